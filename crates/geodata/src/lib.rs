@@ -1,0 +1,21 @@
+//! Geographic ground truth for urbansem: OSM maps, point clouds, real scans, simulated scans.
+//!
+//! Where it sits in the pipeline: every map capability (`srtree`, `streets`, `localize`)
+//! reads its building outlines, street network and point clouds through this crate, all in
+//! one local metric frame ([`projection::LocalFrame`]). Modules, in data-flow order:
+//!
+//! - [`projection`]: WGS84 ↔ local transverse-Mercator frame (east, north in metres).
+//! - [`osm`]: `.osm` XML and `.osm.pbf` ingestion → buildings, street segments, intersections.
+//! - [`city`]: a seeded procedural city written as OSM XML (the embedded default map).
+//! - [`classes`]: urbansem's semantic classes and the mapping from dataset ids.
+//! - [`cloud`]: the column-wise [`cloud::PointCloud`] and its PLY/PCD/LAS/LAZ/KITTI IO.
+//! - [`mercator`]: scaled-Mercator georeferencing used by the KITTI and MCD datasets.
+//! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
+
+pub mod city;
+pub mod classes;
+pub mod cloud;
+pub mod datasets;
+pub mod mercator;
+pub mod osm;
+pub mod projection;

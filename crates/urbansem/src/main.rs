@@ -1,0 +1,55 @@
+//! `urbansem`: the one binary. It parses the command line, dispatches to a command module,
+//! and turns an error chain into a message and an exit code (2 for every error).
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Semantic maps for robots in cities.
+#[derive(Parser)]
+#[command(name = "urbansem", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run every capability on the embedded default city and write demo-out/.
+    Demo(cmd::demo::DemoArgs),
+    /// Pseudo-Boolean optimization (QPBO, quadratization, QSSR).
+    #[command(subcommand)]
+    Pbo(cmd::pbo::PboCommand),
+    /// OpenStreetMap files: statistics and extraction.
+    #[command(subcommand)]
+    Osm(cmd::osm::OsmCommand),
+    /// Point cloud files: statistics and conversion.
+    #[command(subcommand)]
+    Cloud(cmd::cloud::CloudCommand),
+    /// Simulation: procedural cities and labelled scan datasets.
+    #[command(subcommand)]
+    Sim(cmd::sim::SimCommand),
+    /// Benchmarks against the peer implementations named in the issues.
+    #[command(subcommand)]
+    Bench(cmd::bench::BenchCommand),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(args) => cmd::demo::run(args),
+        Command::Pbo(c) => cmd::pbo::run(c),
+        Command::Osm(c) => cmd::osm::run(c),
+        Command::Cloud(c) => cmd::cloud::run(c),
+        Command::Sim(c) => cmd::sim::run(c),
+        Command::Bench(c) => cmd::bench::run(c),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}
