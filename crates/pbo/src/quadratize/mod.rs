@@ -105,12 +105,14 @@ impl Quadratization {
             .take(n)
             .collect();
         // Linear coefficient of each slack given everything else: Δ(w=1) − Δ(w=0).
-        let mut touching: Vec<Vec<(usize, f64, Literal, Option<Literal>)>> = vec![Vec::new(); n];
-        for (t, (lits, a)) in self.poly.terms().enumerate() {
+        // Per slack: (coefficient, the slack's literal, the other literal of a pair term).
+        type Touch = (f64, Literal, Option<Literal>);
+        let mut touching: Vec<Vec<Touch>> = vec![Vec::new(); n];
+        for (lits, a) in self.poly.terms() {
             for (k, l) in lits.iter().enumerate() {
                 if (l.var() as usize) >= self.num_original_vars {
                     let other = lits.get(1 - k).copied().filter(|_| lits.len() == 2);
-                    touching[l.var() as usize].push((t, a, *l, other));
+                    touching[l.var() as usize].push((a, *l, other));
                 }
             }
         }
@@ -118,7 +120,7 @@ impl Quadratization {
             let mut changed = false;
             for w in self.num_original_vars..n {
                 let mut gain_one = 0.0; // ρ(w=1) − ρ(w=0)
-                for &(_, a, l, other) in &touching[w] {
+                for &(a, l, other) in &touching[w] {
                     let other_true = other.is_none_or(|o| o.eval(full[o.var() as usize]));
                     if other_true {
                         gain_one += if l.is_negated() { -a } else { a };

@@ -1,0 +1,9 @@
+//! Markov logic networks (thesis §3.2): the Alchemy/Tuffy/RockIt language, grounding,
+//! the pseudo-Boolean form (PBMLN) and MAP inference on `pbo`.
+//!
+//! Where it sits in the pipeline: above `pbo` (which minimises the ground polynomial) and
+//! below `srtree` (whose spatial-relation consistency is an MLN). Stages, in data-flow order:
+//!
+//! - [`parse`]: programs (`.mln`), evidence (`.db`) and queries, with file:line:col errors.
+
+pub mod parse;

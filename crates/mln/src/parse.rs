@@ -1,0 +1,1112 @@
+//! The Alchemy / Tuffy / RockIt MLN language: programs, evidence and queries.
+//!
+//! One statement per line; `//` starts a comment, `/* … */` comments may span lines. A program holds
+//! - type domains `person = { Anna, Bob }` (integer ranges `{ 1, ..., 10 }` too),
+//! - predicate declarations `Friends(person, person)`; a leading `*` (Tuffy) marks a
+//!   closed-world evidence predicate. A bare atom line whose predicate is not yet declared
+//!   is a declaration, as in Alchemy;
+//! - formulas with a weight (`1.5 Smokes(x) => Cancer(x)`), hard formulas ending in `.`,
+//!   and formulas without weight (weight 0, as Alchemy reads learning input). Connectives, by
+//!   increasing precedence: `<=>`, `=>`, `v`, `^`, `!`; parentheses; `EXIST x,y F` and
+//!   `FORALL x F` (scope to the end of the formula); `x = y` and `x != y`. Tuffy's `@w`
+//!   marks a weight that learning keeps fixed.
+//!
+//! Variables start with a lower-case letter; constants start with an upper-case letter or a
+//! digit, or are quoted (`"Networking"`, stored without the quotes). Evidence lines are
+//! ground atoms `P(A,B)` or negated `!P(A,B)`; query lines are atoms whose variables range
+//! over their types (`advisedBy(x,y)`) or explicit ground atoms.
+//!
+//! ```
+//! use mln::parse::{parse_program, Formula, Weight};
+//! let p = parse_program("Smokes(person)\nCancer(person)\n1.5 Smokes(x) => Cancer(x)\n", "s.mln").unwrap();
+//! assert_eq!(p.predicates.len(), 2);
+//! assert_eq!(p.formulas[0].weight, Weight::Soft(1.5));
+//! assert!(matches!(p.formulas[0].formula, Formula::Implies(..)));
+//! ```
+
+use rustc_hash::FxHashMap;
+use std::path::Path;
+use thiserror::Error;
+
+/// Why a program, evidence or query file could not be read.
+#[derive(Debug, Error)]
+pub enum ParseError {
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// Malformed text at a position.
+    #[error("{path}:{line}:{col}: {message}")]
+    Syntax {
+        /// The file (or a label).
+        path: String,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        col: usize,
+        /// What was found and what was expected.
+        message: String,
+    },
+}
+
+/// A formula's weight.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Weight {
+    /// A soft formula with this weight.
+    Soft(f64),
+    /// A hard formula (must hold).
+    Hard,
+}
+
+/// A declared predicate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Predicate {
+    /// Its name.
+    pub name: String,
+    /// The type of each argument.
+    pub arg_types: Vec<String>,
+    /// Tuffy's `*`: evidence-only, closed world.
+    pub closed_world: bool,
+    /// 1-based line of the declaration.
+    pub line: usize,
+}
+
+/// A declared type domain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TypeDecl {
+    /// The type name.
+    pub name: String,
+    /// Its constants in declaration order.
+    pub constants: Vec<String>,
+    /// 1-based line.
+    pub line: usize,
+}
+
+/// A term: a variable or a constant.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Term {
+    /// A variable (lower-case initial).
+    Var(String),
+    /// A constant (upper-case initial, digit, or quoted).
+    Const(String),
+}
+
+/// An atom `P(t1, …, tk)`; `predicate` indexes [`Program::predicates`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Atom {
+    /// Index into the program's predicates.
+    pub predicate: usize,
+    /// The arguments.
+    pub args: Vec<Term>,
+}
+
+/// A first-order formula.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Formula {
+    /// An atom.
+    Atom(Atom),
+    /// `t1 = t2`.
+    Equal(Term, Term),
+    /// Negation.
+    Not(Box<Formula>),
+    /// Conjunction.
+    And(Vec<Formula>),
+    /// Disjunction.
+    Or(Vec<Formula>),
+    /// Implication.
+    Implies(Box<Formula>, Box<Formula>),
+    /// Equivalence.
+    Iff(Box<Formula>, Box<Formula>),
+    /// Existential quantification.
+    Exists(Vec<String>, Box<Formula>),
+    /// Universal quantification.
+    Forall(Vec<String>, Box<Formula>),
+}
+
+/// A formula with its weight and where it was written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeightedFormula {
+    /// Soft weight or hard.
+    pub weight: Weight,
+    /// The formula.
+    pub formula: Formula,
+    /// Tuffy's `@w`: weight learning must not change this weight.
+    pub fixed_weight: bool,
+    /// 1-based line in the program file.
+    pub line: usize,
+}
+
+/// A parsed MLN program.
+#[derive(Debug, Clone, Default)]
+pub struct Program {
+    /// Declared type domains.
+    pub types: Vec<TypeDecl>,
+    /// Declared predicates.
+    pub predicates: Vec<Predicate>,
+    /// Formulas in file order.
+    pub formulas: Vec<WeightedFormula>,
+    /// The file label used in messages.
+    pub path: String,
+}
+
+impl Program {
+    /// The index of a predicate by name.
+    pub fn predicate_index(&self, name: &str) -> Option<usize> {
+        self.predicates.iter().position(|p| p.name == name)
+    }
+}
+
+/// A literal of evidence: a ground atom and its truth value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvidenceAtom {
+    /// Index into the program's predicates.
+    pub predicate: usize,
+    /// Constant arguments.
+    pub args: Vec<String>,
+    /// True for `P(A)`, false for `!P(A)`.
+    pub value: bool,
+    /// 1-based line in the evidence file.
+    pub line: usize,
+}
+
+/// Reads a program file.
+pub fn read_program(path: &Path) -> Result<Program, ParseError> {
+    let label = path.display().to_string();
+    parse_program(&read(path)?, &label)
+}
+
+/// Reads an evidence file for a program.
+pub fn read_evidence(path: &Path, program: &Program) -> Result<Vec<EvidenceAtom>, ParseError> {
+    let label = path.display().to_string();
+    parse_evidence(&read(path)?, &label, program)
+}
+
+/// Reads a query file: one atom per line (variables allowed).
+pub fn read_query(path: &Path, program: &Program) -> Result<Vec<Atom>, ParseError> {
+    let label = path.display().to_string();
+    parse_query(&read(path)?, &label, program)
+}
+
+fn read(path: &Path) -> Result<String, ParseError> {
+    std::fs::read_to_string(path).map_err(|source| ParseError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Lexical tokens.
+#[derive(Debug, Clone, PartialEq)]
+enum Tok {
+    Ident(String),
+    Quoted(String),
+    Number(String),
+    LParen,
+    RParen,
+    LBrace,
+    RBrace,
+    Comma,
+    Not,
+    And,
+    Implies,
+    Iff,
+    Eq,
+    Neq,
+    Dot,
+    Star,
+    Ellipsis,
+    Plus,
+    At,
+}
+
+impl Tok {
+    fn describe(&self) -> String {
+        match self {
+            Tok::Ident(s) => format!("`{s}`"),
+            Tok::Quoted(s) => format!("\"{s}\""),
+            Tok::Number(s) => format!("number {s}"),
+            Tok::LParen => "`(`".into(),
+            Tok::RParen => "`)`".into(),
+            Tok::LBrace => "`{`".into(),
+            Tok::RBrace => "`}`".into(),
+            Tok::Comma => "`,`".into(),
+            Tok::Not => "`!`".into(),
+            Tok::And => "`^`".into(),
+            Tok::Implies => "`=>`".into(),
+            Tok::Iff => "`<=>`".into(),
+            Tok::Eq => "`=`".into(),
+            Tok::Neq => "`!=`".into(),
+            Tok::Dot => "`.`".into(),
+            Tok::Star => "`*`".into(),
+            Tok::Ellipsis => "`...`".into(),
+            Tok::Plus => "`+`".into(),
+            Tok::At => "`@`".into(),
+        }
+    }
+}
+
+/// A token and its 1-based column.
+type Spanned = (Tok, usize);
+
+/// Splits one line (comment already removed) into tokens.
+fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseError> {
+    let chars: Vec<char> = line.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    let err = |col: usize, message: String| ParseError::Syntax {
+        path: path.to_owned(),
+        line: line_no,
+        col,
+        message,
+    };
+    while i < chars.len() {
+        let c = chars[i];
+        let col = i + 1;
+        let next = chars.get(i + 1).copied();
+        if c.is_whitespace() {
+            i += 1;
+            continue;
+        }
+        let starts_number = c.is_ascii_digit()
+            || ((c == '-' || c == '+' || c == '.') && next.is_some_and(|d| d.is_ascii_digit()));
+        if starts_number && !matches!(out.last(), Some((Tok::Ident(_), _))) {
+            let start = i;
+            i += 1;
+            while i < chars.len()
+                && (chars[i].is_ascii_alphanumeric()
+                    || chars[i] == '.' && chars.get(i + 1).is_some_and(|d| d.is_ascii_digit())
+                    || chars[i] == '_'
+                    || (matches!(chars[i], '-' | '+') && matches!(chars[i - 1], 'e' | 'E')))
+            {
+                i += 1;
+            }
+            let text: String = chars[start..i].iter().collect();
+            // A token like `500abc` is a constant name, not a number.
+            if text.parse::<f64>().is_ok() {
+                out.push((Tok::Number(text), col));
+            } else {
+                out.push((Tok::Ident(text), col));
+            }
+            continue;
+        }
+        if c.is_alphanumeric() || c == '_' {
+            let start = i;
+            while i < chars.len()
+                && (chars[i].is_alphanumeric() || matches!(chars[i], '_' | '-' | '\''))
+            {
+                i += 1;
+            }
+            out.push((Tok::Ident(chars[start..i].iter().collect()), col));
+            continue;
+        }
+        let two: String = chars[i..(i + 3).min(chars.len())].iter().collect();
+        let (tok, len) = if two.starts_with("<=>") {
+            (Tok::Iff, 3)
+        } else if two.starts_with("...") {
+            (Tok::Ellipsis, 3)
+        } else if two.starts_with("=>") {
+            (Tok::Implies, 2)
+        } else if two.starts_with("!=") {
+            (Tok::Neq, 2)
+        } else {
+            match c {
+                '(' => (Tok::LParen, 1),
+                ')' => (Tok::RParen, 1),
+                '{' => (Tok::LBrace, 1),
+                '}' => (Tok::RBrace, 1),
+                ',' => (Tok::Comma, 1),
+                '!' => (Tok::Not, 1),
+                '^' => (Tok::And, 1),
+                '=' => (Tok::Eq, 1),
+                '.' => (Tok::Dot, 1),
+                '*' => (Tok::Star, 1),
+                '+' => (Tok::Plus, 1),
+                '@' => (Tok::At, 1),
+                '"' => {
+                    let start = i + 1;
+                    let mut j = start;
+                    while j < chars.len() && chars[j] != '"' {
+                        j += 1;
+                    }
+                    if j >= chars.len() {
+                        return Err(err(
+                            col,
+                            "unterminated quoted constant: expected a closing `\"`".into(),
+                        ));
+                    }
+                    out.push((Tok::Quoted(chars[start..j].iter().collect()), col));
+                    i = j + 1;
+                    continue;
+                }
+                other => return Err(err(col, format!("unexpected character {other:?}"))),
+            }
+        };
+        out.push((tok, col));
+        i += len;
+    }
+    Ok(out)
+}
+
+/// Blanks `/* … */` block comments (outside quotes and `//` comments), keeping newlines so
+/// that line and column numbers stay those of the file.
+fn blank_block_comments(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.contains("/*") {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut chars = text.chars().peekable();
+    let (mut in_block, mut in_line, mut in_quote) = (false, false, false);
+    while let Some(c) = chars.next() {
+        if in_block {
+            if c == '*' && chars.peek() == Some(&'/') {
+                chars.next();
+                in_block = false;
+                out.push_str("  ");
+            } else {
+                out.push(if c == '\n' { '\n' } else { ' ' });
+            }
+            continue;
+        }
+        match c {
+            '\n' => {
+                in_line = false;
+                in_quote = false;
+            }
+            '"' if !in_line => in_quote = !in_quote,
+            '/' if !in_line && !in_quote && chars.peek() == Some(&'/') => in_line = true,
+            '/' if !in_line && !in_quote && chars.peek() == Some(&'*') => {
+                chars.next();
+                in_block = true;
+                out.push_str("  ");
+                continue;
+            }
+            _ => {}
+        }
+        out.push(c);
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+/// Removes a `//` comment (outside quotes).
+fn strip_comment(line: &str) -> &str {
+    let mut in_quote = false;
+    let bytes = line.as_bytes();
+    for (i, &b) in bytes.iter().enumerate() {
+        if b == b'"' {
+            in_quote = !in_quote;
+        } else if !in_quote && b == b'/' && bytes.get(i + 1) == Some(&b'/') {
+            return &line[..i];
+        }
+    }
+    line
+}
+
+/// A cursor over one line's tokens.
+struct Cursor<'a> {
+    toks: &'a [Spanned],
+    pos: usize,
+    path: &'a str,
+    line: usize,
+    line_len: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn peek(&self) -> Option<&'a Tok> {
+        self.toks.get(self.pos).map(|(t, _)| t)
+    }
+    fn peek_at(&self, k: usize) -> Option<&'a Tok> {
+        self.toks.get(self.pos + k).map(|(t, _)| t)
+    }
+    fn col(&self) -> usize {
+        self.toks
+            .get(self.pos)
+            .map_or(self.line_len + 1, |(_, c)| *c)
+    }
+    fn bump(&mut self) -> Option<&'a Tok> {
+        let t = self.peek();
+        self.pos += 1;
+        t
+    }
+    fn error(&self, message: String) -> ParseError {
+        ParseError::Syntax {
+            path: self.path.to_owned(),
+            line: self.line,
+            col: self.col(),
+            message,
+        }
+    }
+    fn found(&self) -> String {
+        self.peek()
+            .map_or("the end of the line".to_owned(), Tok::describe)
+    }
+    fn expect(&mut self, want: &Tok, what: &str) -> Result<(), ParseError> {
+        if self.peek() == Some(want) {
+            self.pos += 1;
+            Ok(())
+        } else {
+            Err(self.error(format!("expected {what}, found {}", self.found())))
+        }
+    }
+}
+
+fn is_variable(name: &str) -> bool {
+    name.starts_with(|c: char| c.is_lowercase())
+}
+
+/// Parses a program's text; `path` labels messages.
+pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
+    let text = &*blank_block_comments(text);
+    let mut program = Program {
+        path: path.to_owned(),
+        ..Program::default()
+    };
+    let mut pred_index: FxHashMap<String, usize> = FxHashMap::default();
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = strip_comment(raw);
+        if line.trim().is_empty() {
+            continue;
+        }
+        let toks = lex(line, path, line_no)?;
+        let mut cur = Cursor {
+            toks: &toks,
+            pos: 0,
+            path,
+            line: line_no,
+            line_len: line.chars().count(),
+        };
+        // Type domain: name = { … }
+        if let (Some(Tok::Ident(name)), Some(Tok::Eq), Some(Tok::LBrace)) =
+            (cur.peek(), cur.peek_at(1), cur.peek_at(2))
+        {
+            cur.pos += 3;
+            let constants = parse_domain(&mut cur)?;
+            program.types.push(TypeDecl {
+                name: name.clone(),
+                constants,
+                line: line_no,
+            });
+            continue;
+        }
+        // Declaration: [*] Name(type, …) with the name not yet declared.
+        let star = cur.peek() == Some(&Tok::Star);
+        let decl_at = usize::from(star);
+        if let (Some(Tok::Ident(name)), Some(Tok::LParen)) =
+            (cur.peek_at(decl_at), cur.peek_at(decl_at + 1))
+        {
+            if !pred_index.contains_key(name) {
+                cur.pos += decl_at + 2;
+                let mut arg_types = Vec::new();
+                loop {
+                    match cur.bump() {
+                        Some(Tok::Ident(t)) => arg_types.push(t.clone()),
+                        _ => {
+                            cur.pos -= 1;
+                            return Err(cur.error(format!(
+                                "expected a type name in the declaration of {name}, found {}",
+                                cur.found()
+                            )));
+                        }
+                    }
+                    match cur.bump() {
+                        Some(Tok::Comma) => {}
+                        Some(Tok::RParen) => break,
+                        _ => {
+                            cur.pos -= 1;
+                            return Err(
+                                cur.error(format!("expected `,` or `)`, found {}", cur.found()))
+                            );
+                        }
+                    }
+                }
+                if cur.peek().is_some() {
+                    return Err(cur.error(format!(
+                        "unexpected {} after the declaration of {name}",
+                        cur.found()
+                    )));
+                }
+                pred_index.insert(name.clone(), program.predicates.len());
+                program.predicates.push(Predicate {
+                    name: name.clone(),
+                    arg_types,
+                    closed_world: star,
+                    line: line_no,
+                });
+                continue;
+            }
+        }
+        if star {
+            return Err(cur.error(format!(
+                "`*` marks a predicate declaration, but {} is already declared",
+                match cur.peek_at(1) {
+                    Some(t) => t.describe(),
+                    None => "nothing".into(),
+                }
+            )));
+        }
+        // Formula: [weight] F [.]
+        let mut weight = Weight::Soft(0.0);
+        // Tuffy's `@w`: a weight that learning keeps fixed; for inference it is just w.
+        let fixed_weight = cur.peek() == Some(&Tok::At);
+        if fixed_weight {
+            cur.pos += 1;
+            if !matches!(cur.peek(), Some(Tok::Number(_))) {
+                return Err(cur.error(format!(
+                    "expected a weight after `@`, found {}",
+                    cur.found()
+                )));
+            }
+        }
+        if let Some(Tok::Number(w)) = cur.peek() {
+            let value: f64 = w
+                .parse()
+                .map_err(|_| cur.error(format!("bad weight {w}")))?;
+            if !value.is_finite() {
+                return Err(cur.error(format!("weight {w} is not a finite number")));
+            }
+            weight = Weight::Soft(value);
+            cur.pos += 1;
+        }
+        let hard = toks.last().map(|(t, _)| t) == Some(&Tok::Dot);
+        let end = if hard { toks.len() - 1 } else { toks.len() };
+        let mut body = Cursor {
+            toks: &toks[..end],
+            pos: cur.pos,
+            path,
+            line: line_no,
+            line_len: cur.line_len,
+        };
+        if hard {
+            if matches!(weight, Weight::Soft(w) if w != 0.0) {
+                return Err(cur.error(
+                    "a formula cannot have both a weight and a trailing `.` (hard)".into(),
+                ));
+            }
+            weight = Weight::Hard;
+        }
+        let formula = parse_iff(&mut body, &program, &pred_index)?;
+        if body.peek().is_some() {
+            return Err(body.error(format!(
+                "expected a connective (^ v => <=>) or the end of the formula, found {}",
+                body.found()
+            )));
+        }
+        program.formulas.push(WeightedFormula {
+            weight,
+            formula,
+            fixed_weight,
+            line: line_no,
+        });
+    }
+    Ok(program)
+}
+
+fn parse_domain(cur: &mut Cursor<'_>) -> Result<Vec<String>, ParseError> {
+    let mut out = Vec::new();
+    loop {
+        match cur.bump() {
+            Some(Tok::Ident(c)) | Some(Tok::Quoted(c)) | Some(Tok::Number(c)) => {
+                out.push(c.clone())
+            }
+            Some(Tok::Ellipsis) => {
+                // `1, ..., 10`: expand the integer range from the previous constant.
+                let from = out.last().and_then(|s| s.parse::<i64>().ok());
+                let Some(Tok::Comma) = cur.bump() else {
+                    cur.pos -= 1;
+                    return Err(cur.error("expected `,` after `...`".into()));
+                };
+                let to = match cur.bump() {
+                    Some(Tok::Number(n)) => n.parse::<i64>().ok(),
+                    _ => None,
+                };
+                let (Some(from), Some(to)) = (from, to) else {
+                    cur.pos -= 1;
+                    return Err(
+                        cur.error("`...` needs integers on both sides: { 1, ..., 10 }".into())
+                    );
+                };
+                if to - from > 10_000_000 {
+                    return Err(cur.error(format!("range {from}..{to} is too large")));
+                }
+                out.extend((from + 1..=to).map(|k| k.to_string()));
+            }
+            _ => {
+                cur.pos -= 1;
+                return Err(cur.error(format!(
+                    "expected a constant in the domain, found {}",
+                    cur.found()
+                )));
+            }
+        }
+        match cur.bump() {
+            Some(Tok::Comma) => {}
+            Some(Tok::RBrace) => break,
+            _ => {
+                cur.pos -= 1;
+                return Err(cur.error(format!("expected `,` or `}}`, found {}", cur.found())));
+            }
+        }
+    }
+    if cur.peek().is_some() {
+        return Err(cur.error(format!("unexpected {} after the domain", cur.found())));
+    }
+    Ok(out)
+}
+
+type PredIndex = FxHashMap<String, usize>;
+
+fn parse_iff(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+    let mut left = parse_implies(cur, p, idx)?;
+    while cur.peek() == Some(&Tok::Iff) {
+        cur.pos += 1;
+        let right = parse_implies(cur, p, idx)?;
+        left = Formula::Iff(Box::new(left), Box::new(right));
+    }
+    Ok(left)
+}
+
+fn parse_implies(
+    cur: &mut Cursor<'_>,
+    p: &Program,
+    idx: &PredIndex,
+) -> Result<Formula, ParseError> {
+    let left = parse_or(cur, p, idx)?;
+    if cur.peek() == Some(&Tok::Implies) {
+        cur.pos += 1;
+        let right = parse_implies(cur, p, idx)?;
+        return Ok(Formula::Implies(Box::new(left), Box::new(right)));
+    }
+    Ok(left)
+}
+
+fn is_or(t: Option<&Tok>) -> bool {
+    matches!(t, Some(Tok::Ident(s)) if s == "v")
+}
+
+fn parse_or(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+    let mut parts = vec![parse_and(cur, p, idx)?];
+    while is_or(cur.peek()) {
+        cur.pos += 1;
+        parts.push(parse_and(cur, p, idx)?);
+    }
+    Ok(if parts.len() == 1 {
+        parts.swap_remove(0)
+    } else {
+        Formula::Or(parts)
+    })
+}
+
+fn parse_and(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+    let mut parts = vec![parse_unary(cur, p, idx)?];
+    while cur.peek() == Some(&Tok::And) {
+        cur.pos += 1;
+        parts.push(parse_unary(cur, p, idx)?);
+    }
+    Ok(if parts.len() == 1 {
+        parts.swap_remove(0)
+    } else {
+        Formula::And(parts)
+    })
+}
+
+fn parse_unary(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+    match cur.peek() {
+        Some(Tok::Not) => {
+            cur.pos += 1;
+            Ok(Formula::Not(Box::new(parse_unary(cur, p, idx)?)))
+        }
+        Some(Tok::Ident(q))
+            if matches!(
+                q.to_ascii_uppercase().as_str(),
+                "EXIST" | "EXISTS" | "FORALL"
+            ) && cur.peek_at(1) != Some(&Tok::LParen) =>
+        {
+            let exists = q.to_ascii_uppercase().starts_with("EXIST");
+            cur.pos += 1;
+            let mut vars = Vec::new();
+            loop {
+                match cur.bump() {
+                    Some(Tok::Ident(v)) if is_variable(v) => vars.push(v.clone()),
+                    _ => {
+                        cur.pos -= 1;
+                        return Err(cur.error(format!(
+                            "expected a variable after the quantifier, found {}",
+                            cur.found()
+                        )));
+                    }
+                }
+                if cur.peek() == Some(&Tok::Comma) {
+                    cur.pos += 1;
+                } else {
+                    break;
+                }
+            }
+            let body = Box::new(parse_iff(cur, p, idx)?);
+            Ok(if exists {
+                Formula::Exists(vars, body)
+            } else {
+                Formula::Forall(vars, body)
+            })
+        }
+        _ => parse_primary(cur, p, idx),
+    }
+}
+
+fn parse_term(cur: &mut Cursor<'_>) -> Result<Term, ParseError> {
+    match cur.bump() {
+        Some(Tok::Ident(s)) if is_variable(s) => Ok(Term::Var(s.clone())),
+        Some(Tok::Ident(s)) | Some(Tok::Number(s)) | Some(Tok::Quoted(s)) => {
+            Ok(Term::Const(s.clone()))
+        }
+        _ => {
+            cur.pos -= 1;
+            Err(cur.error(format!(
+                "expected a variable or a constant, found {}",
+                cur.found()
+            )))
+        }
+    }
+}
+
+fn parse_primary(
+    cur: &mut Cursor<'_>,
+    p: &Program,
+    idx: &PredIndex,
+) -> Result<Formula, ParseError> {
+    match (cur.peek(), cur.peek_at(1)) {
+        (Some(Tok::LParen), _) => {
+            cur.pos += 1;
+            let f = parse_iff(cur, p, idx)?;
+            cur.expect(&Tok::RParen, "`)`")?;
+            Ok(f)
+        }
+        (Some(Tok::Ident(name)), Some(Tok::LParen)) => {
+            let col = cur.col();
+            let Some(&pred) = idx.get(name) else {
+                return Err(cur.error(format!(
+                    "undeclared predicate {name}: declare it first, e.g. {name}(type1, type2)"
+                )));
+            };
+            cur.pos += 2;
+            let mut args = Vec::new();
+            if cur.peek() != Some(&Tok::RParen) {
+                loop {
+                    args.push(parse_term(cur)?);
+                    match cur.bump() {
+                        Some(Tok::Comma) => {}
+                        Some(Tok::RParen) => break,
+                        _ => {
+                            cur.pos -= 1;
+                            return Err(
+                                cur.error(format!("expected `,` or `)`, found {}", cur.found()))
+                            );
+                        }
+                    }
+                }
+            } else {
+                cur.pos += 1;
+            }
+            let arity = p.predicates[pred].arg_types.len();
+            if args.len() != arity {
+                return Err(ParseError::Syntax {
+                    path: cur.path.to_owned(),
+                    line: cur.line,
+                    col,
+                    message: format!(
+                        "{name} takes {arity} argument(s) ({}), found {}",
+                        p.predicates[pred].arg_types.join(", "),
+                        args.len()
+                    ),
+                });
+            }
+            Ok(Formula::Atom(Atom {
+                predicate: pred,
+                args,
+            }))
+        }
+        (Some(Tok::Ident(_) | Tok::Quoted(_) | Tok::Number(_)), Some(Tok::Eq | Tok::Neq)) => {
+            let a = parse_term(cur)?;
+            let neq = cur.bump() == Some(&Tok::Neq);
+            let b = parse_term(cur)?;
+            let eq = Formula::Equal(a, b);
+            Ok(if neq { Formula::Not(Box::new(eq)) } else { eq })
+        }
+        (Some(Tok::Ident(name)), _) => match idx.get(name) {
+            Some(&pred) if p.predicates[pred].arg_types.is_empty() => {
+                cur.pos += 1;
+                Ok(Formula::Atom(Atom {
+                    predicate: pred,
+                    args: Vec::new(),
+                }))
+            }
+            _ => Err(cur.error(format!(
+                "expected an atom like {name}(x, y), found `{name}` without arguments"
+            ))),
+        },
+        _ => Err(cur.error(format!(
+            "expected an atom, `!`, `(` or a quantifier, found {}",
+            cur.found()
+        ))),
+    }
+}
+
+/// Parses evidence text: ground atoms `P(A,B)` or `!P(A,B)`, one per line.
+pub fn parse_evidence(
+    text: &str,
+    path: &str,
+    program: &Program,
+) -> Result<Vec<EvidenceAtom>, ParseError> {
+    let text = &*blank_block_comments(text);
+    let idx: PredIndex = program
+        .predicates
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (p.name.clone(), i))
+        .collect();
+    let mut out = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = strip_comment(raw);
+        if line.trim().is_empty() {
+            continue;
+        }
+        let toks = lex(line, path, line_no)?;
+        let mut cur = Cursor {
+            toks: &toks,
+            pos: 0,
+            path,
+            line: line_no,
+            line_len: line.chars().count(),
+        };
+        let value = if cur.peek() == Some(&Tok::Not) {
+            cur.pos += 1;
+            false
+        } else {
+            true
+        };
+        let atom_col = cur.col();
+        let f = parse_primary(&mut cur, program, &idx)?;
+        let Formula::Atom(atom) = f else {
+            return Err(ParseError::Syntax {
+                path: path.to_owned(),
+                line: line_no,
+                col: atom_col,
+                message: "expected a ground atom like P(A, B)".into(),
+            });
+        };
+        if cur.peek().is_some() {
+            return Err(cur.error(format!(
+                "unexpected {} after the evidence atom",
+                cur.found()
+            )));
+        }
+        let mut args = Vec::with_capacity(atom.args.len());
+        for t in atom.args {
+            match t {
+                Term::Const(c) => args.push(c),
+                Term::Var(v) => {
+                    return Err(ParseError::Syntax {
+                        path: path.to_owned(),
+                        line: line_no,
+                        col: atom_col,
+                        message: format!(
+                            "evidence must be ground, but `{v}` is a variable (constants start with an upper-case letter or a digit, or are quoted)"
+                        ),
+                    })
+                }
+            }
+        }
+        out.push(EvidenceAtom {
+            predicate: atom.predicate,
+            args,
+            value,
+            line: line_no,
+        });
+    }
+    Ok(out)
+}
+
+/// Parses query text: one atom per line, variables allowed.
+pub fn parse_query(text: &str, path: &str, program: &Program) -> Result<Vec<Atom>, ParseError> {
+    let text = &*blank_block_comments(text);
+    let idx: PredIndex = program
+        .predicates
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (p.name.clone(), i))
+        .collect();
+    let mut out = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = strip_comment(raw);
+        if line.trim().is_empty() {
+            continue;
+        }
+        let toks = lex(line, path, line_no)?;
+        let mut cur = Cursor {
+            toks: &toks,
+            pos: 0,
+            path,
+            line: line_no,
+            line_len: line.chars().count(),
+        };
+        let col = cur.col();
+        let Formula::Atom(atom) = parse_primary(&mut cur, program, &idx)? else {
+            return Err(ParseError::Syntax {
+                path: path.to_owned(),
+                line: line_no,
+                col,
+                message: "expected a query atom like P(x, y)".into(),
+            });
+        };
+        if cur.peek().is_some() {
+            return Err(cur.error(format!("unexpected {} after the query atom", cur.found())));
+        }
+        out.push(atom);
+    }
+    Ok(out)
+}
+
+/// Parses a `-q P1,P2` predicate list into one all-variable query atom per predicate.
+pub fn parse_query_predicates(list: &str, program: &Program) -> Result<Vec<Atom>, ParseError> {
+    let mut out = Vec::new();
+    for (k, name) in list.split(',').map(str::trim).enumerate() {
+        if name.is_empty() {
+            continue;
+        }
+        let Some(pred) = program.predicate_index(name) else {
+            return Err(ParseError::Syntax {
+                path: "-q".into(),
+                line: 1,
+                col: k + 1,
+                message: format!(
+                    "unknown query predicate {name}: the program declares {}",
+                    program
+                        .predicates
+                        .iter()
+                        .map(|p| p.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        };
+        let arity = program.predicates[pred].arg_types.len();
+        out.push(Atom {
+            predicate: pred,
+            args: (0..arity).map(|i| Term::Var(format!("q{i}"))).collect(),
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SMOKERS: &str = "// Evidence\n*Friends(person, person)\nSmokes(person)\nCancer(person)\n\n0.5  !Smokes(a1) v Cancer(a1)\n0.4  !Friends(a1,a2) v !Smokes(a1) v Smokes(a2)\n";
+
+    #[test]
+    fn reads_tuffy_smokers() {
+        let p = parse_program(SMOKERS, "prog.mln").unwrap();
+        assert_eq!(p.predicates.len(), 3);
+        assert!(p.predicates[0].closed_world);
+        assert!(!p.predicates[1].closed_world);
+        assert_eq!(p.formulas.len(), 2);
+        assert_eq!(p.formulas[1].line, 7);
+        let Formula::Or(parts) = &p.formulas[1].formula else {
+            panic!("expected a clause")
+        };
+        assert_eq!(parts.len(), 3);
+        assert!(matches!(&parts[0], Formula::Not(_)));
+    }
+
+    #[test]
+    fn precedence_and_connectives() {
+        let p = parse_program(
+            "P(t)\nQ(t)\nR(t)\n1 P(x) ^ Q(x) v R(x) => !P(x) <=> Q(x)\n",
+            "p.mln",
+        )
+        .unwrap();
+        // ((P ^ Q) v R => !P) <=> Q
+        let Formula::Iff(l, _) = &p.formulas[0].formula else {
+            panic!("{:?}", p.formulas[0].formula)
+        };
+        let Formula::Implies(ante, _) = &**l else {
+            panic!()
+        };
+        assert!(matches!(&**ante, Formula::Or(v) if matches!(v[0], Formula::And(_))));
+    }
+
+    #[test]
+    fn hard_formulas_quotes_domains_exist_and_equality() {
+        let text = "person = { Anna, Bob }\nn = { 1, ..., 4 }\nF(person,person)\nS(person)\nF(x,y) ^ x != y => S(x).\n-3 S(\"Anna\")\n0 EXIST y F(x,y)\n";
+        let p = parse_program(text, "p.mln").unwrap();
+        assert_eq!(p.types[1].constants, ["1", "2", "3", "4"]);
+        assert_eq!(p.formulas[0].weight, Weight::Hard);
+        assert_eq!(p.formulas[1].weight, Weight::Soft(-3.0));
+        assert!(
+            matches!(&p.formulas[1].formula, Formula::Atom(a) if a.args == [Term::Const("Anna".into())])
+        );
+        assert!(matches!(&p.formulas[2].formula, Formula::Exists(v, _) if v == &["y".to_string()]));
+    }
+
+    #[test]
+    fn errors_point_at_the_problem() {
+        let e = parse_program("P(t)\n1 P(x) ^ Q(x)\n", "a.mln").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "a.mln:2:10: undeclared predicate Q: declare it first, e.g. Q(type1, type2)"
+        );
+        let e = parse_program("P(t)\n1 P(x, y)\n", "b.mln").unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("b.mln:2:3: P takes 1 argument(s)"),
+            "{e}"
+        );
+        let e = parse_program("P(t)\n1 P(x) ^\n", "c.mln").unwrap_err();
+        assert!(
+            e.to_string().starts_with("c.mln:2:9: expected an atom"),
+            "{e}"
+        );
+        let e = parse_program("P(t)\n1 P(x) P(y)\n", "d.mln").unwrap_err();
+        assert!(e.to_string().contains("expected a connective"), "{e}");
+        let e = parse_program("P(t)\n1 P(\"x)\n", "e.mln").unwrap_err();
+        assert!(e.to_string().contains("unterminated"), "{e}");
+    }
+
+    #[test]
+    fn block_comments_keep_line_numbers() {
+        let p = parse_program("P(t)\n/* 1 P(x)\n 2 P(y) */ 3 P(z)\n@4 P(w)\n", "b.mln").unwrap();
+        assert_eq!(p.formulas.len(), 2);
+        assert_eq!(p.formulas[0].weight, Weight::Soft(3.0));
+        assert_eq!(p.formulas[0].line, 3);
+        assert!(p.formulas[1].fixed_weight);
+        let e = parse_program("P(t)\n/* x */ 1 Q(x)\n", "c.mln").unwrap_err();
+        assert!(e.to_string().starts_with("c.mln:2:11:"), "{e}");
+    }
+
+    #[test]
+    fn evidence_and_queries() {
+        let p = parse_program(SMOKERS, "prog.mln").unwrap();
+        let ev = parse_evidence("Friends(Anna, Bob)\n\n!Smokes(Gary)\n", "e.db", &p).unwrap();
+        assert_eq!(ev.len(), 2);
+        assert!(!ev[1].value);
+        assert_eq!(ev[1].line, 3);
+        let e = parse_evidence("Smokes(x)\n", "e.db", &p).unwrap_err();
+        assert!(e.to_string().contains("must be ground"), "{e}");
+        let e = parse_evidence("Smoke(Anna)\n", "e.db", &p).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("e.db:1:1: undeclared predicate Smoke"),
+            "{e}"
+        );
+        let q = parse_query("Cancer(x)\n", "q.db", &p).unwrap();
+        assert_eq!(q[0].predicate, 2);
+        let q = parse_query_predicates("Smokes, Cancer", &p).unwrap();
+        assert_eq!(q.len(), 2);
+        assert!(parse_query_predicates("Cancr", &p).is_err());
+    }
+}
