@@ -5,5 +5,7 @@
 //! below `srtree` (whose spatial-relation consistency is an MLN). Stages, in data-flow order:
 //!
 //! - [`parse`]: programs (`.mln`), evidence (`.db`) and queries, with file:line:col errors.
+//! - [`ground`]: join-based grounding with evidence simplification → the cost polynomial.
 
+pub mod ground;
 pub mod parse;

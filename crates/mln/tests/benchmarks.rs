@@ -1,5 +1,7 @@
 //! Every MLN benchmark program, evidence and query file in `../shared/data/mln` parses.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use mln::parse::{read_evidence, read_program, read_query, Program};
 use std::path::PathBuf;
 
