@@ -1,1 +1,256 @@
-//! TODO(skeleton): filled in by its owner this session.
+//! Readers for the real labelled LiDAR scans in `../shared/data/lidar/`.
+//!
+//! Each reader gives [`Scan`]s: the cloud in the sensor frame (with `intensity`, and for
+//! labelled datasets `label` = urbansem [`crate::classes::Class`] id and `raw_label` = the
+//! dataset's id), the sensor pose in the dataset's world frame, and that world frame's
+//! georeference ([`ScaledMercator`]). [`Scan::local_from_sensor`] places the scan in any
+//! [`LocalFrame`], the frame OSM maps are read into.
+//!
+//! - [`mcd`]: MCD `kth_day_06` (Ouster OS1-128, KTH campus, Stockholm).
+//! - [`kitti360`]: KITTI-360 `2013_05_28_drive_0009` (Velodyne HDL-64E, Karlsruhe).
+//! - [`kitti_raw`]: KITTI raw `2011_09_26_drive_0005` frame 0 (HDL-64E + OXTS).
+
+pub mod kitti360;
+pub mod kitti_raw;
+pub mod mcd;
+
+use crate::cloud::{CloudError, PointCloud};
+use crate::mercator::ScaledMercator;
+use crate::projection::LocalFrame;
+use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// An error while reading a dataset.
+#[derive(Debug, Error)]
+pub enum DatasetError {
+    /// A file could not be read (a missing file names its path here).
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// A text file (poses, calibration, OXTS) has a malformed line.
+    #[error("{path}:{line}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong and what was expected.
+        message: String,
+    },
+    /// No pose for a scan's frame.
+    #[error("{path}: no pose for frame {frame}")]
+    MissingPose {
+        /// The pose file.
+        path: PathBuf,
+        /// The frame number.
+        frame: u64,
+    },
+    /// A scan or label file could not be read.
+    #[error(transparent)]
+    Cloud(#[from] CloudError),
+    /// The georeference origin is invalid.
+    #[error("{0}")]
+    Mercator(#[from] crate::mercator::MercatorError),
+}
+
+/// Shorthand for results of this module.
+pub type Result<T> = std::result::Result<T, DatasetError>;
+
+/// One real scan with its pose and georeference.
+#[derive(Debug, Clone)]
+pub struct Scan {
+    /// Frame number in its sequence.
+    pub frame: u64,
+    /// The scan file it came from.
+    pub path: PathBuf,
+    /// Points in the sensor frame (metres); `label`/`raw_label` when the dataset has labels.
+    pub cloud: PointCloud,
+    /// Sensor pose in the dataset's world frame (x east, y north, z up, metres).
+    pub world_from_sensor: Isometry3<f64>,
+    /// The world frame's scaled-Mercator georeference.
+    pub georef: ScaledMercator,
+}
+
+/// A sensor pose in a [`LocalFrame`], with its WGS84 position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalPose {
+    /// Sensor position east, north, up in the local frame, metres.
+    pub position_m: [f64; 3],
+    /// Heading of the sensor's x axis, radians counter-clockwise from grid east.
+    pub yaw_rad: f64,
+    /// WGS84 latitude of the sensor, degrees.
+    pub lat_deg: f64,
+    /// WGS84 longitude of the sensor, degrees.
+    pub lon_deg: f64,
+}
+
+impl Scan {
+    /// WGS84 (lat, lon) in degrees of the sensor.
+    pub fn sensor_wgs84(&self) -> (f64, f64) {
+        let t = self.world_from_sensor.translation.vector;
+        self.georef.to_wgs84([t.x, t.y])
+    }
+
+    /// The rigid transform from the sensor frame into `frame`.
+    ///
+    /// The sensor position is mapped exactly (world → WGS84 → local); the rotation is the
+    /// world rotation turned by the local frame's meridian convergence there. Within a
+    /// scan's 100 m range the remaining scale difference between the two projections is
+    /// below 10⁻⁴ (< 1 cm).
+    pub fn local_from_sensor(&self, frame: &LocalFrame) -> Isometry3<f64> {
+        local_from_world_pose(&self.georef, &self.world_from_sensor, frame)
+    }
+
+    /// The sensor pose in `frame`.
+    pub fn pose_in_local(&self, frame: &LocalFrame) -> LocalPose {
+        let iso = self.local_from_sensor(frame);
+        let x_axis = iso.rotation * Vector3::x();
+        let (lat_deg, lon_deg) = self.sensor_wgs84();
+        let t = iso.translation.vector;
+        LocalPose {
+            position_m: [t.x, t.y, t.z],
+            yaw_rad: x_axis.y.atan2(x_axis.x),
+            lat_deg,
+            lon_deg,
+        }
+    }
+
+    /// The cloud registered into `frame` (a copy; positions become f64).
+    pub fn cloud_in_local(&self, frame: &LocalFrame) -> PointCloud {
+        let mut c = self.cloud.clone();
+        c.transform(&self.local_from_sensor(frame));
+        c
+    }
+}
+
+/// Moves a world pose of `georef` rigidly into `frame` (see [`Scan::local_from_sensor`]).
+pub fn local_from_world_pose(
+    georef: &ScaledMercator,
+    world_from_sensor: &Isometry3<f64>,
+    frame: &LocalFrame,
+) -> Isometry3<f64> {
+    let t = world_from_sensor.translation.vector;
+    let (lat, lon) = georef.to_wgs84([t.x, t.y]);
+    let local_xy = frame.to_local(lat, lon);
+    let turn = georef.yaw_to_local_rad([t.x, t.y], frame);
+    let rotation =
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn) * world_from_sensor.rotation;
+    Isometry3::from_parts(Translation3::new(local_xy[0], local_xy[1], t.z), rotation)
+}
+
+/// A rigid transform from a 3×4 or 4×4 row-major matrix, projecting R onto SO(3).
+pub(crate) fn iso_from_rows(m: &Matrix4<f64>) -> Isometry3<f64> {
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let rot = Rotation3::from_matrix_eps(&r, 1e-12, 100, Rotation3::identity());
+    Isometry3::from_parts(
+        Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]),
+        UnitQuaternion::from_rotation_matrix(&rot),
+    )
+}
+
+/// Checks that the rotation block of `m` is orthonormal to `tol` (a garbled file is not a pose).
+pub(crate) fn check_rotation(m: &Matrix4<f64>, path: &Path, line: usize, tol: f64) -> Result<()> {
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let err = (r.transpose() * r - Matrix3::identity()).abs().max();
+    if !(err <= tol) || !(r.determinant() > 0.0) {
+        return Err(DatasetError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: format!(
+                "rotation is not orthonormal (|RᵀR − I| = {err:.2e}, det = {:.4})",
+                r.determinant()
+            ),
+        });
+    }
+    Ok(())
+}
+
+pub(crate) fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Frame numbers of the files `NNNNNNNNNN.<ext>` in `dir`, sorted.
+pub(crate) fn frames_in(dir: &Path, ext: &str) -> Result<Vec<u64>> {
+    let io = |source| DatasetError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    let mut frames = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let p = entry.map_err(io)?.path();
+        if p.extension().and_then(|e| e.to_str()) != Some(ext) {
+            continue;
+        }
+        if let Some(n) = p
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| s.parse::<u64>().ok())
+        {
+            frames.push(n);
+        }
+    }
+    frames.sort_unstable();
+    Ok(frames)
+}
+
+/// Parses whitespace- or comma-separated floats of one line.
+pub(crate) fn floats(path: &Path, line: usize, text: &str, sep: char) -> Result<Vec<f64>> {
+    text.split(|c: char| c == sep || c.is_whitespace())
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| DatasetError::Parse {
+                    path: path.to_path_buf(),
+                    line,
+                    message: format!("bad number {s:?}"),
+                })
+        })
+        .collect()
+}
+
+/// Sets `label` (urbansem ids via `map`) and `raw_label` of a scan cloud from dataset ids.
+pub(crate) fn attach_labels(
+    cloud: &mut PointCloud,
+    raw: Vec<u32>,
+    map: fn(u32) -> crate::classes::Class,
+) {
+    cloud.label = Some(raw.iter().map(|&r| map(r).id()).collect());
+    cloud.raw_label = Some(raw);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn local_pose_of_a_world_pose_at_the_frame_origin() {
+        let georef = ScaledMercator::new(59.35, 18.07).unwrap();
+        let frame = LocalFrame::new(59.35, 18.07).unwrap();
+        let pose = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 5.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.3),
+        );
+        let l = local_from_world_pose(&georef, &pose, &frame);
+        assert!(l.translation.vector.xy().norm() < 1e-6);
+        assert!((l.translation.vector.z - 5.0).abs() < 1e-12);
+        assert!((l.rotation.angle() - 0.3).abs() < 1e-9);
+    }
+
+    #[test]
+    fn non_orthonormal_rotation_is_rejected() {
+        let mut m = Matrix4::identity();
+        m[(0, 0)] = 2.0;
+        assert!(check_rotation(&m, Path::new("p.txt"), 3, 1e-3).is_err());
+        assert!(check_rotation(&Matrix4::identity(), Path::new("p.txt"), 3, 1e-9).is_ok());
+    }
+}
