@@ -338,7 +338,8 @@ pub fn read_pcd(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
                 },
                 _ => io_err(path)(e),
             })?;
-            if n == 0 {
+            // A point line without its line end is a cut file (the last number may be partial).
+            if n == 0 || !line.ends_with('\n') {
                 return Err(CloudError::Truncated {
                     path: path_buf(path),
                     at: Location::Line(line_no),

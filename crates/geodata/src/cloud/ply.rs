@@ -586,7 +586,8 @@ fn read_ascii_body(
                 },
                 _ => io_err(path)(e),
             })?;
-            if n == 0 {
+            // A point line without its line end is a cut file (the last number may be partial).
+            if n == 0 || !line.ends_with('\n') {
                 return Err(CloudError::Truncated {
                     path: path_buf(path),
                     at: Location::Line(line_no),

@@ -157,7 +157,8 @@ pub(crate) fn iso_from_rows(m: &Matrix4<f64>) -> Isometry3<f64> {
 pub(crate) fn check_rotation(m: &Matrix4<f64>, path: &Path, line: usize, tol: f64) -> Result<()> {
     let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
     let err = (r.transpose() * r - Matrix3::identity()).abs().max();
-    if !(err <= tol) || !(r.determinant() > 0.0) {
+    let orthonormal = err <= tol && r.determinant() > 0.0;
+    if !orthonormal {
         return Err(DatasetError::Parse {
             path: path.to_path_buf(),
             line,
