@@ -127,10 +127,9 @@ impl LocalFrame {
         let eta = xy_m[0] / self.radius_a;
         let mut xi_p = xi;
         let mut eta_p = eta;
-        for (j, b) in self.beta.iter().enumerate() {
-            let k = 2.0 * (j as f64 + 1.0);
-            xi_p -= b * (k * xi).sin() * (k * eta).cosh();
-            eta_p -= b * (k * xi).cos() * (k * eta).sinh();
+        for (b, (sc, cs)) in self.beta.iter().zip(harmonics(xi, eta)) {
+            xi_p -= b * sc;
+            eta_p -= b * cs;
         }
         // Conformal latitude χ and longitude difference.
         let chi = (xi_p.sin() / eta_p.cosh()).asin();
@@ -165,10 +164,9 @@ impl LocalFrame {
         let eta_p = (dlon.sin() / (1.0 + t * t).sqrt()).atanh();
         let mut xi = xi_p;
         let mut eta = eta_p;
-        for (j, a) in self.alpha.iter().enumerate() {
-            let k = 2.0 * (j as f64 + 1.0);
-            xi += a * (k * xi_p).sin() * (k * eta_p).cosh();
-            eta += a * (k * xi_p).cos() * (k * eta_p).sinh();
+        for (a, (sc, cs)) in self.alpha.iter().zip(harmonics(xi_p, eta_p)) {
+            xi += a * sc;
+            eta += a * cs;
         }
         [self.radius_a * eta, self.radius_a * xi]
     }
@@ -193,6 +191,21 @@ impl LocalFrame {
         }
         tau.atan()
     }
+}
+
+/// `(sin 2jx · cosh 2jy, cos 2jx · sinh 2jy)` for j = 1..=6, from one sin/cos and one
+/// sinh/cosh by the angle-addition recurrences (4 transcendental calls instead of 24).
+fn harmonics(x: f64, y: f64) -> [(f64, f64); 6] {
+    let (s1, c1) = (2.0 * x).sin_cos();
+    let (sh1, ch1) = ((2.0 * y).sinh(), (2.0 * y).cosh());
+    let (mut s, mut c, mut sh, mut ch) = (s1, c1, sh1, ch1);
+    let mut out = [(0.0, 0.0); 6];
+    for slot in &mut out {
+        *slot = (s * ch, c * sh);
+        (s, c) = (s * c1 + c * s1, c * c1 - s * s1);
+        (sh, ch) = (sh * ch1 + ch * sh1, ch * ch1 + sh * sh1);
+    }
+    out
 }
 
 #[cfg(test)]

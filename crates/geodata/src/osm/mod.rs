@@ -1,1 +1,490 @@
-//! TODO(skeleton): filled in by its owner this session.
+//! OpenStreetMap ingestion: `.osm` XML and `.osm.pbf` → buildings, highway ways, street network.
+//!
+//! Both readers stream the file into the same raw element tables (nodes, ways, relations with
+//! only the tags urbansem uses), then [`OsmMap`] is assembled from them in a local metric
+//! frame ([`crate::projection::LocalFrame`]) whose origin is the centre of the file's
+//! `<bounds>` (or of the nodes' extent when the file has none).
+//!
+//! - Buildings: closed ways with `building=*` other than `no`, and `type=multipolygon`
+//!   relations with `building=*` whose outer/inner member ways are joined end to end into rings.
+//! - Highways: every way with `highway=*`; all but `area=yes` ones form the street network
+//!   ([`network`]): segments between consecutive nodes, intersections, neighbour pairs N
+//!   (thesis §4.4.2).
+//! - Elements that reference nodes or ways missing from the file (extracts cut at the border)
+//!   are skipped and counted in [`OsmStats`], never silently.
+//!
+//! ```
+//! let xml = r#"<osm version="0.6">
+//!   <node id="1" lat="48.0" lon="11.0"/><node id="2" lat="48.0" lon="11.001"/>
+//!   <node id="3" lat="48.001" lon="11.001"/>
+//!   <way id="10"><nd ref="1"/><nd ref="2"/><nd ref="3"/><nd ref="1"/><tag k="building" v="yes"/></way>
+//!   <way id="11"><nd ref="1"/><nd ref="3"/><tag k="highway" v="service"/></way>
+//! </osm>"#;
+//! let map = geodata::osm::OsmMap::from_xml_str(xml).unwrap();
+//! assert_eq!(map.buildings.len(), 1);
+//! assert_eq!(map.streets.segments.len(), 1);
+//! ```
+
+pub mod error;
+pub mod geometry;
+pub mod index;
+pub mod model;
+pub mod network;
+mod pbf;
+mod rings;
+mod xml;
+
+pub use error::OsmError;
+pub use index::MapIndex;
+pub use model::{
+    Building, ElementKind, HighwayWay, Intersection, OsmMap, OsmStats, StreetNetwork, StreetSegment,
+};
+
+use crate::projection::LocalFrame;
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Tag keys kept from ways and relations; everything else is dropped while reading.
+pub(crate) const KEPT_KEYS: [&str; 13] = [
+    "building",
+    "highway",
+    "name",
+    "width",
+    "lanes",
+    "tunnel",
+    "layer",
+    "sidewalk",
+    "oneway",
+    "height",
+    "building:levels",
+    "area",
+    "type",
+];
+
+/// Whether a tag key is one [`KEPT_KEYS`] holds.
+pub(crate) fn is_kept_key(key: &[u8]) -> bool {
+    KEPT_KEYS.iter().any(|k| k.as_bytes() == key)
+}
+
+/// A node as read: id and WGS84 position in degrees.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RawNode {
+    pub id: i64,
+    pub lat: f64,
+    pub lon: f64,
+}
+
+/// A way as read: id, node references and kept tags.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct RawWay {
+    pub id: i64,
+    pub refs: Vec<i64>,
+    pub tags: Vec<(String, String)>,
+}
+
+/// A relation as read: id, way members with their role, kept tags, count of non-way members.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct RawRelation {
+    pub id: i64,
+    pub way_members: Vec<(i64, String)>,
+    pub tags: Vec<(String, String)>,
+}
+
+/// Everything a reader produces.
+#[derive(Debug, Default)]
+pub(crate) struct RawData {
+    /// `[min_lon, min_lat, max_lon, max_lat]` from the file header, if any.
+    pub bounds: Option<[f64; 4]>,
+    pub nodes: Vec<RawNode>,
+    pub ways: Vec<RawWay>,
+    pub relations: Vec<RawRelation>,
+}
+
+fn tag<'a>(tags: &'a [(String, String)], key: &str) -> Option<&'a str> {
+    tags.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+}
+
+/// Leading decimal number of a tag value (`"12"`, `"12.5 m"`, `"3;4"` → 3); `None` if there is none.
+fn leading_number(value: &str) -> Option<f64> {
+    let trimmed = value.trim();
+    let end = trimmed
+        .char_indices()
+        .find(|(_, c)| !(c.is_ascii_digit() || *c == '.' || *c == '-'))
+        .map_or(trimmed.len(), |(i, _)| i);
+    trimmed
+        .get(..end)?
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+}
+
+fn is_building(tags: &[(String, String)]) -> Option<&str> {
+    tag(tags, "building").filter(|v| *v != "no")
+}
+
+/// Node table sorted by id for binary-search lookup.
+pub(crate) struct NodeTable {
+    nodes: Vec<RawNode>,
+    slot_of_id: rustc_hash::FxHashMap<i64, usize>,
+}
+
+impl NodeTable {
+    fn new(nodes: Vec<RawNode>) -> Self {
+        let mut slot_of_id =
+            rustc_hash::FxHashMap::with_capacity_and_hasher(nodes.len(), Default::default());
+        for (slot, n) in nodes.iter().enumerate() {
+            slot_of_id.insert(n.id, slot);
+        }
+        NodeTable { nodes, slot_of_id }
+    }
+
+    fn get(&self, id: i64) -> Option<&RawNode> {
+        self.slot_of_id
+            .get(&id)
+            .and_then(|&slot| self.nodes.get(slot))
+    }
+
+    /// Projected positions of all `refs`, or `None` if any is missing.
+    fn project(&self, frame: &LocalFrame, refs: &[i64]) -> Option<Vec<[f64; 2]>> {
+        refs.iter()
+            .map(|&id| self.get(id).map(|n| frame.to_local(n.lat, n.lon)))
+            .collect()
+    }
+}
+
+/// Closed ring from a closed node list (first == last): drop the repeat, orient, reject degenerate.
+fn ring_from_closed(mut points: Vec<[f64; 2]>, ccw: bool) -> Option<Vec<[f64; 2]>> {
+    points.pop();
+    points.dedup();
+    if points.len() >= 2 && points.first() == points.last() {
+        points.pop();
+    }
+    if points.len() < 3 {
+        return None;
+    }
+    let area = geometry::signed_area(&points);
+    if area == 0.0 || !area.is_finite() {
+        return None;
+    }
+    if (area > 0.0) != ccw {
+        points.reverse();
+    }
+    Some(points)
+}
+
+enum WayOutcome {
+    Building(Building),
+    Highway(HighwayWay),
+    Both(Building, HighwayWay),
+    Nothing,
+}
+
+#[derive(Default)]
+struct WayCounts {
+    building_ways: usize,
+    open_building_ways: usize,
+    highway_ways: usize,
+    building_missing: usize,
+    building_degenerate: usize,
+    highway_missing: usize,
+    highway_short: usize,
+}
+
+fn build_way(
+    way: &RawWay,
+    nodes: &NodeTable,
+    frame: &LocalFrame,
+    counts: &mut WayCounts,
+) -> WayOutcome {
+    let mut building = None;
+    if let Some(value) = is_building(&way.tags) {
+        let closed = way.refs.len() >= 4 && way.refs.first() == way.refs.last();
+        if closed {
+            counts.building_ways += 1;
+            match nodes.project(frame, &way.refs) {
+                None => counts.building_missing += 1,
+                Some(points) => match ring_from_closed(points, true) {
+                    None => counts.building_degenerate += 1,
+                    Some(outer) => {
+                        building = Some(Building {
+                            osm_id: way.id,
+                            kind: ElementKind::Way,
+                            building: value.to_string(),
+                            outer,
+                            inners: Vec::new(),
+                            height_m: tag(&way.tags, "height").and_then(leading_number),
+                            levels: tag(&way.tags, "building:levels").and_then(leading_number),
+                            name: tag(&way.tags, "name").map(str::to_string),
+                        })
+                    }
+                },
+            }
+        } else {
+            counts.open_building_ways += 1;
+        }
+    }
+    let mut highway = None;
+    if let Some(kind) = tag(&way.tags, "highway") {
+        counts.highway_ways += 1;
+        if way.refs.len() < 2 {
+            counts.highway_short += 1;
+        } else {
+            match nodes.project(frame, &way.refs) {
+                None => counts.highway_missing += 1,
+                Some(points) => {
+                    highway = Some(HighwayWay {
+                        osm_id: way.id,
+                        highway: kind.to_string(),
+                        name: tag(&way.tags, "name").map(str::to_string),
+                        width_m: tag(&way.tags, "width").and_then(leading_number),
+                        lanes: tag(&way.tags, "lanes").and_then(|v| v.trim().parse::<u32>().ok()),
+                        tunnel: tag(&way.tags, "tunnel").is_some_and(|v| v != "no"),
+                        layer: tag(&way.tags, "layer")
+                            .and_then(|v| v.trim().parse().ok())
+                            .unwrap_or(0),
+                        sidewalk: tag(&way.tags, "sidewalk").map(str::to_string),
+                        oneway: tag(&way.tags, "oneway")
+                            .is_some_and(|v| matches!(v, "yes" | "true" | "1" | "-1")),
+                        area: tag(&way.tags, "area") == Some("yes"),
+                        node_ids: way.refs.clone(),
+                        points,
+                    })
+                }
+            }
+        }
+    }
+    match (building, highway) {
+        (Some(b), Some(h)) => WayOutcome::Both(b, h),
+        (Some(b), None) => WayOutcome::Building(b),
+        (None, Some(h)) => WayOutcome::Highway(h),
+        (None, None) => WayOutcome::Nothing,
+    }
+}
+
+/// The frame origin for raw data: centre of the bounds, else of the nodes' extent.
+fn extent_of(raw: &RawData, source_name: &str) -> Result<[f64; 4], OsmError> {
+    if let Some(b) = raw.bounds {
+        return Ok(b);
+    }
+    let mut bbox = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for n in &raw.nodes {
+        bbox = [
+            bbox[0].min(n.lon),
+            bbox[1].min(n.lat),
+            bbox[2].max(n.lon),
+            bbox[3].max(n.lat),
+        ];
+    }
+    if raw.nodes.is_empty() {
+        return Err(OsmError::EmptyMap {
+            source_name: source_name.to_string(),
+        });
+    }
+    Ok(bbox)
+}
+
+impl OsmMap {
+    /// Reads an `.osm` (XML) or `.osm.pbf` file; the frame is centred on the file's bounds.
+    pub fn load(path: impl AsRef<Path>) -> Result<OsmMap, OsmError> {
+        Self::load_in_frame(path, None)
+    }
+
+    /// Reads a file like [`OsmMap::load`], into `frame` when one is given (to share a frame).
+    pub fn load_in_frame(
+        path: impl AsRef<Path>,
+        frame: Option<LocalFrame>,
+    ) -> Result<OsmMap, OsmError> {
+        let path = path.as_ref();
+        let name = path.to_string_lossy().to_lowercase();
+        let raw = if name.ends_with(".pbf") {
+            pbf::read_pbf(path)?
+        } else if name.ends_with(".osm") || name.ends_with(".xml") {
+            let file = std::fs::File::open(path).map_err(|source| OsmError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            xml::read_xml(
+                std::io::BufReader::with_capacity(1 << 16, file),
+                &path.display().to_string(),
+            )?
+        } else {
+            return Err(OsmError::UnknownExtension {
+                path: path.to_path_buf(),
+            });
+        };
+        Self::from_raw(raw, frame, &path.display().to_string())
+    }
+
+    /// Parses OSM XML held in a string (frame centred on its bounds).
+    pub fn from_xml_str(xml: &str) -> Result<OsmMap, OsmError> {
+        Self::from_xml_reader(xml.as_bytes(), "<string>", None)
+    }
+
+    /// Parses OSM XML from any buffered reader; `source_name` appears in errors.
+    pub fn from_xml_reader<R: std::io::BufRead>(
+        reader: R,
+        source_name: &str,
+        frame: Option<LocalFrame>,
+    ) -> Result<OsmMap, OsmError> {
+        let raw = xml::read_xml(reader, source_name)?;
+        Self::from_raw(raw, frame, source_name)
+    }
+
+    pub(crate) fn from_raw(
+        raw: RawData,
+        frame: Option<LocalFrame>,
+        source_name: &str,
+    ) -> Result<OsmMap, OsmError> {
+        let bbox_lonlat = extent_of(&raw, source_name)?;
+        let frame = match frame {
+            Some(f) => f,
+            None => LocalFrame::new(
+                0.5 * (bbox_lonlat[1] + bbox_lonlat[3]),
+                0.5 * (bbox_lonlat[0] + bbox_lonlat[2]),
+            )
+            .map_err(|source| OsmError::Frame {
+                source_name: source_name.to_string(),
+                source,
+            })?,
+        };
+        let mut stats = OsmStats {
+            nodes: raw.nodes.len(),
+            ways: raw.ways.len(),
+            relations: raw.relations.len(),
+            ..OsmStats::default()
+        };
+        let nodes = NodeTable::new(raw.nodes);
+
+        let per_way: Vec<(WayOutcome, WayCounts)> = raw
+            .ways
+            .par_iter()
+            .map(|w| {
+                let mut c = WayCounts::default();
+                let o = build_way(w, &nodes, &frame, &mut c);
+                (o, c)
+            })
+            .collect();
+        let mut buildings = Vec::new();
+        let mut highways = Vec::new();
+        for (outcome, c) in per_way {
+            stats.building_ways += c.building_ways;
+            stats.open_building_ways += c.open_building_ways;
+            stats.highway_ways += c.highway_ways;
+            stats.skipped_building_ways_missing_nodes += c.building_missing;
+            stats.skipped_building_ways_degenerate += c.building_degenerate;
+            stats.skipped_highway_ways_missing_nodes += c.highway_missing;
+            stats.skipped_highway_ways_too_short += c.highway_short;
+            match outcome {
+                WayOutcome::Building(b) => buildings.push(b),
+                WayOutcome::Highway(h) => highways.push(h),
+                WayOutcome::Both(b, h) => {
+                    buildings.push(b);
+                    highways.push(h);
+                }
+                WayOutcome::Nothing => {}
+            }
+        }
+
+        let mut way_refs: rustc_hash::FxHashMap<i64, &[i64]> = rustc_hash::FxHashMap::default();
+        let wanted: rustc_hash::FxHashSet<i64> = raw
+            .relations
+            .iter()
+            .filter(|r| {
+                tag(&r.tags, "type") == Some("multipolygon") && is_building(&r.tags).is_some()
+            })
+            .flat_map(|r| r.way_members.iter().map(|(id, _)| *id))
+            .collect();
+        for w in &raw.ways {
+            if wanted.contains(&w.id) {
+                way_refs.insert(w.id, &w.refs);
+            }
+        }
+        for rel in &raw.relations {
+            if tag(&rel.tags, "type") != Some("multipolygon") {
+                continue;
+            }
+            let Some(value) = is_building(&rel.tags) else {
+                continue;
+            };
+            stats.building_relations += 1;
+            match rings::assemble(rel, &way_refs, &nodes, &frame) {
+                Err(rings::RingError::Missing) => {
+                    stats.skipped_building_relations_missing_members += 1
+                }
+                Err(rings::RingError::Unclosed) => stats.skipped_building_relations_unclosed += 1,
+                Ok(polygons) => {
+                    for (outer, inners) in polygons {
+                        buildings.push(Building {
+                            osm_id: rel.id,
+                            kind: ElementKind::Relation,
+                            building: value.to_string(),
+                            outer,
+                            inners,
+                            height_m: tag(&rel.tags, "height").and_then(leading_number),
+                            levels: tag(&rel.tags, "building:levels").and_then(leading_number),
+                            name: tag(&rel.tags, "name").map(str::to_string),
+                        });
+                    }
+                }
+            }
+        }
+        let streets = network::build_network(&highways);
+        Ok(OsmMap {
+            frame,
+            bbox_lonlat,
+            buildings,
+            highways,
+            streets,
+            stats,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn leading_numbers() {
+        assert_eq!(leading_number("12"), Some(12.0));
+        assert_eq!(leading_number(" 12.5 m"), Some(12.5));
+        assert_eq!(leading_number("3;4"), Some(3.0));
+        assert_eq!(leading_number("tall"), None);
+    }
+
+    #[test]
+    fn ring_is_made_ccw_without_repeat() {
+        let cw = vec![[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+        let ring = ring_from_closed(cw, true).unwrap();
+        assert_eq!(ring.len(), 4);
+        assert!(geometry::signed_area(&ring) > 0.0);
+        assert!(ring_from_closed(vec![[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]], true).is_none());
+    }
+
+    #[test]
+    fn missing_nodes_are_counted_not_silent() {
+        let xml = r#"<osm><node id="1" lat="48.0" lon="11.0"/><node id="2" lat="48.0" lon="11.001"/>
+            <way id="5"><nd ref="1"/><nd ref="2"/><nd ref="99"/><nd ref="1"/><tag k="building" v="yes"/></way>
+            <way id="6"><nd ref="1"/><nd ref="98"/><tag k="highway" v="footway"/></way>
+            <way id="7"><nd ref="1"/><nd ref="2"/><tag k="building" v="no"/></way></osm>"#;
+        let map = OsmMap::from_xml_str(xml).unwrap();
+        assert_eq!(map.building_count(), 1);
+        assert_eq!(map.buildings.len(), 0);
+        assert_eq!(map.stats.skipped_building_ways_missing_nodes, 1);
+        assert_eq!(map.stats.highway_ways, 1);
+        assert_eq!(map.stats.skipped_highway_ways_missing_nodes, 1);
+    }
+
+    #[test]
+    fn empty_map_is_an_error() {
+        assert!(matches!(
+            OsmMap::from_xml_str("<osm></osm>"),
+            Err(OsmError::EmptyMap { .. })
+        ));
+    }
+}

@@ -1,0 +1,169 @@
+//! The map types: buildings, highway ways, street segments, intersections, statistics.
+//!
+//! Conventions: every coordinate is in the map's local frame ([`crate::projection::LocalFrame`]),
+//! `[east, north]` in metres. Rings are closed implicitly: the last vertex is *not* a repeat
+//! of the first. Outer rings are counter-clockwise (positive signed area), inner rings
+//! (courtyards) clockwise.
+
+use crate::projection::LocalFrame;
+use serde::Serialize;
+
+/// Which OSM element a building came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum ElementKind {
+    /// A closed way tagged `building=*`.
+    Way,
+    /// A `type=multipolygon` relation tagged `building=*`.
+    Relation,
+}
+
+/// One building outline (one outer ring with its holes).
+///
+/// A multipolygon relation with several outer rings yields several `Building`s with the same
+/// `osm_id`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Building {
+    /// Id of the OSM way or relation.
+    pub osm_id: i64,
+    /// Way or relation.
+    pub kind: ElementKind,
+    /// Value of the `building` tag (`yes`, `house`, …).
+    pub building: String,
+    /// Outer ring, counter-clockwise, last vertex not repeated, metres in the local frame.
+    pub outer: Vec<[f64; 2]>,
+    /// Inner rings (holes), clockwise, last vertex not repeated.
+    pub inners: Vec<Vec<[f64; 2]>>,
+    /// `height` in metres, when tagged and numeric.
+    pub height_m: Option<f64>,
+    /// `building:levels`, when tagged and numeric.
+    pub levels: Option<f64>,
+    /// `name`, when tagged.
+    pub name: Option<String>,
+}
+
+/// One OSM way tagged `highway=*`, with its geometry in the local frame.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HighwayWay {
+    /// Id of the OSM way.
+    pub osm_id: i64,
+    /// Value of the `highway` tag (`primary`, `residential`, `footway`, …).
+    pub highway: String,
+    /// `name`, when tagged.
+    pub name: Option<String>,
+    /// `width` in metres, when tagged and numeric.
+    pub width_m: Option<f64>,
+    /// `lanes`, when tagged and numeric.
+    pub lanes: Option<u32>,
+    /// `tunnel` is tagged and not `no`.
+    pub tunnel: bool,
+    /// `layer` (0 when untagged or not an integer).
+    pub layer: i32,
+    /// `sidewalk` value (`both`, `left`, `no`, …), when tagged.
+    pub sidewalk: Option<String>,
+    /// `oneway=yes|true|1|-1`.
+    pub oneway: bool,
+    /// `area=yes`: a pedestrian square or similar, not a centre line (kept out of the network).
+    pub area: bool,
+    /// OSM node ids in way order.
+    pub node_ids: Vec<i64>,
+    /// Node positions in way order, metres in the local frame.
+    pub points: Vec<[f64; 2]>,
+}
+
+/// A street segment: the straight piece between two consecutive nodes of a highway way.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StreetSegment {
+    /// Index of the way in [`super::OsmMap::highways`].
+    pub way_index: usize,
+    /// Position of the segment in its way (0 = first).
+    pub index_in_way: usize,
+    /// OSM node id of the start point `p_{s,b}`.
+    pub from_node: i64,
+    /// OSM node id of the end point `p_{s,e}`.
+    pub to_node: i64,
+    /// Start point, metres in the local frame.
+    pub a: [f64; 2],
+    /// End point, metres in the local frame.
+    pub b: [f64; 2],
+    /// Euclidean length in metres.
+    pub length_m: f64,
+    /// The way's `highway` value.
+    pub highway: String,
+}
+
+/// A street intersection: a node shared by ≥ 3 segment ends or by two different ways.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Intersection {
+    /// OSM node id.
+    pub node_id: i64,
+    /// Position, metres in the local frame.
+    pub position: [f64; 2],
+    /// Indices into [`StreetNetwork::segments`] of the segments ending here, ascending.
+    pub segment_ids: Vec<usize>,
+}
+
+/// The street graph G = (P, S) of thesis §4.4.2 with its neighbour pairs N.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct StreetNetwork {
+    /// All segments S, way by way in way order.
+    pub segments: Vec<StreetSegment>,
+    /// Intersections, sorted by node id.
+    pub intersections: Vec<Intersection>,
+    /// Neighbour pairs N as `[s1, s2]` with `s1 < s2`, sorted: segments sharing a waypoint.
+    pub neighbour_pairs: Vec<[usize; 2]>,
+}
+
+/// Element counts and everything that was skipped while building the map.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct OsmStats {
+    /// Nodes in the file.
+    pub nodes: usize,
+    /// Ways in the file.
+    pub ways: usize,
+    /// Relations in the file.
+    pub relations: usize,
+    /// Closed ways with `building=*` other than `no` (counted whether or not their nodes resolve).
+    pub building_ways: usize,
+    /// `type=multipolygon` relations with `building=*` other than `no`.
+    pub building_relations: usize,
+    /// Ways with a `highway=*` tag.
+    pub highway_ways: usize,
+    /// Ways with `building=*` (not `no`) that are not closed; not buildings.
+    pub open_building_ways: usize,
+    /// Building ways skipped because a node reference was missing from the file.
+    pub skipped_building_ways_missing_nodes: usize,
+    /// Building ways skipped because the ring has < 3 distinct vertices or zero area.
+    pub skipped_building_ways_degenerate: usize,
+    /// Building relations skipped because a member way or node was missing from the file.
+    pub skipped_building_relations_missing_members: usize,
+    /// Building relations skipped because their outer ways do not join into closed rings.
+    pub skipped_building_relations_unclosed: usize,
+    /// Highway ways skipped because a node reference was missing from the file.
+    pub skipped_highway_ways_missing_nodes: usize,
+    /// Highway ways with fewer than two nodes.
+    pub skipped_highway_ways_too_short: usize,
+}
+
+/// A parsed OSM map in one local metric frame.
+#[derive(Debug, Clone)]
+pub struct OsmMap {
+    /// The local frame all coordinates are in.
+    pub frame: LocalFrame,
+    /// `[min_lon, min_lat, max_lon, max_lat]`: the file's bounds, or the nodes' extent without bounds.
+    pub bbox_lonlat: [f64; 4],
+    /// Building outlines (ways first in file order, then relations).
+    pub buildings: Vec<Building>,
+    /// All highway ways whose nodes resolved, in file order.
+    pub highways: Vec<HighwayWay>,
+    /// Street segments, intersections and neighbour pairs built from the non-area highways.
+    pub streets: StreetNetwork,
+    /// Counts and skipped elements.
+    pub stats: OsmStats,
+}
+
+impl OsmMap {
+    /// Number of building elements in the file: closed `building=*` ways plus building multipolygons.
+    pub fn building_count(&self) -> usize {
+        self.stats.building_ways + self.stats.building_relations
+    }
+}
