@@ -39,6 +39,7 @@ fn formats() -> Vec<(&'static str, Encoding)> {
         ("c.ply", Encoding::Ascii),
         ("d.pcd", Encoding::BinaryLittleEndian),
         ("e.pcd", Encoding::Ascii),
+        ("e2.pcd", Encoding::BinaryCompressed),
         ("f.las", Encoding::BinaryLittleEndian),
         ("g.laz", Encoding::BinaryLittleEndian),
     ]

@@ -15,13 +15,14 @@
 //! | format | positions | intensity | rgb | label | raw_label | object |
 //! |---|---|---|---|---|---|---|
 //! | PLY (ascii, binary LE/BE) | float/double | float | uchar red green blue | uchar | uint | uint |
-//! | PCD (ascii, binary) | F4/F8 | F4 | U4 `rgb` (0x00RRGGBB; F4-packed accepted) | U1 | U4 | U4 |
+//! | PCD (ascii, binary, binary_compressed) | F4/F8 | F4 | U4 `rgb` (0x00RRGGBB; F4-packed accepted) | U1 | U4 | U4 |
 //! | LAS/LAZ 1.4 (format 6/7) | integer grid, 0.1 mm | u16 field + exact f32 in extra bytes | u16 ×257 | classification (see [`las`]) | extra bytes | extra bytes |
 //! | KITTI `.bin` | f32 | f32 reflectance | – | separate uint32 label file | separate | – |
 
 pub mod error;
 pub mod kitti;
 pub mod las;
+pub mod lzf;
 pub mod pcd;
 pub mod ply;
 
@@ -344,6 +345,8 @@ pub enum Encoding {
     BinaryLittleEndian,
     /// Binary big-endian (PLY only; PCD binary is always little-endian).
     BinaryBigEndian,
+    /// PCD `binary_compressed` (LZF); other formats write their binary little-endian form.
+    BinaryCompressed,
 }
 
 /// Options for writing.

@@ -3,8 +3,10 @@
 //! Fields `x y z`, `intensity`, `rgb`/`rgba` (packed 0x00RRGGBB, as U4 or as the bits of
 //! an F4, PCL's convention), `label`, `raw_label` and `object` fill the columns; other
 //! fields (any type, any COUNT) are skipped. `VIEWPOINT` is read but not applied (it is
-//! metadata in PCL too). `DATA binary_compressed` (LZF, column-major) is reported as
-//! [`CloudError::Unsupported`]; convert such files with `pcl_convert_pcd_ascii_binary`.
+//! metadata in PCL too). `DATA binary_compressed` is read and written too: after the header,
+//! u32 compressed size, u32 uncompressed size, then one LZF block ([`super::lzf`]) holding the
+//! fields column by column (all x, then all y, …). That block is decompressed in memory;
+//! ascii and binary bodies are streamed.
 
 use super::ply::{assign, Role, Scalar};
 use super::{io_err, path_buf, read_full, CloudError, Encoding, Location, PointCloud, PointRecord};
@@ -29,10 +31,17 @@ struct Field {
     role: PcdRole,
 }
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Data {
+    Ascii,
+    Binary,
+    Compressed,
+}
+
 struct Header {
     fields: Vec<Field>,
     points: usize,
-    binary: bool,
+    data: Data,
     len: u64,
     lines: usize,
 }
@@ -118,17 +127,18 @@ fn read_header(path: &Path, r: &mut impl BufRead) -> Result<Header> {
             "HEIGHT" => height = Some(one("HEIGHT")?),
             "POINTS" => points = Some(one("POINTS")?),
             "DATA" => {
-                let binary = match rest.first().copied() {
-                    Some("ascii") => false,
-                    Some("binary") => true,
-                    Some("binary_compressed") => return Err(CloudError::Unsupported {
-                        path: path_buf(path),
-                        what:
-                            "PCD DATA binary_compressed (LZF); convert it to binary or ascii first"
-                                .into(),
-                    }),
+                let data = match rest.first().copied() {
+                    Some("ascii") => Data::Ascii,
+                    Some("binary") => Data::Binary,
+                    Some("binary_compressed") => Data::Compressed,
                     other => {
-                        return Err(header_err(path, line_no, format!("unknown DATA {other:?}")))
+                        return Err(header_err(
+                            path,
+                            line_no,
+                            format!(
+                            "unknown DATA {other:?}; expected ascii, binary or binary_compressed"
+                        ),
+                        ))
                     }
                 };
                 let counts = counts.unwrap_or_else(|| vec![1; names.len()]);
@@ -215,7 +225,7 @@ fn read_header(path: &Path, r: &mut impl BufRead) -> Result<Header> {
                 return Ok(Header {
                     fields,
                     points,
-                    binary,
+                    data,
                     len,
                     lines: line_no,
                 });
@@ -257,7 +267,7 @@ fn set(
     }
 }
 
-/// Reads a PCD file (`DATA ascii` or `DATA binary`).
+/// Reads a PCD file (`DATA ascii`, `binary` or `binary_compressed`).
 pub fn read_pcd(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadReport)> {
     let file = File::open(path).map_err(io_err(path))?;
     let file_len = file.metadata().map_err(io_err(path))?.len();
@@ -287,7 +297,9 @@ pub fn read_pcd(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
         PointCloud::with_columns(columns, precision, capacity),
         options,
     );
-    if h.binary {
+    if h.data == Data::Compressed {
+        read_compressed_body(path, &mut r, &h, file_len, &mut sink)?;
+    } else if h.data == Data::Binary {
         let record: usize = h.fields.iter().map(|f| f.ty.size() * f.count).sum();
         let mut buf = vec![0u8; record];
         for i in 0..h.points {
@@ -400,16 +412,113 @@ pub fn read_pcd(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
     Ok(sink.finish())
 }
 
-/// Writes a PCD v0.7 file; `BinaryBigEndian` is written as PCD's (little-endian) binary.
+fn read_compressed_body(
+    path: &Path,
+    r: &mut impl Read,
+    h: &Header,
+    file_len: u64,
+    sink: &mut Sink,
+) -> Result<()> {
+    let truncated = |at: u64| CloudError::Truncated {
+        path: path_buf(path),
+        at: Location::Byte(at),
+        point: 0,
+        expected: h.points,
+    };
+    let mut sizes = [0u8; 8];
+    if !read_full(r, &mut sizes).map_err(io_err(path))? {
+        return Err(truncated(h.len));
+    }
+    let compressed = u64::from(u32::from_le_bytes([sizes[0], sizes[1], sizes[2], sizes[3]]));
+    let raw_len = u64::from(u32::from_le_bytes([sizes[4], sizes[5], sizes[6], sizes[7]]));
+    let record: usize = h.fields.iter().map(|f| f.ty.size() * f.count).sum();
+    let expected_raw = (h.points as u64).saturating_mul(record as u64);
+    if raw_len != expected_raw {
+        return Err(CloudError::BadValue {
+            path: path_buf(path),
+            at: Location::Byte(h.len + 4),
+            field: "uncompressed size".into(),
+            value: format!("{raw_len} (POINTS × record size = {expected_raw})"),
+        });
+    }
+    // One 3-byte LZF chunk expands to at most 264 bytes: a larger claim is a corrupt header
+    // (and must not become a huge allocation).
+    if raw_len > compressed.saturating_mul(88) + 32 {
+        return Err(CloudError::BadValue {
+            path: path_buf(path),
+            at: Location::Byte(h.len),
+            field: "compressed size".into(),
+            value: format!("{compressed} bytes cannot hold {raw_len} uncompressed bytes"),
+        });
+    }
+    let data_start = h.len + 8;
+    if data_start + compressed > file_len {
+        return Err(truncated(file_len));
+    }
+    if data_start + compressed < file_len {
+        return Err(CloudError::TrailingData {
+            path: path_buf(path),
+            at: Location::Byte(data_start + compressed),
+            extra: file_len - data_start - compressed,
+        });
+    }
+    let mut packed = vec![0u8; compressed as usize];
+    if !read_full(r, &mut packed).map_err(io_err(path))? {
+        return Err(truncated(data_start));
+    }
+    let soa = super::lzf::decompress(&packed, raw_len as usize).map_err(|e| {
+        let at = match e {
+            super::lzf::LzfError::Truncated { at }
+            | super::lzf::LzfError::BadReference { at }
+            | super::lzf::LzfError::Overflow { at } => at,
+        };
+        CloudError::BadValue {
+            path: path_buf(path),
+            at: Location::Byte(data_start + at as u64),
+            field: "LZF data".into(),
+            value: format!("{e:?}"),
+        }
+    })?;
+    // Column-major: field k's values start at POINTS × (record bytes of the fields before k).
+    let mut starts = Vec::with_capacity(h.fields.len());
+    let mut acc = 0usize;
+    for f in &h.fields {
+        starts.push(acc);
+        acc += h.points * f.ty.size() * f.count;
+    }
+    for i in 0..h.points {
+        let mut rec = PointRecord::default();
+        for (f, &start) in h.fields.iter().zip(&starts) {
+            if f.role == PcdRole::Column(Role::Skip) {
+                continue;
+            }
+            let at = start + i * f.ty.size() * f.count;
+            let raw = soa.get(at..at + f.ty.size()).unwrap_or(&[]);
+            let v = f.ty.decode(raw, false);
+            set(&mut rec, f, v, raw, path, Location::Point(i))?;
+        }
+        sink.push(&rec)?;
+    }
+    Ok(())
+}
+
+/// Writes a PCD v0.7 file: `Ascii`, `BinaryCompressed` (LZF) or binary (little-endian; PCD
+/// has no big-endian variant, so `BinaryBigEndian` writes binary too).
 pub fn write_pcd(path: &Path, cloud: &PointCloud, encoding: Encoding) -> Result<()> {
     cloud.check_columns()?;
     let file = File::create(path).map_err(io_err(path))?;
     let mut w = BufWriter::with_capacity(1 << 16, file);
-    write_pcd_to(&mut w, cloud, encoding != Encoding::Ascii).map_err(io_err(path))?;
+    let data = match encoding {
+        Encoding::Ascii => Data::Ascii,
+        Encoding::BinaryCompressed => Data::Compressed,
+        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => Data::Binary,
+    };
+    write_pcd_to(&mut w, cloud, data).map_err(io_err(path))?;
     w.flush().map_err(io_err(path))
 }
 
-fn write_pcd_to(w: &mut impl Write, cloud: &PointCloud, binary: bool) -> std::io::Result<()> {
+fn write_pcd_to(w: &mut impl Write, cloud: &PointCloud, data: Data) -> std::io::Result<()> {
+    let binary = data != Data::Ascii;
     let c = cloud.columns();
     let (xs, xt) = match cloud.precision {
         Precision::F32 => ("4", "F"),
@@ -457,7 +566,17 @@ fn write_pcd_to(w: &mut impl Write, cloud: &PointCloud, binary: bool) -> std::io
         cloud.len(),
         cloud.len()
     )?;
-    writeln!(w, "DATA {}", if binary { "binary" } else { "ascii" })?;
+    let name = match data {
+        Data::Ascii => "ascii",
+        Data::Binary => "binary",
+        Data::Compressed => "binary_compressed",
+    };
+    writeln!(w, "DATA {name}")?;
+    let field_sizes: Vec<usize> = fields
+        .iter()
+        .map(|f| f.1.parse::<usize>().unwrap_or(0))
+        .collect();
+    let mut aos = Vec::new();
     let mut rec = Vec::with_capacity(64);
     for i in 0..cloud.len() {
         let Some(p) = cloud.get(i) else { break };
@@ -513,7 +632,42 @@ fn write_pcd_to(w: &mut impl Write, cloud: &PointCloud, binary: bool) -> std::io
         if c.object {
             rec.extend_from_slice(&p.object.to_le_bytes());
         }
-        w.write_all(&rec)?;
+        if data == Data::Compressed {
+            aos.extend_from_slice(&rec);
+        } else {
+            w.write_all(&rec)?;
+        }
+    }
+    if data == Data::Compressed {
+        let n = cloud.len();
+        let record: usize = field_sizes.iter().sum();
+        let mut soa = Vec::with_capacity(aos.len());
+        let mut offset = 0usize;
+        for &size in &field_sizes {
+            for i in 0..n {
+                let at = i * record + offset;
+                soa.extend_from_slice(aos.get(at..at + size).unwrap_or(&[]));
+            }
+            offset += size;
+        }
+        let packed = super::lzf::compress(&soa);
+        let too_big = || {
+            std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "PCD binary_compressed holds at most 4 GiB",
+            )
+        };
+        w.write_all(
+            &u32::try_from(packed.len())
+                .map_err(|_| too_big())?
+                .to_le_bytes(),
+        )?;
+        w.write_all(
+            &u32::try_from(soa.len())
+                .map_err(|_| too_big())?
+                .to_le_bytes(),
+        )?;
+        w.write_all(&packed)?;
     }
     Ok(())
 }
@@ -542,14 +696,30 @@ mod tests {
     }
 
     #[test]
-    fn compressed_is_unsupported() {
+    fn compressed_round_trip_and_bad_sizes() {
         let dir = std::env::temp_dir().join(format!("urbansem-pcd-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("c.pcd");
-        std::fs::write(&p, "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA binary_compressed\n").unwrap();
-        assert!(matches!(
-            read_pcd(&p, &ReadOptions::default()),
-            Err(CloudError::Unsupported { .. })
-        ));
+        let columns = Columns {
+            intensity: true,
+            ..Columns::default()
+        };
+        let mut c = PointCloud::with_columns(columns, Precision::F32, 3);
+        for i in 0..3 {
+            c.push(&PointRecord {
+                position: [i as f64, 1.0, 2.0],
+                intensity: 0.5,
+                ..PointRecord::default()
+            });
+        }
+        write_pcd(&p, &c, Encoding::BinaryCompressed).unwrap();
+        assert_eq!(read_pcd(&p, &ReadOptions::default()).unwrap().0, c);
+        let mut bytes = std::fs::read(&p).unwrap();
+        let data = b"DATA binary_compressed\n";
+        let at = bytes.windows(data.len()).position(|w| w == data).unwrap() + data.len();
+        bytes[at + 4] ^= 1; // the uncompressed size
+        std::fs::write(&p, &bytes).unwrap();
+        let e = read_pcd(&p, &ReadOptions::default()).unwrap_err();
+        assert!(matches!(e, CloudError::BadValue { .. }), "{e}");
     }
 }

@@ -679,7 +679,7 @@ fn write_ply_to(w: &mut impl Write, cloud: &PointCloud, encoding: Encoding) -> s
     let c = cloud.columns();
     let fmt = match encoding {
         Encoding::Ascii => "ascii",
-        Encoding::BinaryLittleEndian => "binary_little_endian",
+        Encoding::BinaryLittleEndian | Encoding::BinaryCompressed => "binary_little_endian",
         Encoding::BinaryBigEndian => "binary_big_endian",
     };
     let xyz = match cloud.precision {

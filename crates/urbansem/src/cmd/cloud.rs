@@ -37,6 +37,9 @@ pub enum CloudCommand {
         /// Write PLY as binary big-endian.
         #[arg(long, conflicts_with = "ascii")]
         big_endian: bool,
+        /// Write PCD as `binary_compressed` (LZF).
+        #[arg(long, conflicts_with_all = ["ascii", "big_endian"])]
+        compressed: bool,
         /// A per-point uint32 label file (KITTI-360/MCD/SemanticKITTI style) to attach as `raw_label`.
         #[arg(long)]
         labels: Option<PathBuf>,
@@ -63,6 +66,7 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
             output,
             ascii,
             big_endian,
+            compressed,
             labels,
             label_set,
             drop_non_finite,
@@ -71,6 +75,8 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
                 Encoding::Ascii
             } else if big_endian {
                 Encoding::BinaryBigEndian
+            } else if compressed {
+                Encoding::BinaryCompressed
             } else {
                 Encoding::BinaryLittleEndian
             };
