@@ -97,22 +97,43 @@ fn decode_blob(
     Ok(part)
 }
 
-/// Reads a PBF file into raw element tables. Errors name the blob index and byte offset.
+/// A reader that counts the bytes handed out, so errors can name the offset of the failing blob.
+struct CountingReader<R> {
+    inner: R,
+    consumed: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl<R: std::io::Read> std::io::Read for CountingReader<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.consumed
+            .fetch_add(n as u64, std::sync::atomic::Ordering::Relaxed);
+        Ok(n)
+    }
+}
+
+/// Reads a PBF file into raw element tables. Errors name the blob index and the byte offset
+/// where that blob starts.
 pub(crate) fn read_pbf(path: &Path) -> Result<RawData, OsmError> {
-    let reader = BlobReader::seekable_from_path(path).map_err(|e| match e.kind() {
-        osmpbf::ErrorKind::Io(_) => OsmError::Io {
-            path: path.to_path_buf(),
-            source: std::io::Error::other(e.to_string()),
-        },
-        _ => pbf_error(path, 0, 0, &e),
+    let file = std::fs::File::open(path).map_err(|source| OsmError::Io {
+        path: path.to_path_buf(),
+        source,
     })?;
+    let consumed = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let counting = CountingReader {
+        inner: std::io::BufReader::with_capacity(1 << 16, file),
+        consumed: consumed.clone(),
+    };
+    let mut reader = BlobReader::new(counting);
     let mut blobs = Vec::new();
-    let mut next_offset = 0u64;
-    for (index, blob) in reader.enumerate() {
-        let blob = blob.map_err(|e| pbf_error(path, index, next_offset, &e))?;
-        let offset = blob.offset().map_or(next_offset, |o| o.0);
-        next_offset = offset;
-        blobs.push((index, offset, blob));
+    loop {
+        let offset = consumed.load(std::sync::atomic::Ordering::Relaxed);
+        let index = blobs.len();
+        match reader.next() {
+            None => break,
+            Some(Ok(blob)) => blobs.push((index, offset, blob)),
+            Some(Err(e)) => return Err(pbf_error(path, index, offset, &e)),
+        }
     }
     if blobs.is_empty() {
         return Err(OsmError::Pbf {

@@ -28,7 +28,7 @@ pub fn run(command: OsmCommand) -> anyhow::Result<()> {
 
 fn info(path: &PathBuf, json: bool) -> anyhow::Result<()> {
     let start = Instant::now();
-    let map = OsmMap::load(path).with_context(|| format!("loading map {}", path.display()))?;
+    let map = OsmMap::load(path).context("loading the map")?;
     let parse_s = start.elapsed().as_secs_f64();
     let s = &map.stats;
     let (origin_lat, origin_lon) = map.frame.origin();
