@@ -31,7 +31,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum OpbError {
     /// The file could not be read at all.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read the file")]
     Io {
         /// The file.
         path: String,
