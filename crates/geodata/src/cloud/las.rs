@@ -25,6 +25,7 @@
 //! * `raw_label` and `object` (u32) are stored in 4 extra bytes each.
 //! * `rgb` is stored as 16-bit colour (value × 257) and read back as the high byte.
 //!
+//! The extra bytes are described by a standard Extra Bytes VLR (`LASF_Spec`, record 4).
 //! A VLR (`user_id` "urbansem", record 1) lists the columns and the extra-byte layout; a
 //! LAS file without it (another tool's) is read as intensity (u16), rgb (if the format has
 //! colour), `label` from the table and `raw_label` = the classification code.
@@ -124,6 +125,37 @@ fn parse_descriptor(data: &[u8]) -> Option<(Columns, Precision)> {
 
 fn extra_len(c: &Columns) -> usize {
     4 * (usize::from(c.intensity) + usize::from(c.raw_label) + usize::from(c.object))
+}
+
+/// The LAS 1.4 Extra Bytes VLR (`LASF_Spec`, record 4) describing our extra bytes, so
+/// that other tools (PDAL, LAStools) see `intensity_f32`, `raw_label` and `object` by name.
+fn extra_bytes_vlr(c: &Columns) -> Vlr {
+    // (name, LAS data type: 5 = u32, 9 = f32)
+    let mut fields: Vec<(&str, u8)> = Vec::new();
+    if c.intensity {
+        fields.push(("intensity_f32", 9));
+    }
+    if c.raw_label {
+        fields.push(("raw_label", 5));
+    }
+    if c.object {
+        fields.push(("object", 5));
+    }
+    let mut data = Vec::with_capacity(192 * fields.len());
+    for (name, data_type) in fields {
+        let mut d = [0u8; 192];
+        d[2] = data_type;
+        d[4..4 + name.len()].copy_from_slice(name.as_bytes());
+        let description = b"urbansem column";
+        d[160..160 + description.len()].copy_from_slice(description);
+        data.extend_from_slice(&d);
+    }
+    Vlr {
+        user_id: "LASF_Spec".into(),
+        record_id: 4,
+        description: "Extra Bytes".into(),
+        data,
+    }
 }
 
 /// Reads a LAS or LAZ file.
@@ -259,6 +291,9 @@ pub fn write_las(path: &Path, cloud: &PointCloud) -> Result<()> {
         description: "urbansem columns".into(),
         data: descriptor(&c, cloud.precision).into_bytes(),
     });
+    if extra_len(&c) > 0 {
+        builder.vlrs.push(extra_bytes_vlr(&c));
+    }
     let header = builder
         .into_header()
         .map_err(las_err(path, Location::Byte(0)))?;
