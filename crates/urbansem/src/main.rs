@@ -2,6 +2,7 @@
 //! and turns an error chain into a message and an exit code (2 for every error).
 
 mod cmd;
+mod report;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
