@@ -18,6 +18,18 @@
 //! | PCD (ascii, binary, binary_compressed) | F4/F8 | F4 | U4 `rgb` (0x00RRGGBB; F4-packed accepted) | U1 | U4 | U4 |
 //! | LAS/LAZ 1.4 (format 6/7) | integer grid, 0.1 mm | u16 field + exact f32 in extra bytes | u16 ×257 | classification (see [`las`]) | extra bytes | extra bytes |
 //! | KITTI `.bin` | f32 | f32 reflectance | – | separate uint32 label file | separate | – |
+//!
+//! ```
+//! use geodata::cloud::{read_cloud, write_cloud, Columns, PointCloud, PointRecord, Precision};
+//! let columns = Columns { intensity: true, ..Columns::default() };
+//! let mut cloud = PointCloud::with_columns(columns, Precision::F32, 1);
+//! cloud.push(&PointRecord { position: [1.0, 2.5, -3.0], intensity: 0.25, ..PointRecord::default() });
+//! let path = std::env::temp_dir().join(format!("urbansem-doc-{}.ply", std::process::id()));
+//! write_cloud(&path, &cloud)?;
+//! assert_eq!(read_cloud(&path)?, cloud);
+//! # std::fs::remove_file(&path)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod error;
 pub mod kitti;

@@ -58,26 +58,39 @@ impl Scalar {
         }
     }
 
-    /// Decodes `bytes` (exactly `size()` long) to f64; exact for every type but 64-bit ints.
+    /// Decodes `bytes` (exactly `size()` long; missing bytes read as 0) to f64; exact for
+    /// every type but 64-bit integers beyond 2⁵³.
+    #[inline]
     pub(crate) fn decode(self, bytes: &[u8], big_endian: bool) -> f64 {
-        let mut b = [0u8; 8];
-        let n = self.size().min(bytes.len());
-        b[..n].copy_from_slice(&bytes[..n]);
-        if big_endian {
-            b[..n].reverse();
+        #[inline(always)]
+        fn arr<const N: usize>(b: &[u8]) -> [u8; N] {
+            let mut a = [0u8; N];
+            if let Some(s) = b.get(..N) {
+                a.copy_from_slice(s);
+            }
+            a
         }
-        // `b` now holds the little-endian representation in its first n bytes.
+        macro_rules! num {
+            ($t:ty, $n:expr) => {{
+                let a = arr::<$n>(bytes);
+                if big_endian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }
+            }};
+        }
         match self {
-            Scalar::I8 => f64::from(b[0] as i8),
-            Scalar::U8 => f64::from(b[0]),
-            Scalar::I16 => f64::from(i16::from_le_bytes([b[0], b[1]])),
-            Scalar::U16 => f64::from(u16::from_le_bytes([b[0], b[1]])),
-            Scalar::I32 => f64::from(i32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-            Scalar::U32 => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-            Scalar::F32 => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-            Scalar::I64 => i64::from_le_bytes(b) as f64,
-            Scalar::U64 => u64::from_le_bytes(b) as f64,
-            Scalar::F64 => f64::from_le_bytes(b),
+            Scalar::I8 => f64::from(num!(i8, 1)),
+            Scalar::U8 => f64::from(num!(u8, 1)),
+            Scalar::I16 => f64::from(num!(i16, 2)),
+            Scalar::U16 => f64::from(num!(u16, 2)),
+            Scalar::I32 => f64::from(num!(i32, 4)),
+            Scalar::U32 => f64::from(num!(u32, 4)),
+            Scalar::F32 => f64::from(num!(f32, 4)),
+            Scalar::I64 => num!(i64, 8) as f64,
+            Scalar::U64 => num!(u64, 8) as f64,
+            Scalar::F64 => num!(f64, 8),
         }
     }
 
@@ -140,6 +153,7 @@ impl Role {
 }
 
 /// Stores a decoded value into the record field of `role`, checking its range.
+#[inline]
 pub(crate) fn assign(
     rec: &mut PointRecord,
     role: Role,
