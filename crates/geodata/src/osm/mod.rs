@@ -124,31 +124,46 @@ fn is_building(tags: &[(String, String)]) -> Option<&str> {
 
 /// Node table sorted by id for binary-search lookup.
 pub(crate) struct NodeTable {
-    nodes: Vec<RawNode>,
+    /// Node positions in the local frame, by slot.
+    local: Vec<[f64; 2]>,
     slot_of_id: rustc_hash::FxHashMap<i64, usize>,
 }
 
 impl NodeTable {
-    fn new(nodes: Vec<RawNode>) -> Self {
-        let mut slot_of_id =
-            rustc_hash::FxHashMap::with_capacity_and_hasher(nodes.len(), Default::default());
-        for (slot, n) in nodes.iter().enumerate() {
-            slot_of_id.insert(n.id, slot);
-        }
-        NodeTable { nodes, slot_of_id }
+    /// Projects every node once (in parallel) and indexes the slots by id.
+    fn new(nodes: &[RawNode], frame: &LocalFrame) -> Self {
+        let (local, slot_of_id) = rayon::join(
+            || {
+                nodes
+                    .par_iter()
+                    .map(|n| frame.to_local(n.lat, n.lon))
+                    .collect()
+            },
+            || {
+                let mut slot_of_id = rustc_hash::FxHashMap::with_capacity_and_hasher(
+                    nodes.len(),
+                    Default::default(),
+                );
+                for (slot, n) in nodes.iter().enumerate() {
+                    slot_of_id.insert(n.id, slot);
+                }
+                slot_of_id
+            },
+        );
+        NodeTable { local, slot_of_id }
     }
 
-    fn get(&self, id: i64) -> Option<&RawNode> {
+    /// Local position of a node id, if the file has it.
+    fn get(&self, id: i64) -> Option<[f64; 2]> {
         self.slot_of_id
             .get(&id)
-            .and_then(|&slot| self.nodes.get(slot))
+            .and_then(|&slot| self.local.get(slot))
+            .copied()
     }
 
-    /// Projected positions of all `refs`, or `None` if any is missing.
-    fn project(&self, frame: &LocalFrame, refs: &[i64]) -> Option<Vec<[f64; 2]>> {
-        refs.iter()
-            .map(|&id| self.get(id).map(|n| frame.to_local(n.lat, n.lon)))
-            .collect()
+    /// Local positions of all `refs`, or `None` if any is missing.
+    fn project(&self, refs: &[i64]) -> Option<Vec<[f64; 2]>> {
+        refs.iter().map(|&id| self.get(id)).collect()
     }
 }
 
@@ -190,18 +205,13 @@ struct WayCounts {
     highway_short: usize,
 }
 
-fn build_way(
-    way: &RawWay,
-    nodes: &NodeTable,
-    frame: &LocalFrame,
-    counts: &mut WayCounts,
-) -> WayOutcome {
+fn build_way(way: &RawWay, nodes: &NodeTable, counts: &mut WayCounts) -> WayOutcome {
     let mut building = None;
     if let Some(value) = is_building(&way.tags) {
         let closed = way.refs.len() >= 4 && way.refs.first() == way.refs.last();
         if closed {
             counts.building_ways += 1;
-            match nodes.project(frame, &way.refs) {
+            match nodes.project(&way.refs) {
                 None => counts.building_missing += 1,
                 Some(points) => match ring_from_closed(points, true) {
                     None => counts.building_degenerate += 1,
@@ -229,7 +239,7 @@ fn build_way(
         if way.refs.len() < 2 {
             counts.highway_short += 1;
         } else {
-            match nodes.project(frame, &way.refs) {
+            match nodes.project(&way.refs) {
                 None => counts.highway_missing += 1,
                 Some(points) => {
                     highway = Some(HighwayWay {
@@ -358,14 +368,14 @@ impl OsmMap {
             relations: raw.relations.len(),
             ..OsmStats::default()
         };
-        let nodes = NodeTable::new(raw.nodes);
+        let nodes = NodeTable::new(&raw.nodes, &frame);
 
         let per_way: Vec<(WayOutcome, WayCounts)> = raw
             .ways
             .par_iter()
             .map(|w| {
                 let mut c = WayCounts::default();
-                let o = build_way(w, &nodes, &frame, &mut c);
+                let o = build_way(w, &nodes, &mut c);
                 (o, c)
             })
             .collect();
@@ -412,7 +422,7 @@ impl OsmMap {
                 continue;
             };
             stats.building_relations += 1;
-            match rings::assemble(rel, &way_refs, &nodes, &frame) {
+            match rings::assemble(rel, &way_refs, &nodes) {
                 Err(rings::RingError::Missing) => {
                     stats.skipped_building_relations_missing_members += 1
                 }

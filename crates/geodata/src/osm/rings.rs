@@ -1,7 +1,6 @@
 //! Multipolygon ring assembly: join outer/inner member ways end to end into closed rings.
 
 use super::{geometry, ring_from_closed, NodeTable, RawRelation};
-use crate::projection::LocalFrame;
 use rustc_hash::FxHashMap;
 
 /// Why a multipolygon relation produced no rings.
@@ -52,7 +51,6 @@ pub(crate) fn assemble(
     rel: &RawRelation,
     way_refs: &FxHashMap<i64, &[i64]>,
     nodes: &NodeTable,
-    frame: &LocalFrame,
 ) -> Result<Vec<Polygon>, RingError> {
     let mut outer_pieces = Vec::new();
     let mut inner_pieces = Vec::new();
@@ -71,7 +69,7 @@ pub(crate) fn assemble(
         join_pieces(pieces)?
             .iter()
             .map(|ids| {
-                let points = nodes.project(frame, ids).ok_or(RingError::Missing)?;
+                let points = nodes.project(ids).ok_or(RingError::Missing)?;
                 ring_from_closed(points, ccw).ok_or(RingError::Unclosed)
             })
             .collect()
