@@ -393,3 +393,101 @@ fn truncated_real_scans_name_the_byte_offset() {
         }
     }
 }
+
+#[test]
+fn binary_ply_skips_unknown_properties_and_elements_by_type() {
+    let dir = tmp_dir("ply-unknown");
+    let p = dir.join("u.ply");
+    let mut bytes = b"ply\nformat binary_little_endian 1.0\ncomment other tool\nelement camera 1\nproperty double fx\n\
+property list uint short ids\nelement vertex 2\nproperty uchar flags\nproperty float x\nproperty short nx\n\
+property float y\nproperty double quality\nproperty float z\nproperty list uchar uint nbrs\nproperty int label\n\
+element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        .to_vec();
+    // camera: fx, 3 ids
+    bytes.extend_from_slice(&500.0f64.to_le_bytes());
+    bytes.extend_from_slice(&3u32.to_le_bytes());
+    for id in [1i16, 2, 3] {
+        bytes.extend_from_slice(&id.to_le_bytes());
+    }
+    for (i, (x, y, z)) in [(1.5f32, 2.5f32, 3.5f32), (-1.0, -2.0, -3.0)]
+        .iter()
+        .enumerate()
+    {
+        bytes.push(7);
+        bytes.extend_from_slice(&x.to_le_bytes());
+        bytes.extend_from_slice(&(-5i16).to_le_bytes());
+        bytes.extend_from_slice(&y.to_le_bytes());
+        bytes.extend_from_slice(&0.9f64.to_le_bytes());
+        bytes.extend_from_slice(&z.to_le_bytes());
+        bytes.push(i as u8); // i neighbours
+        for k in 0..i as u32 {
+            bytes.extend_from_slice(&k.to_le_bytes());
+        }
+        bytes.extend_from_slice(&(Class::Tree.id() as i32).to_le_bytes());
+    }
+    bytes.push(3);
+    for v in [0i32, 1, 0] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(&p, &bytes).unwrap();
+    let c = read_cloud(&p).unwrap();
+    assert_eq!(c.positions, vec![[1.5, 2.5, 3.5], [-1.0, -2.0, -3.0]]);
+    assert_eq!(c.label, Some(vec![Class::Tree.id(); 2]));
+    assert_eq!(c.columns().names(), vec!["x", "y", "z", "label"]);
+    // One byte more than announced is trailing data, named with its offset.
+    bytes.push(0);
+    std::fs::write(&p, &bytes).unwrap();
+    match read_cloud(&p) {
+        Err(CloudError::TrailingData { at, extra: 1, .. }) => {
+            assert_eq!(at, geodata::cloud::Location::Byte(bytes.len() as u64 - 1));
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn foreign_las_without_urbansem_vlr_maps_classification_colour_and_intensity() {
+    use las::{Builder, Color, Point, Writer};
+    let dir = tmp_dir("las-foreign");
+    let p = dir.join("foreign.las");
+    let mut builder = Builder::from((1, 2));
+    builder.point_format = las::point::Format::new(3).unwrap();
+    let header = builder.into_header().unwrap();
+    let mut w = Writer::from_path(&p, header).unwrap();
+    for (i, code) in [2u8, 6, 5, 11, 9].iter().enumerate() {
+        w.write_point(Point {
+            x: i as f64,
+            y: 0.5,
+            z: -1.25,
+            intensity: 1000 + i as u16,
+            classification: las::point::Classification::new(*code).unwrap(),
+            color: Some(Color {
+                red: 0xff00,
+                green: 0x1234,
+                blue: 0,
+            }),
+            gps_time: Some(0.0),
+            ..Point::default()
+        })
+        .unwrap();
+    }
+    w.close().unwrap();
+    drop(w);
+    let c = read_cloud(&p).unwrap();
+    assert_eq!(c.len(), 5);
+    assert_eq!(c.raw_label, Some(vec![2, 6, 5, 11, 9]));
+    let classes: Vec<Class> = (0..5).map(|i| c.class(i)).collect();
+    assert_eq!(
+        classes,
+        vec![
+            Class::Unlabelled,
+            Class::Building,
+            Class::Tree,
+            Class::Street,
+            Class::Other
+        ]
+    );
+    assert_eq!(c.rgb.as_ref().unwrap()[0], [0xff, 0x12, 0]);
+    assert_eq!(c.intensity.as_ref().unwrap()[4], 1004.0);
+    assert_eq!(c.positions[3], [3.0, 0.5, -1.25]);
+}
