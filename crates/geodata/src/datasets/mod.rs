@@ -79,7 +79,7 @@ pub struct Scan {
 /// A sensor pose in a [`LocalFrame`], with its WGS84 position.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalPose {
-    /// Sensor position east, north, up in the local frame, metres.
+    /// Sensor position east, north in the local frame and the dataset world's z, metres.
     pub position_m: [f64; 3],
     /// Heading of the sensor's x axis, radians counter-clockwise from grid east.
     pub yaw_rad: f64,
@@ -245,6 +245,31 @@ mod tests {
         assert!(l.translation.vector.xy().norm() < 1e-6);
         assert!((l.translation.vector.z - 5.0).abs() < 1e-12);
         assert!((l.rotation.angle() - 0.3).abs() < 1e-9);
+    }
+
+    #[test]
+    fn heading_follows_the_meridian_convergence() {
+        // A sensor 10 km east of the local origin looking geographic north: in the local
+        // frame its x axis must point along the mapped image of that meridian.
+        let georef = ScaledMercator::new(59.35, 18.07).unwrap();
+        let frame = LocalFrame::new(59.35, 18.07).unwrap();
+        let pose = Isometry3::from_parts(
+            Translation3::new(10_000.0, 0.0, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2),
+        );
+        let l = local_from_world_pose(&georef, &pose, &frame);
+        let x = l.rotation * Vector3::x();
+        let (lat0, lon0) = georef.to_wgs84([10_000.0, 0.0]);
+        let (lat1, lon1) = georef.to_wgs84([10_000.0, 200.0]);
+        let (a, b) = (frame.to_local(lat0, lon0), frame.to_local(lat1, lon1));
+        let expected = (b[1] - a[1]).atan2(b[0] - a[0]);
+        let got = x.y.atan2(x.x);
+        assert!((got - expected).abs() < 1e-6, "{got} vs {expected}");
+        assert!(
+            (expected - std::f64::consts::FRAC_PI_2).abs() > 1e-3,
+            "convergence is not trivial here"
+        );
+        assert!((l.translation.vector.x - a[0]).abs() < 1e-9);
     }
 
     #[test]
