@@ -169,6 +169,8 @@ fn real_scan_round_trips_every_format_and_las_is_idempotent() {
             let p2 = dir.join("again.las");
             write_cloud(&p2, &back).unwrap();
             assert!(read_cloud(&p2).unwrap() == back, "LAS is not idempotent");
+            let same = std::fs::read(&p).unwrap() == std::fs::read(&p2).unwrap();
+            assert!(same, "LAS → cloud → LAS changed the file");
         }
     }
     // The real KITTI .bin comes back byte for byte.

@@ -2,7 +2,7 @@
 //!
 //! Written files use point format 6 (7 when the cloud has `rgb`) and a 0.1 mm integer grid
 //! (scale 10⁻⁴ m, offset a multiple of 100 km), so positions come back within 0.05 mm and
-//! a LAS → cloud → LAS trip reproduces the same integers. Other columns are exact:
+//! a LAS → cloud → LAS trip reproduces the same file byte for byte. Other columns are exact:
 //!
 //! * `label` ↔ classification, by this table (LAS 1.4 R15 classes; 64–68 are
 //!   user-definable classes taken for urbansem's classes LAS has no code for):
@@ -280,11 +280,12 @@ pub fn write_las(path: &Path, cloud: &PointCloud) -> Result<()> {
         scale: LAS_SCALE_M,
         offset: offset(k),
     };
-    builder.transforms = Vector {
+    let grid = Vector {
         x: t(0),
         y: t(1),
         z: t(2),
     };
+    builder.transforms = grid;
     builder.vlrs.push(Vlr {
         user_id: VLR_USER.into(),
         record_id: VLR_RECORD,
@@ -320,10 +321,17 @@ pub fn write_las(path: &Path, cloud: &PointCloud) -> Result<()> {
         } else {
             p.intensity
         };
+        // Snap to the integer grid here, so the header bounds are those of the stored
+        // points and LAS → cloud → LAS gives the same bytes.
+        let mut q = [0.0; 3];
+        for (k, t) in [grid.x, grid.y, grid.z].iter().enumerate() {
+            let v = p.position.get(k).copied().unwrap_or(0.0);
+            q[k] = t.direct(t.inverse(v).map_err(las_err(path, Location::Point(i)))?);
+        }
         let point = Point {
-            x: p.position[0],
-            y: p.position[1],
-            z: p.position[2],
+            x: q[0],
+            y: q[1],
+            z: q[2],
             intensity: scaled.round().clamp(0.0, 65535.0) as u16,
             classification: Classification::new(las_code_of(class))
                 .map_err(las_err(path, Location::Point(i)))?,
