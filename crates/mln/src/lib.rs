@@ -6,6 +6,10 @@
 //!
 //! - [`parse`]: programs (`.mln`), evidence (`.db`) and queries, with file:line:col errors.
 //! - [`ground`]: join-based grounding with evidence simplification → the cost polynomial.
+//! - [`infer`]: MAP inference (QPBO/QSSR, MaxWalkSAT on formulas or monomials).
+//! - [`walksat`]: MaxWalkSAT over weighted conjunctive factors.
 
 pub mod ground;
+pub mod infer;
 pub mod parse;
+pub mod walksat;

@@ -261,6 +261,39 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(150))]
+    /// MAP by every method reaches the brute-force minimum of cost + hard violations on
+    /// small random MLNs; the QPBO method's bound is below it.
+    #[test]
+    fn map_equals_brute_force((prog, ev, query) in arb_case(), seed in any::<u64>()) {
+        use mln::infer::{map_inference, InferOptions, Method};
+        let program = parse_program(&prog, "p.mln").unwrap();
+        let evidence = parse_evidence(&ev, "e.db", &program).unwrap();
+        let query_atoms = parse_query(&query, "q.db", &program).unwrap();
+        let problem = ground(&program, &evidence, "e.db", &query_atoms, &GroundOptions::default()).unwrap();
+        let n = problem.atoms.len();
+        prop_assume!(n <= 14);
+        let total = |x: &[bool]| problem.cost.evaluate(x);
+        let mut best = f64::INFINITY;
+        for m in 0u32..(1 << n) {
+            let x: Vec<bool> = (0..n).map(|i| m >> i & 1 == 1).collect();
+            best = best.min(total(&x));
+        }
+        for method in [Method::Qpbo, Method::MaxWalkSat, Method::MaxWalkSatMonomials] {
+            let mut o = InferOptions { method, ..InferOptions::default() };
+            o.walksat.seed = seed;
+            o.walksat.max_flips = 20_000;
+            let r = map_inference(&problem, &o);
+            let got = total(&r.assignment);
+            prop_assert!((got - best).abs() < 1e-6, "{:?}: {got} vs optimum {best}", method);
+            if let Some(lb) = r.lower_bound {
+                prop_assert!(lb <= best + 1e-6);
+            }
+        }
+    }
+}
+
 #[test]
 fn smokers_example_by_hand() {
     // Thesis Example 3.2.1/3.2.2: two persons, Friends(A,B), Friends(B,A) unknown here.

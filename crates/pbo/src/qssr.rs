@@ -40,6 +40,8 @@ pub struct QssrOptions {
     pub seed: u64,
     /// At most this many QSSR rounds.
     pub max_rounds: usize,
+    /// Enumerate the residue exactly when at most this many free variables remain.
+    pub exact_residue_vars: usize,
 }
 
 impl Default for QssrOptions {
@@ -51,6 +53,7 @@ impl Default for QssrOptions {
             improve_rounds: 0,
             seed: 0,
             max_rounds: 100,
+            exact_residue_vars: 16,
         }
     }
 }
@@ -106,6 +109,8 @@ pub struct QssrResult {
     pub rounds: Vec<QssrRound>,
     /// Time per phase.
     pub seconds: PhaseSeconds,
+    /// Whether `assignment` is a proven global minimiser (persistencies + enumeration).
+    pub exact: bool,
 }
 
 /// A QPBO instance built from a quadratic polynomial over its occurring variables.
@@ -259,7 +264,19 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
 
     let t2 = Instant::now();
     let mut assignment: Vec<bool> = persistent.iter().map(|p| p.unwrap_or(false)).collect();
-    if options.improve_rounds > 0 && residual.num_terms() > 0 {
+    let free: Vec<usize> = residual
+        .occurring_vars()
+        .iter()
+        .enumerate()
+        .filter_map(|(v, &o)| o.then_some(v))
+        .collect();
+    let exact = free.len() <= options.exact_residue_vars;
+    if free.is_empty() {
+        // Everything that matters is persistent.
+    } else if exact {
+        enumerate_residue(&residual, &free, &mut assignment);
+        lower_bound = residual.evaluate(&assignment);
+    } else if options.improve_rounds > 0 {
         let quad = quadratize(&residual, options.quadratizer);
         improve_residue(&quad, &mut assignment, options);
     }
@@ -283,6 +300,25 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
         },
         rounds,
         seconds,
+        exact,
+    }
+}
+
+/// Sets the free variables of the residue to a minimiser by enumerating all 2ᵏ values.
+fn enumerate_residue(residual: &Polynomial, free: &[usize], assignment: &mut [bool]) {
+    let mut x = assignment.to_vec();
+    let mut best = (f64::INFINITY, 0u64);
+    for mask in 0u64..(1u64 << free.len()) {
+        for (k, &v) in free.iter().enumerate() {
+            x[v] = mask >> k & 1 == 1;
+        }
+        let e = residual.evaluate(&x);
+        if e < best.0 {
+            best = (e, mask);
+        }
+    }
+    for (k, &v) in free.iter().enumerate() {
+        assignment[v] = best.1 >> k & 1 == 1;
     }
 }
 
@@ -325,7 +361,7 @@ mod tests {
         fn qssr_persistencies_are_correct(f in arb_higher_order(10), probe in any::<bool>()) {
             let (min, _) = f.brute_force_minimum();
             for quadratizer in Quadratizer::ALL {
-                let r = solve(&f, &QssrOptions { quadratizer, probe, improve_rounds: 3, ..QssrOptions::default() });
+                let r = solve(&f, &QssrOptions { quadratizer, probe, improve_rounds: 3, exact_residue_vars: 0, ..QssrOptions::default() });
                 prop_assert!(r.lower_bound <= min + 1e-9, "{quadratizer}: bound {} > min {min}", r.lower_bound);
                 prop_assert!(r.energy >= min - 1e-9);
                 prop_assert!((r.energy - f.evaluate(&r.assignment)).abs() < 1e-9);
@@ -337,6 +373,18 @@ mod tests {
                     if let Some(v) = p { prop_assert_eq!(v, a); }
                 }
             }
+        }
+    }
+
+    proptest! {
+        /// With an exact residue, QSSR returns a global minimiser whose energy is the bound.
+        #[test]
+        fn exact_residue_gives_the_optimum(f in arb_higher_order(10)) {
+            let (min, _) = f.brute_force_minimum();
+            let r = solve(&f, &QssrOptions::default());
+            prop_assert!(r.exact);
+            prop_assert!((r.energy - min).abs() < 1e-9, "energy {} vs min {min}", r.energy);
+            prop_assert!((r.lower_bound - min).abs() < 1e-9);
         }
     }
 

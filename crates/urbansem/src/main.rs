@@ -22,6 +22,9 @@ enum Command {
     /// Pseudo-Boolean optimization (QPBO, quadratization, QSSR).
     #[command(subcommand)]
     Pbo(cmd::pbo::PboCommand),
+    /// Markov logic networks: MAP inference.
+    #[command(subcommand)]
+    Mln(cmd::mln::MlnCommand),
     /// OpenStreetMap files: statistics and extraction.
     #[command(subcommand)]
     Osm(cmd::osm::OsmCommand),
@@ -41,6 +44,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(args) => cmd::demo::run(args),
         Command::Pbo(c) => cmd::pbo::run(c),
+        Command::Mln(c) => cmd::mln::run(c),
         Command::Osm(c) => cmd::osm::run(c),
         Command::Cloud(c) => cmd::cloud::run(c),
         Command::Sim(c) => cmd::sim::run(c),

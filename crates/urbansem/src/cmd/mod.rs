@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod cloud;
 pub mod demo;
+pub mod mln;
 pub mod osm;
 pub mod pbo;
 pub mod sim;

@@ -1,0 +1,188 @@
+//! `urbansem mln …`: MAP inference on Markov logic networks.
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use mln::ground::{ground, GroundOptions};
+use mln::infer::{map_inference, InferOptions, Method};
+use mln::parse::{parse_query_predicates, read_evidence, read_program, read_query};
+use pbo::quadratize::Quadratizer;
+use serde_json::json;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Subcommands of `urbansem mln`.
+#[derive(Subcommand)]
+pub enum MlnCommand {
+    /// MAP inference: the most probable truth values of the query atoms.
+    Infer(InferArgs),
+}
+
+/// Options of `urbansem mln infer`.
+#[derive(Args)]
+pub struct InferArgs {
+    /// The MLN program (Alchemy/Tuffy/RockIt syntax).
+    #[arg(short = 'i', long = "input")]
+    pub program: PathBuf,
+    /// Evidence files (repeat or separate with commas).
+    #[arg(short = 'e', long = "evidence", value_delimiter = ',')]
+    pub evidence: Vec<PathBuf>,
+    /// Query predicates, comma-separated.
+    #[arg(short = 'q', long = "queries", conflicts_with = "query_file")]
+    pub queries: Option<String>,
+    /// A query file: one atom per line (variables allowed; ground atoms list a canopy).
+    #[arg(long)]
+    pub query_file: Option<PathBuf>,
+    /// Write the MAP state of the query atoms here (Alchemy's format: `Atom(A,B) 1`).
+    #[arg(short = 'r', long = "result")]
+    pub result: Option<PathBuf>,
+    /// MAP algorithm: qpbo, maxwalksat, maxwalksat-monomials.
+    #[arg(long, default_value = "qpbo", value_parser = parse_method)]
+    pub method: Method,
+    /// Order reduction for the qpbo method: ish, asm, fix.
+    #[arg(long, default_value = "asm", value_parser = parse_quadratizer)]
+    pub quadratize: Quadratizer,
+    /// Use the multinomial (positive literals only) form of the cost.
+    #[arg(long)]
+    pub multinomial: bool,
+    /// QPBO-I rounds on the residue (qpbo method).
+    #[arg(long, default_value_t = 50)]
+    pub improve: usize,
+    /// Flips per MaxWalkSAT chain.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub flips: usize,
+    /// MaxWalkSAT chains run in parallel.
+    #[arg(long, default_value_t = 2)]
+    pub chains: usize,
+    /// Seed of every random step.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_method(s: &str) -> Result<Method, String> {
+    s.parse()
+}
+
+fn parse_quadratizer(s: &str) -> Result<Quadratizer, String> {
+    s.parse()
+}
+
+/// Runs one `urbansem mln` subcommand.
+pub fn run(command: MlnCommand) -> anyhow::Result<()> {
+    match command {
+        MlnCommand::Infer(args) => infer(&args),
+    }
+}
+
+fn infer(args: &InferArgs) -> anyhow::Result<()> {
+    let t0 = Instant::now();
+    let program = read_program(&args.program).context("reading the program")?;
+    let mut evidence = Vec::new();
+    for e in &args.evidence {
+        evidence.extend(read_evidence(e, &program).context("reading evidence")?);
+    }
+    let query = match (&args.queries, &args.query_file) {
+        (Some(list), _) => parse_query_predicates(list, &program)?,
+        (None, Some(f)) => read_query(f, &program).context("reading the query file")?,
+        (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
+    };
+    let parse_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let evidence_label = args
+        .evidence
+        .first()
+        .map_or_else(|| "(no evidence)".to_owned(), |p| p.display().to_string());
+    let problem = ground(
+        &program,
+        &evidence,
+        &evidence_label,
+        &query,
+        &GroundOptions {
+            multinomial: args.multinomial,
+            ..GroundOptions::default()
+        },
+    )
+    .context("grounding")?;
+    let ground_s = t1.elapsed().as_secs_f64();
+    let mut options = InferOptions {
+        method: args.method,
+        quadratizer: args.quadratize,
+        improve_rounds: args.improve,
+        ..InferOptions::default()
+    };
+    options.walksat.seed = args.seed;
+    options.walksat.max_flips = args.flips;
+    options.walksat.chains = args.chains;
+    let r = map_inference(&problem, &options);
+    let total_s = t0.elapsed().as_secs_f64();
+
+    if let Some(path) = &args.result {
+        let query_preds: Vec<usize> = query.iter().map(|a| a.predicate).collect();
+        let mut lines: Vec<String> = (0..problem.atoms.len())
+            .filter(|&i| query_preds.contains(&problem.atoms[i].predicate))
+            .map(|i| {
+                format!(
+                    "{} {}",
+                    problem.atom_name(&program, i),
+                    u8::from(r.assignment[i])
+                )
+            })
+            .collect();
+        lines.sort();
+        let mut f = std::fs::File::create(path)
+            .with_context(|| format!("creating the result file {}", path.display()))?;
+        for l in lines {
+            writeln!(f, "{l}").with_context(|| format!("writing {}", path.display()))?;
+        }
+    }
+    let higher = problem.higher_order_factors();
+    if args.json {
+        let out = json!({
+            "program": args.program.display().to_string(),
+            "method": args.method.name(),
+            "quadratize": args.quadratize.name(),
+            "seed": args.seed,
+            "cost": r.scores.cost,
+            "violated_weight": r.scores.violated_weight,
+            "hard_violations": r.scores.hard_violations,
+            "lower_bound": r.lower_bound,
+            "ground_atoms": problem.atoms.len(),
+            "ground_factors": problem.factors.len(),
+            "higher_order_factors": higher,
+            "persistent_fraction": r.persistent_fraction,
+            "true_atoms": r.assignment.iter().filter(|&&v| v).count(),
+            "seconds": {
+                "parse": parse_s,
+                "ground": ground_s,
+                "quadratize": r.seconds_quadratize,
+                "solve": r.seconds_solve,
+                "total": total_s,
+            },
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "{}: {} ground atoms, {} ground formulas ({} higher-order)",
+            args.program.display(),
+            problem.atoms.len(),
+            problem.factors.len(),
+            higher
+        );
+        println!("method            {}", args.method.name());
+        println!("cost              {}", r.scores.cost);
+        println!("violated weight   {}", r.scores.violated_weight);
+        println!("hard violations   {}", r.scores.hard_violations);
+        if let Some(lb) = r.lower_bound {
+            println!("lower bound       {lb}  (of cost + hard weight × violations)");
+            println!("persistent        {:.2} %", 100.0 * r.persistent_fraction);
+        }
+        println!(
+            "seconds           parse {parse_s:.3}  ground {ground_s:.3}  quadratize {:.3}  solve {:.3}  total {total_s:.3}",
+            r.seconds_quadratize, r.seconds_solve
+        );
+    }
+    Ok(())
+}
