@@ -220,7 +220,11 @@ pub struct Graph<T: Capacity> {
     time: u32,
     queue_first: u32,
     queue_last: u32,
+    /// Orphans created by augmentation (pushed at the front).
     orphans: VecDeque<u32>,
+    /// Orphans created while adopting (processed before the next augmentation orphan, as
+    /// in the reference implementation: one orphan's whole subtree is settled first).
+    orphans_rear: VecDeque<u32>,
     marked: Vec<u32>,
     /// Whether search trees from a previous solve are valid for reuse.
     trees_valid: bool,
@@ -257,6 +261,7 @@ impl<T: Capacity> Graph<T> {
             queue_first: NONE,
             queue_last: NONE,
             orphans: VecDeque::new(),
+            orphans_rear: VecDeque::new(),
             marked: Vec::new(),
             trees_valid: false,
         }
@@ -318,6 +323,13 @@ impl<T: Capacity> Graph<T> {
         self.edge_ends.push((i as u32, j as u32));
         self.pending_caps.push((cap, rev_cap));
         self.edge_ends.len() - 1
+    }
+
+    /// The endpoints `(i, j)` of edge `e`.
+    #[inline]
+    pub fn edge_ends(&self, e: usize) -> (usize, usize) {
+        let (i, j) = self.edge_ends[e];
+        (i as usize, j as usize)
     }
 
     /// Residual capacities `(i → j, j → i)` of edge `e` (its capacities before a solve).
@@ -437,6 +449,12 @@ impl<T: Capacity> Graph<T> {
         self.eps
     }
 
+    /// Builds the compact arc array now (otherwise the first [`Graph::maxflow`] does it).
+    /// Edges added later trigger a rebuild that keeps the current residuals.
+    pub fn prepare(&mut self) {
+        self.build();
+    }
+
     /// Places pending edges into the CSR arc array (keeping the residuals of built ones).
     /// Returns whether the array was rebuilt.
     fn build(&mut self) -> bool {
@@ -487,6 +505,10 @@ impl<T: Capacity> Graph<T> {
         self.arcs = arcs;
         self.edge_arc = edge_arc;
         self.built_edges = m;
+        if self.trees_valid {
+            // Trees refer to old arc positions: the next solve starts afresh.
+            self.trees_valid = false;
+        }
         true
     }
 
@@ -496,9 +518,9 @@ impl<T: Capacity> Graph<T> {
     /// With `reuse_trees`, continues from the previous flow and search trees; only nodes
     /// marked with [`Graph::mark_node`] (and everything they disconnect) are revisited.
     pub fn maxflow(&mut self, reuse_trees: bool) -> T {
-        let rebuilt = self.build();
+        self.build();
         self.eps = T::tolerance(self.scale);
-        if reuse_trees && self.trees_valid && !rebuilt {
+        if reuse_trees && self.trees_valid {
             self.reuse_trees_init();
         } else {
             self.init();
@@ -512,6 +534,7 @@ impl<T: Capacity> Graph<T> {
         self.queue_first = NONE;
         self.queue_last = NONE;
         self.orphans.clear();
+        self.orphans_rear.clear();
         self.time = 0;
         let eps = self.eps;
         for i in 0..self.nodes.len() {
@@ -634,7 +657,7 @@ impl<T: Capacity> Graph<T> {
     #[inline]
     fn set_orphan_rear(&mut self, i: u32) {
         self.nodes[i as usize].parent = ORPHAN;
-        self.orphans.push_back(i);
+        self.orphans_rear.push_back(i);
     }
 
     fn run(&mut self) {
@@ -802,7 +825,14 @@ impl<T: Capacity> Graph<T> {
     }
 
     fn adopt_orphans(&mut self) {
-        while let Some(i) = self.orphans.pop_front() {
+        loop {
+            let i = match self.orphans_rear.pop_front() {
+                Some(i) => i,
+                None => match self.orphans.pop_front() {
+                    Some(i) => i,
+                    None => break,
+                },
+            };
             if self.nodes[i as usize].is_sink {
                 self.process_orphan::<true>(i);
             } else {

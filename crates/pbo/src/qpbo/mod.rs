@@ -102,8 +102,8 @@ impl<T: Capacity> Pairwise<T> {
 enum Solved<T: Capacity> {
     /// Not solved since the last change.
     No,
-    /// All terms submodular: one node per variable.
-    Primal(Graph<T>),
+    /// All terms submodular: the primal graph alone decided.
+    Primal,
     /// The doubled graph: node i is xᵢ, node n + i is x̄ᵢ.
     Doubled(Graph<T>),
 }
@@ -121,6 +121,12 @@ pub struct Qpbo<T: Capacity> {
     labels: Vec<Label>,
     twice_bound: T,
     solved: Solved<T>,
+    /// The primal graph, built as terms arrive: unary terms and the submodular parts.
+    primal: Graph<T>,
+    /// Constants split off by the reparametrisation of pairwise terms.
+    reparam_constant: T,
+    /// Non-submodular parts `(i, j, v)`: v·(1 − xᵢ)·(1 − xⱼ), v > 0.
+    nonsubmodular: Vec<(u32, u32, T)>,
     /// Largest magnitude of any energy added (float round-off tolerances scale with it).
     scale: T,
 }
@@ -136,6 +142,9 @@ impl<T: Capacity> Qpbo<T> {
             twice_bound: T::ZERO,
             solved: Solved::No,
             scale: T::ZERO,
+            primal: Graph::new(num_vars, num_pairwise_hint),
+            reparam_constant: T::ZERO,
+            nonsubmodular: Vec::new(),
         }
     }
 
@@ -160,6 +169,8 @@ impl<T: Capacity> Qpbo<T> {
         let u = &mut self.unary[i];
         u[0] += e0;
         u[1] += e1;
+        // Sink side (x = 1) pays the source capacity; source side pays the sink capacity.
+        self.primal.add_tweights(i, e1, e0);
         self.note_scale(&[e0, e1]);
         self.solved = Solved::No;
     }
@@ -178,6 +189,20 @@ impl<T: Capacity> Qpbo<T> {
             j: j as u32,
             e: [e00, e01, e10, e11],
         });
+        // E = A + (C−A)xᵢ + (D−C)xⱼ + w(1−xᵢ)xⱼ with w = B + C − A − D.
+        let (a, b, c, d) = (e00, e01, e10, e11);
+        self.reparam_constant += a;
+        self.primal.add_tweights(i, c - a, T::ZERO);
+        self.primal.add_tweights(j, d - c, T::ZERO);
+        let w = b + c - a - d;
+        if w >= T::ZERO {
+            self.primal.add_edge(i, j, w, T::ZERO);
+        } else {
+            // w(1−xᵢ)xⱼ = w(1−xᵢ) + (−w)(1−xᵢ)(1−xⱼ)
+            self.reparam_constant += w;
+            self.primal.add_tweights(i, -w, T::ZERO);
+            self.nonsubmodular.push((i as u32, j as u32, -w));
+        }
         self.solved = Solved::No;
     }
 
@@ -194,61 +219,36 @@ impl<T: Capacity> Qpbo<T> {
         e
     }
 
+    /// Builds the compact arc array of the primal graph now (otherwise [`Qpbo::solve`]
+    /// does it): the counterpart of building the graph in Kolmogorov's `AddPairwiseTerm`.
+    pub fn prepare(&mut self) {
+        self.primal.prepare();
+    }
+
     /// Computes the roof dual: the lower bound and the strongly persistent labels.
     pub fn solve(&mut self) {
         let n = self.unary.len();
-        let mut constant = self.constant;
-        let mut d: Vec<T> = self.unary.iter().map(|u| u[1] - u[0]).collect();
-        for u in &self.unary {
-            constant += u[0];
-        }
-        let mut num_nonsub = 0usize;
-        let mut weights: Vec<T> = Vec::with_capacity(self.pairs.len());
-        for p in &self.pairs {
-            let [a, b, c, dd] = p.e;
-            constant += a;
-            d[p.i as usize] += c - a;
-            d[p.j as usize] += dd - c;
-            let w = b + c - a - dd;
-            if w < T::ZERO {
-                // w(1−xᵢ)xⱼ = w(1−xᵢ) + (−w)(1−xᵢ)x̄ⱼ
-                constant += w;
-                d[p.i as usize] -= w;
-                num_nonsub += 1;
-            }
-            weights.push(w);
-        }
-        // Stage 1: the primal graph with the submodular terms.
-        let mut g1 = Graph::<T>::new(n, self.pairs.len() - num_nonsub);
-        let scale = if T::IS_FLOAT {
-            self.energy_scale()
-        } else {
-            T::ZERO
-        };
-        g1.raise_tolerance_scale(scale);
-        for (i, &di) in d.iter().enumerate() {
-            g1.add_tweights(i, di, T::ZERO);
-        }
-        for (p, &w) in self.pairs.iter().zip(&weights) {
-            if w >= T::ZERO {
-                g1.add_edge(p.i as usize, p.j as usize, w, T::ZERO);
-            }
-        }
-        let flow1 = g1.maxflow(false);
-        if num_nonsub == 0 {
-            self.twice_bound = constant + flow1 + constant + flow1;
+        let scale = if T::IS_FLOAT { self.scale } else { T::ZERO };
+        // Stage 1: the primal graph with the unary and submodular terms.
+        self.primal.raise_tolerance_scale(scale);
+        let flow1 = self.primal.maxflow(false);
+        let base = self.constant + self.reparam_constant + flow1;
+        if self.nonsubmodular.is_empty() {
+            self.twice_bound = base + base;
             for (i, l) in self.labels.iter_mut().enumerate() {
-                *l = match g1.tree(i) {
+                *l = match self.primal.tree(i) {
                     Some(Segment::Source) => Label::Zero,
                     Some(Segment::Sink) => Label::One,
                     None => Label::Unlabelled,
                 };
             }
-            self.solved = Solved::Primal(g1);
+            self.solved = Solved::Primal;
             return;
         }
         // Stage 2: the doubled graph, starting from the stage-1 flow mirrored.
-        let mut g2 = Graph::<T>::new(2 * n, 2 * self.pairs.len());
+        let g1 = &self.primal;
+        let m1 = g1.num_edges();
+        let mut g2 = Graph::<T>::new(2 * n, 2 * (m1 + self.nonsubmodular.len()));
         g2.raise_tolerance_scale(scale);
         for i in 0..n {
             let tr = g1.tr_residual(i);
@@ -260,22 +260,19 @@ impl<T: Capacity> Qpbo<T> {
             g2.add_tweights(i, s, t);
             g2.add_tweights(n + i, t, s);
         }
-        let mut e1 = 0usize;
-        for (p, &w) in self.pairs.iter().zip(&weights) {
-            let (i, j) = (p.i as usize, p.j as usize);
-            if w >= T::ZERO {
-                let (r, rr) = g1.edge_residual(e1);
-                e1 += 1;
-                g2.add_edge(i, j, r, rr);
-                g2.add_edge(n + j, n + i, r, rr);
-            } else {
-                g2.add_edge(i, n + j, -w, T::ZERO);
-                g2.add_edge(j, n + i, -w, T::ZERO);
-            }
+        for e in 0..m1 {
+            let (i, j) = g1.edge_ends(e);
+            let (r, rr) = g1.edge_residual(e);
+            g2.add_edge(i, j, r, rr);
+            g2.add_edge(n + j, n + i, r, rr);
         }
-        drop(g1);
+        for &(i, j, v) in &self.nonsubmodular {
+            let (i, j) = (i as usize, j as usize);
+            g2.add_edge(i, n + j, v, T::ZERO);
+            g2.add_edge(j, n + i, v, T::ZERO);
+        }
         let flow2 = g2.maxflow(false);
-        self.twice_bound = constant + flow1 + constant + flow1 + flow2;
+        self.twice_bound = base + base + flow2;
         for (i, l) in self.labels.iter_mut().enumerate() {
             *l = match (g2.tree(i), g2.tree(n + i)) {
                 (Some(Segment::Source), _) | (_, Some(Segment::Sink)) => Label::Zero,
@@ -293,7 +290,7 @@ impl<T: Capacity> Qpbo<T> {
     pub fn compute_weak_persistencies(&mut self) {
         match &self.solved {
             Solved::No => {}
-            Solved::Primal(_) => {
+            Solved::Primal => {
                 // V \ T* is a closed source set: free nodes go to the source side.
                 for l in &mut self.labels {
                     if *l == Label::Unlabelled {

@@ -32,13 +32,14 @@ impl<T: Capacity> Qpbo<T> {
     /// `num_new` variables.
     pub(crate) fn restrict(&self, subst: &[Subst], num_new: usize) -> Qpbo<T> {
         let mut r = Qpbo::new(num_new, self.pairs.len());
-        r.constant = self.constant;
         r.scale = self.scale;
+        let mut constant = self.constant;
+        let mut unary = vec![[T::ZERO; 2]; num_new];
         for (u, &s) in self.unary.iter().zip(subst) {
             match s {
-                Subst::Value(v) => r.constant += u[usize::from(v)],
+                Subst::Value(v) => constant += u[usize::from(v)],
                 Subst::Lit(k, neg) => {
-                    let ru = &mut r.unary[k as usize];
+                    let ru = &mut unary[k as usize];
                     ru[0] += u[usize::from(neg)];
                     ru[1] += u[usize::from(!neg)];
                 }
@@ -46,20 +47,20 @@ impl<T: Capacity> Qpbo<T> {
         }
         for p in &self.pairs {
             match (subst[p.i as usize], subst[p.j as usize]) {
-                (Subst::Value(vi), Subst::Value(vj)) => r.constant += p.eval(vi, vj),
+                (Subst::Value(vi), Subst::Value(vj)) => constant += p.eval(vi, vj),
                 (Subst::Value(vi), Subst::Lit(k, nj)) => {
-                    let ru = &mut r.unary[k as usize];
+                    let ru = &mut unary[k as usize];
                     ru[0] += p.eval(vi, nj);
                     ru[1] += p.eval(vi, !nj);
                 }
                 (Subst::Lit(k, ni), Subst::Value(vj)) => {
-                    let ru = &mut r.unary[k as usize];
+                    let ru = &mut unary[k as usize];
                     ru[0] += p.eval(ni, vj);
                     ru[1] += p.eval(!ni, vj);
                 }
                 (Subst::Lit(k, ni), Subst::Lit(l, nj)) => {
                     if k == l {
-                        let ru = &mut r.unary[k as usize];
+                        let ru = &mut unary[k as usize];
                         ru[0] += p.eval(ni, nj);
                         ru[1] += p.eval(!ni, !nj);
                     } else {
@@ -74,6 +75,10 @@ impl<T: Capacity> Qpbo<T> {
                     }
                 }
             }
+        }
+        r.add_constant(constant);
+        for (k, u) in unary.into_iter().enumerate() {
+            r.add_unary(k, u[0], u[1]);
         }
         r
     }
