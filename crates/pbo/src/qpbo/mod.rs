@@ -105,7 +105,7 @@ enum Solved<T: Capacity> {
     /// All terms submodular: the primal graph alone decided.
     Primal,
     /// The doubled graph: node i is xᵢ, node n + i is x̄ᵢ.
-    Doubled(Graph<T>),
+    Doubled(Box<Graph<T>>),
 }
 
 /// A quadratic pseudo-Boolean function and its QPBO solver state.
@@ -280,7 +280,7 @@ impl<T: Capacity> Qpbo<T> {
                 _ => Label::Unlabelled,
             };
         }
-        self.solved = Solved::Doubled(g2);
+        self.solved = Solved::Doubled(Box::new(g2));
     }
 
     /// Extends the labels of [`Qpbo::solve`] to a weakly persistent labelling (call right
