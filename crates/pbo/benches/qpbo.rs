@@ -2,7 +2,6 @@
 //! (the `--quick` sizes of `urbansem bench pbo`, which prints the ratio to Kolmogorov's
 //! QPBO and BK max-flow; this bench times urbansem alone).
 
-
 // criterion_group! generates an undocumented public function.
 #![allow(missing_docs)]
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};

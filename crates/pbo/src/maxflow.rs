@@ -185,11 +185,16 @@ struct Node<T> {
 }
 
 /// One directed arc of the CSR array; `sister` is the reverse arc.
+///
+/// `rev_cap` mirrors the sister's `r_cap`, so that scans of a node's arcs (sink-tree growth,
+/// adoption) read one cache line instead of chasing the sister into another node's arcs;
+/// every flow update writes both copies ([`Graph::push_flow`]).
 #[derive(Debug, Clone, Copy)]
 struct Arc<T> {
     head: u32,
     sister: u32,
     r_cap: T,
+    rev_cap: T,
 }
 
 /// A directed graph with source and sink terminals, solved by Boykov–Kolmogorov max-flow.
@@ -337,7 +342,7 @@ impl<T: Capacity> Graph<T> {
         if e < self.built_edges {
             let a = self.edge_arc[e] as usize;
             let arc = self.arcs[a];
-            (arc.r_cap, self.arcs[arc.sister as usize].r_cap)
+            (arc.r_cap, arc.rev_cap)
         } else {
             self.pending_caps[e - self.built_edges]
         }
@@ -352,9 +357,11 @@ impl<T: Capacity> Graph<T> {
         );
         if e < self.built_edges {
             let a = self.edge_arc[e] as usize;
-            self.arcs[a].r_cap += delta;
             let s = self.arcs[a].sister as usize;
+            self.arcs[a].r_cap += delta;
+            self.arcs[a].rev_cap += rev_delta;
             self.arcs[s].r_cap += rev_delta;
+            self.arcs[s].rev_cap += delta;
             let (f, r) = (self.arcs[a].r_cap, self.arcs[s].r_cap);
             self.note_scale(f);
             self.note_scale(r);
@@ -481,6 +488,7 @@ impl<T: Capacity> Graph<T> {
             head: 0,
             sister: 0,
             r_cap: T::ZERO,
+            rev_cap: T::ZERO,
         };
         let mut arcs = vec![blank; 2 * m];
         let mut edge_arc = vec![0u32; m];
@@ -493,11 +501,13 @@ impl<T: Capacity> Graph<T> {
                 head: j,
                 sister: b,
                 r_cap: c,
+                rev_cap: rc,
             };
             arcs[b as usize] = Arc {
                 head: i,
                 sister: a,
                 r_cap: rc,
+                rev_cap: c,
             };
             edge_arc[e] = a;
         }
@@ -592,11 +602,7 @@ impl<T: Capacity> Graph<T> {
                     }
                     let nj = self.nodes[j];
                     if nj.parent != NONE && nj.parent != ORPHAN && nj.is_sink == to_source {
-                        let r = if to_source {
-                            arc.r_cap
-                        } else {
-                            self.arcs[arc.sister as usize].r_cap
-                        };
+                        let r = if to_source { arc.r_cap } else { arc.rev_cap };
                         if r > eps {
                             self.set_active(j as u32);
                         }
@@ -706,7 +712,7 @@ impl<T: Capacity> Graph<T> {
             } else {
                 for a in b..e {
                     let arc = self.arcs[a];
-                    if self.arcs[arc.sister as usize].r_cap > eps {
+                    if arc.rev_cap > eps {
                         let j = arc.head as usize;
                         let nj = &mut self.nodes[j];
                         if nj.parent == NONE {
@@ -739,6 +745,18 @@ impl<T: Capacity> Graph<T> {
         }
     }
 
+    /// Sends `amount` along arc `a`, keeping both residual copies in step.
+    #[inline]
+    fn push_flow(&mut self, a: usize, amount: T) {
+        let arc = &mut self.arcs[a];
+        arc.r_cap -= amount;
+        arc.rev_cap += amount;
+        let s = arc.sister as usize;
+        let sister = &mut self.arcs[s];
+        sister.r_cap += amount;
+        sister.rev_cap -= amount;
+    }
+
     /// Pushes the bottleneck flow along source tree → `middle` → sink tree.
     fn augment(&mut self, middle: u32) {
         let eps = self.eps;
@@ -752,7 +770,7 @@ impl<T: Capacity> Graph<T> {
                 break;
             }
             let arc = self.arcs[a as usize];
-            let r = self.arcs[arc.sister as usize].r_cap;
+            let r = arc.rev_cap;
             if bottleneck > r {
                 bottleneck = r;
             }
@@ -780,8 +798,7 @@ impl<T: Capacity> Graph<T> {
             bottleneck = tr;
         }
         // Augment.
-        self.arcs[m.sister as usize].r_cap += bottleneck;
-        self.arcs[middle as usize].r_cap -= bottleneck;
+        self.push_flow(middle as usize, bottleneck);
         let mut i = self.arcs[m.sister as usize].head;
         loop {
             let a = self.nodes[i as usize].parent;
@@ -789,10 +806,9 @@ impl<T: Capacity> Graph<T> {
                 break;
             }
             let arc = self.arcs[a as usize];
-            self.arcs[a as usize].r_cap += bottleneck;
-            let s = arc.sister as usize;
-            self.arcs[s].r_cap -= bottleneck;
-            if self.arcs[s].r_cap <= eps {
+            // Flow runs parent → i along the sister of the parent arc.
+            self.push_flow(arc.sister as usize, bottleneck);
+            if self.arcs[a as usize].rev_cap <= eps {
                 self.set_orphan_front(i);
             }
             i = arc.head;
@@ -809,8 +825,7 @@ impl<T: Capacity> Graph<T> {
                 break;
             }
             let arc = self.arcs[a as usize];
-            self.arcs[arc.sister as usize].r_cap += bottleneck;
-            self.arcs[a as usize].r_cap -= bottleneck;
+            self.push_flow(a as usize, bottleneck);
             if self.arcs[a as usize].r_cap <= eps {
                 self.set_orphan_front(i);
             }
@@ -852,11 +867,7 @@ impl<T: Capacity> Graph<T> {
         for a0 in b..e {
             let arc0 = self.arcs[a0];
             // Residual from the candidate parent j into i (source tree) or i → j (sink tree).
-            let r = if SINK {
-                arc0.r_cap
-            } else {
-                self.arcs[arc0.sister as usize].r_cap
-            };
+            let r = if SINK { arc0.r_cap } else { arc0.rev_cap };
             if r <= eps {
                 continue;
             }
@@ -918,11 +929,7 @@ impl<T: Capacity> Graph<T> {
             if nj.is_sink != SINK || nj.parent == NONE {
                 continue;
             }
-            let r = if SINK {
-                arc0.r_cap
-            } else {
-                self.arcs[arc0.sister as usize].r_cap
-            };
+            let r = if SINK { arc0.r_cap } else { arc0.rev_cap };
             if r > eps {
                 self.set_active(j);
             }

@@ -9,10 +9,10 @@
 //! 1984; Boros & Hammer 2002), the doubled graph on nodes {p, p̄} carries every term twice;
 //! its minimum cut is twice the roof-dual lower bound.
 //!
-//! Like Kolmogorov's reference, [`Qpbo::solve`] runs in two stages: a max-flow on the primal
-//! graph with the submodular terms only, then (if any term is non-submodular) the doubled
-//! graph starts from that flow mirrored. A fully submodular function never builds the
-//! doubled graph and is solved exactly.
+//! The primal graph (unary and submodular terms) is built as terms are added. A fully
+//! submodular function is solved on it alone, exactly, and never builds the doubled graph;
+//! otherwise the doubled graph is built from it (residual capacities, mirrored) plus the
+//! non-submodular edges and solved.
 //!
 //! Two kinds of partial labelling are offered:
 //! - **strong persistency** ([`Qpbo::solve`]): `xᵢ = 0` iff node i is reachable from the
@@ -229,9 +229,17 @@ impl<T: Capacity> Qpbo<T> {
     pub fn solve(&mut self) {
         let n = self.unary.len();
         let scale = if T::IS_FLOAT { self.scale } else { T::ZERO };
-        // Stage 1: the primal graph with the unary and submodular terms.
+        // Stage 1: the primal graph with the unary and submodular terms. Measured on the
+        // random sparse instance (20 % non-submodular terms), solving the doubled graph
+        // from the original capacities is about 2× faster than continuing from a stage-1
+        // flow without its search trees, so stage 1 runs only for submodular functions.
         self.primal.raise_tolerance_scale(scale);
-        let flow1 = self.primal.maxflow(false);
+        let flow1 = if self.nonsubmodular.is_empty() {
+            self.primal.maxflow(false)
+        } else {
+            self.primal.prepare();
+            self.primal.flow()
+        };
         let base = self.constant + self.reparam_constant + flow1;
         if self.nonsubmodular.is_empty() {
             self.twice_bound = base + base;
@@ -245,7 +253,7 @@ impl<T: Capacity> Qpbo<T> {
             self.solved = Solved::Primal;
             return;
         }
-        // Stage 2: the doubled graph, starting from the stage-1 flow mirrored.
+        // Stage 2: the doubled graph from the primal residual capacities, mirrored.
         let g1 = &self.primal;
         let m1 = g1.num_edges();
         let mut g2 = Graph::<T>::new(2 * n, 2 * (m1 + self.nonsubmodular.len()));
