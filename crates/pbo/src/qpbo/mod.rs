@@ -104,7 +104,7 @@ enum Solved<T: Capacity> {
     No,
     /// All terms submodular: the primal graph alone decided.
     Primal,
-    /// The doubled graph: node i is xᵢ, node n + i is x̄ᵢ.
+    /// The doubled graph: node 2i is xᵢ, node 2i + 1 is x̄ᵢ (mates share cache lines).
     Doubled(Box<Graph<T>>),
 }
 
@@ -265,24 +265,24 @@ impl<T: Capacity> Qpbo<T> {
             } else {
                 (T::ZERO, -tr)
             };
-            g2.add_tweights(i, s, t);
-            g2.add_tweights(n + i, t, s);
+            g2.add_tweights(2 * i, s, t);
+            g2.add_tweights(2 * i + 1, t, s);
         }
         for e in 0..m1 {
             let (i, j) = g1.edge_ends(e);
             let (r, rr) = g1.edge_residual(e);
-            g2.add_edge(i, j, r, rr);
-            g2.add_edge(n + j, n + i, r, rr);
+            g2.add_edge(2 * i, 2 * j, r, rr);
+            g2.add_edge(2 * j + 1, 2 * i + 1, r, rr);
         }
         for &(i, j, v) in &self.nonsubmodular {
             let (i, j) = (i as usize, j as usize);
-            g2.add_edge(i, n + j, v, T::ZERO);
-            g2.add_edge(j, n + i, v, T::ZERO);
+            g2.add_edge(2 * i, 2 * j + 1, v, T::ZERO);
+            g2.add_edge(2 * j, 2 * i + 1, v, T::ZERO);
         }
         let flow2 = g2.maxflow(false);
         self.twice_bound = base + base + flow2;
         for (i, l) in self.labels.iter_mut().enumerate() {
-            *l = match (g2.tree(i), g2.tree(n + i)) {
+            *l = match (g2.tree(2 * i), g2.tree(2 * i + 1)) {
                 (Some(Segment::Source), _) | (_, Some(Segment::Sink)) => Label::Zero,
                 (Some(Segment::Sink), _) | (_, Some(Segment::Source)) => Label::One,
                 _ => Label::Unlabelled,
@@ -376,7 +376,8 @@ impl<T: Capacity> Qpbo<T> {
     }
 }
 
-/// Weak-persistency labels from the residual graph of the doubled graph `g` (2n nodes):
+/// Weak-persistency labels from the residual graph of the doubled graph `g` (2n nodes,
+/// node 2i = xᵢ, 2i + 1 = x̄ᵢ):
 /// Tarjan's SCC over the free nodes, then in reverse topological order every component
 /// not yet placed and not its own mirror goes to the source side, its mirror to the sink.
 fn weak_sides<T: Capacity>(g: &Graph<T>, n: usize) -> Vec<Label> {
@@ -454,7 +455,7 @@ fn weak_sides<T: Capacity>(g: &Graph<T>, n: usize) -> Vec<Label> {
     let mut mirror = vec![UNVISITED; num_comps as usize];
     for v in 0..total {
         if comp[v] != UNVISITED {
-            let m = if v < n { v + n } else { v - n };
+            let m = v ^ 1;
             mirror[comp[v] as usize] = comp[m];
         }
     }
@@ -475,10 +476,11 @@ fn weak_sides<T: Capacity>(g: &Graph<T>, n: usize) -> Vec<Label> {
     }
     (0..n)
         .map(|i| {
-            if comp[i] == UNVISITED {
+            let c = comp[2 * i];
+            if c == UNVISITED {
                 return Label::Unlabelled;
             }
-            match side[comp[i] as usize] {
+            match side[c as usize] {
                 1 => Label::Zero,
                 2 => Label::One,
                 _ => Label::Unlabelled,
