@@ -33,6 +33,8 @@ struct StageOutput {
     title: &'static str,
     text_html: String,
     figures: Vec<String>,
+    /// Figures also written as files into the output folder: (file name, bytes).
+    files: Vec<(&'static str, Vec<u8>)>,
 }
 
 type Stage = fn(&DemoArgs) -> anyhow::Result<StageOutput>;
@@ -67,6 +69,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         }
         summary.insert(out.key.into(), entry);
         html.section(out.title, &out.text_html, &out.figures);
+        for (name, bytes) in &out.files {
+            let path = args.out.join(name);
+            std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))?;
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -125,19 +131,30 @@ fn stage_city(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
         }
     }
     let ppm = svg.pixels_per_metre();
-    for h in &map.highways {
-        let (width_m, colour) = match h.highway.as_str() {
-            "primary" | "trunk" => (9.0, "#e8a03c"),
-            "secondary" | "tertiary" => (7.0, "#f2cf5b"),
-            "residential" | "unclassified" | "living_street" => (5.5, "#ffffff"),
-            "service" => (3.5, "#ffffff"),
-            _ => (1.5, "#d86a6a"),
-        };
-        let style = format!(
-            "stroke:{colour};stroke-width:{:.1};stroke-linecap:round;stroke-linejoin:round",
-            (width_m * ppm).max(1.0)
-        );
-        svg.polyline(&h.points, &style);
+    let style_of = |highway: &str| match highway {
+        "primary" | "trunk" => (9.0, "#e8a03c"),
+        "secondary" | "tertiary" => (7.0, "#f2cf5b"),
+        "residential" | "unclassified" | "living_street" => (5.5, "#ffffff"),
+        "service" => (3.5, "#ffffff"),
+        _ => (1.5, "#d86a6a"),
+    };
+    // Casing first (grey, wider), then the fill colour, so light streets stay visible.
+    for casing in [true, false] {
+        for h in &map.highways {
+            let (width_m, colour) = style_of(&h.highway);
+            let width_px = (width_m * ppm).max(1.0);
+            let style = if casing {
+                format!(
+                    "stroke:#8a8a8a;stroke-width:{:.1};stroke-linecap:round;stroke-linejoin:round",
+                    width_px + 1.6
+                )
+            } else {
+                format!(
+                    "stroke:{colour};stroke-width:{width_px:.1};stroke-linecap:round;stroke-linejoin:round"
+                )
+            };
+            svg.polyline(&h.points, &style);
+        }
     }
     for i in &map.streets.intersections {
         svg.circle(i.position, 2.0, "fill:#3050c0");
@@ -173,6 +190,7 @@ fn stage_city(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
             generate_s
         ),
         figures: vec![svg.finish()],
+        files: vec![("city.svg", svg.finish().into_bytes())],
     })
 }
 
@@ -248,11 +266,15 @@ fn stage_denoise(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let energy = q.energy(&labels);
     let errors_before = clean.iter().zip(&noisy).filter(|(a, b)| a != b).count();
     let errors_after = clean.iter().zip(&labels).filter(|(a, b)| a != b).count();
-    let figures = vec![
-        Html::png_img(&image_png(side, &clean), "clean", 256),
-        Html::png_img(&image_png(side, &noisy), "noisy (15 % flipped)", 256),
-        Html::png_img(&image_png(side, &labels), "QPBO minimiser", 256),
+    let pngs = [
+        ("denoise-clean.png", image_png(side, &clean)),
+        ("denoise-noisy.png", image_png(side, &noisy)),
+        ("denoise-qpbo.png", image_png(side, &labels)),
     ];
+    let figures = pngs
+        .iter()
+        .map(|(name, png)| Html::png_img(png, name, 256))
+        .collect();
     Ok(StageOutput {
         key: "pbo_denoise",
         summary: json!({
@@ -277,6 +299,7 @@ fn stage_denoise(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             solve_s
         ),
         figures,
+        files: pngs.into_iter().collect(),
     })
 }
 
@@ -371,5 +394,6 @@ fn stage_higher_order(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             f.num_higher_order_terms()
         ),
         figures: vec![table],
+        files: Vec::new(),
     })
 }
