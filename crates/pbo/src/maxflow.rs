@@ -483,7 +483,9 @@ impl<T: Capacity> Graph<T> {
         for k in 0..n {
             first[k + 1] += first[k];
         }
-        let mut cursor: Vec<u32> = first[..n].to_vec();
+        // Each node's arcs are placed last-added first, the order in which the reference
+        // implementation's linked lists scan them (it steers tree growth on grids).
+        let mut cursor: Vec<u32> = first[1..].to_vec();
         let blank = Arc {
             head: 0,
             sister: 0,
@@ -493,10 +495,10 @@ impl<T: Capacity> Graph<T> {
         let mut arcs = vec![blank; 2 * m];
         let mut edge_arc = vec![0u32; m];
         for (e, (&(i, j), &(c, rc))) in self.edge_ends.iter().zip(caps.iter()).enumerate() {
+            cursor[i as usize] -= 1;
             let a = cursor[i as usize];
-            cursor[i as usize] += 1;
+            cursor[j as usize] -= 1;
             let b = cursor[j as usize];
-            cursor[j as usize] += 1;
             arcs[a as usize] = Arc {
                 head: j,
                 sister: b,

@@ -23,7 +23,8 @@ pub struct ProbeOptions {
     /// Use weakly persistent labels (more fixed variables; the result then holds in some
     /// global minimiser instead of every one).
     pub weak_persistencies: bool,
-    /// Upper limit on the number of probed variables (each costs two QPBO solves).
+    /// Upper limit on the number of probed variables. Each probe costs two QPBO solves of
+    /// the remaining function, so probing all of a large function is expensive.
     pub max_probes: usize,
 }
 
@@ -31,7 +32,7 @@ impl Default for ProbeOptions {
     fn default() -> Self {
         ProbeOptions {
             weak_persistencies: true,
-            max_probes: 10_000,
+            max_probes: 1_000,
         }
     }
 }
