@@ -687,53 +687,11 @@ impl<T: Capacity> Graph<T> {
             }
             let iu = i as usize;
             let ni = self.nodes[iu];
-            let (b, e) = (self.first[iu] as usize, self.first[iu + 1] as usize);
-            let mut middle = NONE;
-            if !ni.is_sink {
-                for a in b..e {
-                    let arc = self.arcs[a];
-                    if arc.r_cap > eps {
-                        let j = arc.head as usize;
-                        let nj = &mut self.nodes[j];
-                        if nj.parent == NONE {
-                            nj.is_sink = false;
-                            nj.parent = arc.sister;
-                            nj.ts = ni.ts;
-                            nj.dist = ni.dist + 1;
-                            self.set_active(j as u32);
-                        } else if nj.is_sink {
-                            middle = a as u32;
-                            break;
-                        } else if nj.ts <= ni.ts && nj.dist > ni.dist {
-                            nj.parent = arc.sister;
-                            nj.ts = ni.ts;
-                            nj.dist = ni.dist + 1;
-                        }
-                    }
-                }
+            let middle = if ni.is_sink {
+                self.grow::<true>(iu, ni)
             } else {
-                for a in b..e {
-                    let arc = self.arcs[a];
-                    if arc.rev_cap > eps {
-                        let j = arc.head as usize;
-                        let nj = &mut self.nodes[j];
-                        if nj.parent == NONE {
-                            nj.is_sink = true;
-                            nj.parent = arc.sister;
-                            nj.ts = ni.ts;
-                            nj.dist = ni.dist + 1;
-                            self.set_active(j as u32);
-                        } else if !nj.is_sink {
-                            middle = arc.sister;
-                            break;
-                        } else if nj.ts <= ni.ts && nj.dist > ni.dist {
-                            nj.parent = arc.sister;
-                            nj.ts = ni.ts;
-                            nj.dist = ni.dist + 1;
-                        }
-                    }
-                }
-            }
+                self.grow::<false>(iu, ni)
+            };
             self.time = self.time.wrapping_add(1);
             if middle != NONE {
                 // Keep i active: it may have more paths to the other tree.
@@ -757,6 +715,47 @@ impl<T: Capacity> Graph<T> {
         let sister = &mut self.arcs[s];
         sister.r_cap += amount;
         sister.rev_cap -= amount;
+    }
+
+    /// Grows the tree of active node `i` (the sink tree if `SINK`) over its residual arcs.
+    /// Returns the arc from the source tree to the sink tree it found, or `NONE`.
+    #[inline]
+    fn grow<const SINK: bool>(&mut self, i: usize, ni: Node<T>) -> u32 {
+        let eps = self.eps;
+        let (b, e) = (self.first[i] as usize, self.first[i + 1] as usize);
+        let arcs = &self.arcs[b..e];
+        let nodes = &mut self.nodes;
+        for (k, arc) in arcs.iter().enumerate() {
+            let r = if SINK { arc.rev_cap } else { arc.r_cap };
+            if r <= eps {
+                continue;
+            }
+            let j = arc.head;
+            let nj = &mut nodes[j as usize];
+            if nj.parent == NONE {
+                nj.is_sink = SINK;
+                nj.parent = arc.sister;
+                nj.ts = ni.ts;
+                nj.dist = ni.dist + 1;
+                // set_active, inlined: j is not queued yet unless its `next` is set.
+                if nj.next == NONE {
+                    nj.next = j;
+                    if self.queue_last != NONE {
+                        nodes[self.queue_last as usize].next = j;
+                    } else {
+                        self.queue_first = j;
+                    }
+                    self.queue_last = j;
+                }
+            } else if nj.is_sink != SINK {
+                return if SINK { arc.sister } else { (b + k) as u32 };
+            } else if nj.ts <= ni.ts && nj.dist > ni.dist {
+                nj.parent = arc.sister;
+                nj.ts = ni.ts;
+                nj.dist = ni.dist + 1;
+            }
+        }
+        NONE
     }
 
     /// Pushes the bottleneck flow along source tree → `middle` → sink tree.
