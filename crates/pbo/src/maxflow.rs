@@ -669,7 +669,6 @@ impl<T: Capacity> Graph<T> {
     }
 
     fn run(&mut self) {
-        let eps = self.eps;
         let mut current = NONE;
         loop {
             let mut i = current;
