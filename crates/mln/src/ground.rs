@@ -257,7 +257,8 @@ enum Arg {
 /// Evidence and domains, shared read-only by the parallel grounders.
 struct World<'a> {
     program: &'a Program,
-    evidence: FxHashMap<(usize, Box<[u32]>), bool>,
+    /// Per predicate: evidence atoms (constant ids) → truth value.
+    evidence: Vec<FxHashMap<Box<[u32]>, bool>>,
     /// Per predicate: true facts.
     true_facts: Vec<Vec<Box<[u32]>>>,
     /// Per predicate, per argument position: constant → indices into `true_facts`.
@@ -271,9 +272,7 @@ struct World<'a> {
 
 impl World<'_> {
     fn state(&self, predicate: usize, args: &[u32]) -> State {
-        // Avoid allocating a key for the lookup on the hot path.
-        let key: (usize, Box<[u32]>) = (predicate, args.into());
-        match self.evidence.get(&key) {
+        match self.evidence[predicate].get(args) {
             Some(true) => State::True,
             Some(false) => State::False,
             None if !self.open[predicate] => State::False,
@@ -437,9 +436,13 @@ pub fn ground(
         .collect();
     let domains: FxHashMap<String, Vec<u32>> =
         domain_sets.into_iter().map(|(k, v)| (k, v.0)).collect();
+    let mut evidence_by_pred: Vec<FxHashMap<Box<[u32]>, bool>> = vec![FxHashMap::default(); np];
+    for ((p, args), v) in evidence_map {
+        evidence_by_pred[p].insert(args, v);
+    }
     let world = World {
         program,
-        evidence: evidence_map,
+        evidence: evidence_by_pred,
         true_facts,
         fact_index,
         open,
@@ -989,8 +992,18 @@ fn eval_lit(world: &World<'_>, l: &ClauseLit, b: &[u32]) -> LitValue {
             args,
             positive,
         } => {
-            let ground: Box<[u32]> = args.iter().map(|a| resolve(*a, b)).collect();
-            match world.state(*predicate, &ground) {
+            let mut buf = [0u32; 8];
+            let ground_vec: Vec<u32>;
+            let ground: &[u32] = if args.len() <= buf.len() {
+                for (g, a) in buf.iter_mut().zip(args) {
+                    *g = resolve(*a, b);
+                }
+                &buf[..args.len()]
+            } else {
+                ground_vec = args.iter().map(|a| resolve(*a, b)).collect();
+                &ground_vec
+            };
+            match world.state(*predicate, ground) {
                 State::True => {
                     if *positive {
                         LitValue::True
@@ -1005,7 +1018,7 @@ fn eval_lit(world: &World<'_>, l: &ClauseLit, b: &[u32]) -> LitValue {
                         LitValue::True
                     }
                 }
-                State::Unknown => LitValue::Unknown(*predicate, ground, *positive),
+                State::Unknown => LitValue::Unknown(*predicate, ground.into(), *positive),
             }
         }
     }
@@ -1054,9 +1067,18 @@ fn bound_literal_true(world: &World<'_>, l: &ClauseLit, binding: &[Option<u32>])
             args,
             positive,
         } => {
-            let ground: Option<Vec<u32>> = args.iter().map(|a| get(*a)).collect();
-            let ground = ground?;
-            Some(match world.state(*predicate, &ground) {
+            let mut buf = [0u32; 8];
+            let mut heap = Vec::new();
+            let ground: &mut [u32] = if args.len() <= buf.len() {
+                &mut buf[..args.len()]
+            } else {
+                heap.resize(args.len(), 0);
+                &mut heap
+            };
+            for (g, a) in ground.iter_mut().zip(args) {
+                *g = get(*a)?;
+            }
+            Some(match world.state(*predicate, ground) {
                 State::True => *positive,
                 State::False => !*positive,
                 State::Unknown => false,

@@ -53,7 +53,8 @@ pub struct InferOptions {
     pub method: Method,
     /// Order reduction for the QPBO method.
     pub quadratizer: Quadratizer,
-    /// Probing in every QSSR round.
+    /// Probing in every QSSR round (off by default: on LP it adds 0.1 % persistencies
+    /// for a 30× longer solve).
     pub probe: bool,
     /// QPBO-I rounds on the residue.
     pub improve_rounds: usize,
@@ -66,7 +67,7 @@ impl Default for InferOptions {
         InferOptions {
             method: Method::Qpbo,
             quadratizer: Quadratizer::Asm,
-            probe: true,
+            probe: false,
             improve_rounds: 50,
             walksat: WalkSatOptions::default(),
         }

@@ -42,6 +42,9 @@ pub struct InferArgs {
     /// Order reduction for the qpbo method: ish, asm, fix.
     #[arg(long, default_value = "asm", value_parser = parse_quadratizer)]
     pub quadratize: Quadratizer,
+    /// Run probing (QPBO-P) in the QSSR rounds of the qpbo method (slower; rarely lowers the cost).
+    #[arg(long)]
+    pub probe: bool,
     /// Use the multinomial (positive literals only) form of the cost.
     #[arg(long)]
     pub multinomial: bool,
@@ -110,6 +113,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let mut options = InferOptions {
         method: args.method,
         quadratizer: args.quadratize,
+        probe: args.probe,
         improve_rounds: args.improve,
         ..InferOptions::default()
     };
