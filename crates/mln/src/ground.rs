@@ -872,7 +872,11 @@ fn ground_formula(
     let total: f64 = domains.iter().map(|d| d.len() as f64).product();
 
     // Bindings that leave at least one clause unsatisfied by evidence: union over clauses.
+    // A single clause enumerates each binding once, in a deterministic order, so it needs
+    // neither the union set nor the sort.
+    let mut sorted: Vec<Box<[u32]>> = Vec::new();
     let mut bindings: FxHashSet<Box<[u32]>> = FxHashSet::default();
+    let single = clauses.len() == 1;
     for clause in &clauses {
         let mut binding: Vec<Option<u32>> = vec![None; names.len()];
         let clause_vars: Vec<usize> = {
@@ -881,7 +885,7 @@ fn ground_formula(
             v.dedup();
             v
         };
-        let mut found: Vec<Vec<u32>> = Vec::new();
+        let mut found: Vec<u32> = Vec::new();
         enumerate_unsatisfied(
             world,
             clause,
@@ -889,7 +893,9 @@ fn ground_formula(
             &domains,
             &mut binding,
             &mut found,
-            options.max_groundings,
+            options
+                .max_groundings
+                .saturating_mul(clause_vars.len().max(1)),
         )
         .map_err(|()| GroundError::TooLarge {
             path: program.path.clone(),
@@ -900,15 +906,21 @@ fn ground_formula(
         let others: Vec<usize> = (0..names.len())
             .filter(|v| !clause_vars.contains(v))
             .collect();
-        for partial in found {
-            let mut full = vec![0u32; names.len()];
-            for (k, &v) in clause_vars.iter().enumerate() {
-                full[v] = partial[k];
+        let stride = clause_vars.len();
+        let mut full = vec![0u32; names.len()];
+        let count = if stride == 0 { 1 } else { found.len() / stride };
+        for k in 0..count {
+            for (j, &v) in clause_vars.iter().enumerate() {
+                full[v] = found[k * stride + j];
             }
             extend_product(&others, &domains, &mut full, 0, &mut |b| {
-                bindings.insert(b.into());
+                if single {
+                    sorted.push(b.into());
+                } else {
+                    bindings.insert(b.into());
+                }
             });
-            if bindings.len() > options.max_groundings {
+            if sorted.len().max(bindings.len()) > options.max_groundings {
                 return Err(GroundError::TooLarge {
                     path: program.path.clone(),
                     line: wf.line,
@@ -917,8 +929,10 @@ fn ground_formula(
             }
         }
     }
-    let mut sorted: Vec<Box<[u32]>> = bindings.into_iter().collect();
-    sorted.sort_unstable();
+    if !single {
+        sorted = bindings.into_iter().collect();
+        sorted.sort_unstable();
+    }
     let enumerated = sorted.len();
     let mut out = FormulaGroundings {
         factors: Vec::new(),
@@ -1087,14 +1101,15 @@ fn bound_literal_true(world: &World<'_>, l: &ClauseLit, binding: &[Option<u32>])
     }
 }
 
-/// Backtracking join: all bindings of `vars` under which no literal of the clause is true.
+/// Backtracking join: all bindings of `vars` under which no literal of the clause is true,
+/// appended to `found` flat (one value per variable of `vars`, binding after binding).
 fn enumerate_unsatisfied(
     world: &World<'_>,
     clause: &[ClauseLit],
     vars: &[usize],
     domains: &[&[u32]],
     binding: &mut Vec<Option<u32>>,
-    found: &mut Vec<Vec<u32>>,
+    found: &mut Vec<u32>,
     limit: usize,
 ) -> Result<(), ()> {
     // Prune: a literal whose variables are all bound and which is true satisfies the clause.
@@ -1104,7 +1119,7 @@ fn enumerate_unsatisfied(
         }
     }
     if vars.iter().all(|&v| binding[v].is_some()) {
-        found.push(vars.iter().map(|&v| binding[v].unwrap_or(0)).collect());
+        found.extend(vars.iter().map(|&v| binding[v].unwrap_or(0)));
         if found.len() > limit {
             return Err(());
         }
