@@ -886,13 +886,14 @@ fn ground_formula(
             v
         };
         let mut found: Vec<u32> = Vec::new();
+        let mut count = 0usize;
         enumerate_unsatisfied(
             world,
             clause,
             &clause_vars,
             &domains,
             &mut binding,
-            &mut found,
+            (&mut found, &mut count),
             options
                 .max_groundings
                 .saturating_mul(clause_vars.len().max(1)),
@@ -908,7 +909,6 @@ fn ground_formula(
             .collect();
         let stride = clause_vars.len();
         let mut full = vec![0u32; names.len()];
-        let count = if stride == 0 { 1 } else { found.len() / stride };
         for k in 0..count {
             for (j, &v) in clause_vars.iter().enumerate() {
                 full[v] = found[k * stride + j];
@@ -1102,16 +1102,18 @@ fn bound_literal_true(world: &World<'_>, l: &ClauseLit, binding: &[Option<u32>])
 }
 
 /// Backtracking join: all bindings of `vars` under which no literal of the clause is true,
-/// appended to `found` flat (one value per variable of `vars`, binding after binding).
+/// appended flat to `found.0` (one value per variable of `vars`, binding after binding) and
+/// counted in `found.1` (a clause without variables has one empty binding).
 fn enumerate_unsatisfied(
     world: &World<'_>,
     clause: &[ClauseLit],
     vars: &[usize],
     domains: &[&[u32]],
     binding: &mut Vec<Option<u32>>,
-    found: &mut Vec<u32>,
+    found: (&mut Vec<u32>, &mut usize),
     limit: usize,
 ) -> Result<(), ()> {
+    let (flat, count) = found;
     // Prune: a literal whose variables are all bound and which is true satisfies the clause.
     for l in clause {
         if bound_literal_true(world, l, binding) == Some(true) {
@@ -1119,8 +1121,9 @@ fn enumerate_unsatisfied(
         }
     }
     if vars.iter().all(|&v| binding[v].is_some()) {
-        found.extend(vars.iter().map(|&v| binding[v].unwrap_or(0)));
-        if found.len() > limit {
+        flat.extend(vars.iter().map(|&v| binding[v].unwrap_or(0)));
+        *count += 1;
+        if *count > limit {
             return Err(());
         }
         return Ok(());
@@ -1175,7 +1178,15 @@ fn enumerate_unsatisfied(
                 }
             }
             if ok {
-                enumerate_unsatisfied(world, clause, vars, domains, binding, found, limit)?;
+                enumerate_unsatisfied(
+                    world,
+                    clause,
+                    vars,
+                    domains,
+                    binding,
+                    (&mut *flat, &mut *count),
+                    limit,
+                )?;
             }
             for v in newly {
                 binding[v] = None;
@@ -1189,7 +1200,15 @@ fn enumerate_unsatisfied(
     };
     for &c in domains[v] {
         binding[v] = Some(c);
-        enumerate_unsatisfied(world, clause, vars, domains, binding, found, limit)?;
+        enumerate_unsatisfied(
+            world,
+            clause,
+            vars,
+            domains,
+            binding,
+            (&mut *flat, &mut *count),
+            limit,
+        )?;
     }
     binding[v] = None;
     Ok(())

@@ -176,7 +176,7 @@ const PERSONS: [&str; 3] = ["Ann", "Bob", "Cy"];
 /// A random small program over `person`: *Friends(person,person) closed, Smokes and Cancer
 /// open (queried), with a few formula shapes and random weights, evidence and canopy.
 fn arb_case() -> impl Strategy<Value = (String, String, String)> {
-    let shapes = proptest::collection::vec((0usize..7, -3i32..=3, any::<bool>()), 1..5);
+    let shapes = proptest::collection::vec((0usize..8, -3i32..=3, any::<bool>()), 1..5);
     let evidence =
         proptest::collection::vec((0usize..3, 0usize..3, 0usize..3, any::<bool>()), 0..8);
     (shapes, evidence, any::<bool>()).prop_map(|(shapes, evidence, canopy)| {
@@ -191,6 +191,7 @@ fn arb_case() -> impl Strategy<Value = (String, String, String)> {
             "EXIST y Friends(x, y) ^ Smokes(y)",
             "Cancer(Ann) v !Smokes(x)",
             "Smokes(x) ^ Smokes(y) ^ Cancer(z)",
+            "Cancer(Ann) v !Smokes(Bob)",
         ];
         for (shape, w, hard) in shapes {
             if hard && w == 0 {
