@@ -864,31 +864,32 @@ impl<T: Capacity> Graph<T> {
         let (b, e) = (self.first[iu] as usize, self.first[iu + 1] as usize);
         let mut d_min = INFINITE_D;
         let mut a0_min = NONE;
-        for a0 in b..e {
-            let arc0 = self.arcs[a0];
+        let time = self.time;
+        let arcs = &self.arcs;
+        let nodes = &mut self.nodes;
+        for (k, arc0) in arcs[b..e].iter().enumerate() {
             // Residual from the candidate parent j into i (source tree) or i → j (sink tree).
             let r = if SINK { arc0.r_cap } else { arc0.rev_cap };
             if r <= eps {
                 continue;
             }
             let mut j = arc0.head;
-            let nj = self.nodes[j as usize];
+            let nj = &nodes[j as usize];
             if nj.is_sink != SINK || nj.parent == NONE {
                 continue;
             }
             // Check the origin of j.
             let mut d: u32 = 0;
             loop {
-                let n = self.nodes[j as usize];
-                if n.ts == self.time {
+                let n = &mut nodes[j as usize];
+                if n.ts == time {
                     d = d.saturating_add(n.dist);
                     break;
                 }
                 let a = n.parent;
                 d += 1;
                 if a == TERMINAL {
-                    let n = &mut self.nodes[j as usize];
-                    n.ts = self.time;
+                    n.ts = time;
                     n.dist = 1;
                     break;
                 }
@@ -896,21 +897,24 @@ impl<T: Capacity> Graph<T> {
                     d = INFINITE_D;
                     break;
                 }
-                j = self.arcs[a as usize].head;
+                j = arcs[a as usize].head;
             }
             if d < INFINITE_D {
                 if d < d_min {
-                    a0_min = a0 as u32;
+                    a0_min = (b + k) as u32;
                     d_min = d;
                 }
                 // Set marks along the path.
                 let mut j = arc0.head;
-                while self.nodes[j as usize].ts != self.time {
-                    let n = &mut self.nodes[j as usize];
-                    n.ts = self.time;
+                loop {
+                    let n = &mut nodes[j as usize];
+                    if n.ts == time {
+                        break;
+                    }
+                    n.ts = time;
                     n.dist = d;
                     d = d.saturating_sub(1);
-                    j = self.arcs[n.parent as usize].head;
+                    j = arcs[n.parent as usize].head;
                 }
             }
         }
