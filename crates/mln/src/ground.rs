@@ -97,8 +97,6 @@ pub enum GroundError {
 /// Options of [`ground`].
 #[derive(Debug, Clone)]
 pub struct GroundOptions {
-    /// Use the multinomial (positive literals only) form of the cost instead of literals.
-    pub multinomial: bool,
     /// Refuse formulas with more enumerated groundings than this.
     pub max_groundings: usize,
 }
@@ -106,7 +104,6 @@ pub struct GroundOptions {
 impl Default for GroundOptions {
     fn default() -> Self {
         GroundOptions {
-            multinomial: false,
             max_groundings: 200_000_000,
         }
     }
@@ -521,9 +518,6 @@ pub fn ground(
         add_factor_polynomial(&mut cost, f);
     }
     cost.simplify(1e-12);
-    if options.multinomial {
-        cost = cost.to_multinomial();
-    }
     Ok(GroundProblem {
         constants: consts.names,
         atoms,

@@ -46,6 +46,50 @@ impl std::str::FromStr for Method {
     }
 }
 
+/// Terms with more negated literals stay in literal form in the multinomial representation.
+const MULTINOMIAL_MAX_NEGATED: usize = 12;
+
+/// Which polynomial form QSSR minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Representation {
+    /// Literal monomials as grounded (x and x̄).
+    Literal,
+    /// Positive literals where affordable: x̄ expanded as 1 − x in terms of at most 12
+    /// negated literals, so opposite-polarity terms merge (this makes the thesis' ID problem
+    /// submodular); longer terms stay in literal form.
+    Multinomial,
+    /// Both, in parallel; the lower cost wins (ties: more persistencies).
+    #[default]
+    Auto,
+}
+
+impl Representation {
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Representation::Literal => "literal",
+            Representation::Multinomial => "multinomial",
+            Representation::Auto => "auto",
+        }
+    }
+}
+
+impl std::str::FromStr for Representation {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        [
+            Representation::Literal,
+            Representation::Multinomial,
+            Representation::Auto,
+        ]
+        .into_iter()
+        .find(|r| r.name() == s)
+        .ok_or_else(|| {
+            format!("unknown representation {s:?}: expected literal, multinomial or auto")
+        })
+    }
+}
+
 /// Options of [`map_inference`].
 #[derive(Debug, Clone)]
 pub struct InferOptions {
@@ -53,6 +97,8 @@ pub struct InferOptions {
     pub method: Method,
     /// Order reduction for the QPBO method.
     pub quadratizer: Quadratizer,
+    /// Polynomial form for the QPBO method.
+    pub representation: Representation,
     /// Probing in every QSSR round (off by default: on LP it adds 0.1 % persistencies
     /// for a 30× longer solve).
     pub probe: bool,
@@ -67,6 +113,7 @@ impl Default for InferOptions {
         InferOptions {
             method: Method::Qpbo,
             quadratizer: Quadratizer::Asm,
+            representation: Representation::Auto,
             probe: false,
             improve_rounds: 50,
             walksat: WalkSatOptions::default(),
@@ -97,16 +144,36 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
     let t = Instant::now();
     let (assignment, lower_bound, persistent_fraction, seconds_quadratize) = match options.method {
         Method::Qpbo => {
-            let r = solve(
-                &problem.cost,
-                &QssrOptions {
-                    quadratizer: options.quadratizer,
-                    probe: options.probe,
-                    improve_rounds: options.improve_rounds,
-                    seed: options.walksat.seed,
-                    ..QssrOptions::default()
-                },
-            );
+            let qssr = QssrOptions {
+                quadratizer: options.quadratizer,
+                probe: options.probe,
+                improve_rounds: options.improve_rounds,
+                seed: options.walksat.seed,
+                ..QssrOptions::default()
+            };
+            let run = |multinomial: bool| {
+                let poly = if multinomial {
+                    // Long clauses (EXIST expansions) stay in literal form.
+                    problem.cost.to_multinomial_partial(MULTINOMIAL_MAX_NEGATED)
+                } else {
+                    problem.cost.clone()
+                };
+                solve(&poly, &qssr)
+            };
+            let r = match options.representation {
+                Representation::Literal => run(false),
+                Representation::Multinomial => run(true),
+                Representation::Auto => {
+                    let (a, b) = rayon::join(|| run(false), || run(true));
+                    let bound = a.lower_bound.max(b.lower_bound);
+                    let better_b = b.energy < a.energy - 1e-9
+                        || ((b.energy - a.energy).abs() <= 1e-9
+                            && b.labelled_fraction > a.labelled_fraction);
+                    let mut r = if better_b { b } else { a };
+                    r.lower_bound = bound.min(r.energy);
+                    r
+                }
+            };
             (
                 r.assignment,
                 Some(r.lower_bound),

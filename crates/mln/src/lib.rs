@@ -8,7 +8,9 @@
 //! - [`ground`]: join-based grounding with evidence simplification → the cost polynomial.
 //! - [`infer`]: MAP inference (QPBO/QSSR, MaxWalkSAT on formulas or monomials).
 //! - [`walksat`]: MaxWalkSAT over weighted conjunctive factors.
+//! - [`generate`]: seeded generators of the thesis' F&S, −F&S and ID problems.
 
+pub mod generate;
 pub mod ground;
 pub mod infer;
 pub mod parse;

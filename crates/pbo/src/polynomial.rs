@@ -24,6 +24,20 @@
 
 use rustc_hash::FxHashMap;
 
+/// Terms with more negated literals than this are not expanded into multinomial form
+/// (2ᵏ monomials).
+pub const MAX_MULTINOMIAL_NEGATED: usize = 24;
+
+/// A term too long to expand into multinomial form.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("a term with {negated} negated literals (degree {degree}) would expand into 2^{negated} monomials; at most {MAX_MULTINOMIAL_NEGATED} negated literals can be expanded")]
+pub struct ExpansionError {
+    /// Negated literals in the offending term.
+    pub negated: usize,
+    /// Its degree.
+    pub degree: usize,
+}
+
 /// A literal: a variable index with a polarity (x or x̄ = 1 − x).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Literal(u32);
@@ -251,24 +265,40 @@ impl Polynomial {
 
     /// The same function with positive literals only (x̄ expanded as 1 − x).
     ///
-    /// A term with k negated literals expands into 2ᵏ monomials before merging.
-    pub fn to_multinomial(&self) -> Polynomial {
+    /// A term with k negated literals expands into 2ᵏ monomials before merging, so terms
+    /// with more than [`MAX_MULTINOMIAL_NEGATED`] negated literals are refused.
+    pub fn to_multinomial(&self) -> Result<Polynomial, ExpansionError> {
+        if let Some((lits, _)) = self
+            .terms()
+            .find(|(l, _)| l.iter().filter(|x| x.is_negated()).count() > MAX_MULTINOMIAL_NEGATED)
+        {
+            return Err(ExpansionError {
+                negated: lits.iter().filter(|x| x.is_negated()).count(),
+                degree: lits.len(),
+            });
+        }
+        Ok(self.to_multinomial_partial(MAX_MULTINOMIAL_NEGATED))
+    }
+
+    /// The same function with every term of at most `max_negated` negated literals expanded
+    /// into positive literals; longer terms stay as they are (a mixed form).
+    pub fn to_multinomial_partial(&self, max_negated: usize) -> Polynomial {
         let mut out = Polynomial::new(self.num_vars);
         out.constant = self.constant;
         for (lits, a) in self.terms() {
-            let positives: Vec<Literal> = lits
-                .iter()
-                .map(|l| Literal::pos(l.var()))
-                .collect::<Vec<_>>();
             let negated: Vec<usize> = (0..lits.len()).filter(|&i| lits[i].is_negated()).collect();
+            let k = negated.len();
+            if k > max_negated.min(MAX_MULTINOMIAL_NEGATED) {
+                out.add_normalized(a, lits.to_vec());
+                continue;
+            }
             let fixed: Vec<Literal> = lits.iter().copied().filter(|l| !l.is_negated()).collect();
             // Π_{fixed} x · Π_{negated} (1 − x) = Σ_{S ⊆ negated} (−1)^{|S|} Π_{fixed ∪ S} x
-            let k = negated.len();
             for mask in 0u64..(1u64 << k) {
                 let mut mono = fixed.clone();
                 for (bit, &i) in negated.iter().enumerate() {
                     if mask >> bit & 1 == 1 {
-                        mono.push(positives[i]);
+                        mono.push(Literal::pos(lits[i].var()));
                     }
                 }
                 mono.sort_unstable();
@@ -410,6 +440,19 @@ mod tests {
     }
 
     #[test]
+    fn long_negated_terms_are_refused_or_kept() {
+        // The EXIST clauses of LP have ~70 negated literals: 2^70 monomials.
+        let mut f = Polynomial::new(70);
+        let lits: Vec<Literal> = (0..70).map(Literal::neg).collect();
+        f.add_term(-2.5, &lits);
+        let e = f.to_multinomial().unwrap_err();
+        assert_eq!(e.negated, 70);
+        let p = f.to_multinomial_partial(12);
+        assert_eq!(p.num_terms(), 1);
+        assert_eq!(p.evaluate(&[false; 70]), -2.5);
+    }
+
+    #[test]
     fn fixing_substitutes_and_simplifies() {
         // f = 3·x0·x̄1 + 2·x1·x2 − x2
         let mut f = Polynomial::new(3);
@@ -449,8 +492,12 @@ mod tests {
     proptest! {
         #[test]
         fn multinomial_equals_original(f in arb_polynomial(7, 4)) {
-            let m = f.to_multinomial();
+            let m = f.to_multinomial().unwrap();
             prop_assert!(m.terms().all(|(l, _)| l.iter().all(|x| !x.is_negated())));
+            let partial = f.to_multinomial_partial(1);
+            for x in all_assignments(f.num_vars()) {
+                prop_assert!((f.evaluate(&x) - partial.evaluate(&x)).abs() < 1e-9);
+            }
             for x in all_assignments(f.num_vars()) {
                 prop_assert!((f.evaluate(&x) - m.evaluate(&x)).abs() < 1e-9);
             }

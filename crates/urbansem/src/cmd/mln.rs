@@ -3,7 +3,7 @@
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use mln::ground::{ground, GroundOptions};
-use mln::infer::{map_inference, InferOptions, Method};
+use mln::infer::{map_inference, InferOptions, Method, Representation};
 use mln::parse::{parse_query_predicates, read_evidence, read_program, read_query};
 use pbo::quadratize::Quadratizer;
 use serde_json::json;
@@ -16,6 +16,36 @@ use std::time::Instant;
 pub enum MlnCommand {
     /// MAP inference: the most probable truth values of the query atoms.
     Infer(InferArgs),
+    /// Generate a synthetic problem of the thesis (prog.mln, evidence.db, query.db).
+    Generate(GenerateArgs),
+}
+
+/// Which synthetic problem to generate.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum Problem {
+    /// Friends & Smokers (Table 3.1).
+    Fs,
+    /// Friends & Smokers with every weight negated.
+    NegFs,
+    /// Image denoising with triple smoothing rules.
+    Id,
+}
+
+/// Options of `urbansem mln generate`.
+#[derive(Args)]
+pub struct GenerateArgs {
+    /// fs, neg-fs or id.
+    #[arg(value_enum)]
+    pub problem: Problem,
+    /// Persons (fs, neg-fs; thesis: 200) or image side in pixels (id; thesis: 90).
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Seed of the evidence.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// Options of `urbansem mln infer`.
@@ -45,7 +75,10 @@ pub struct InferArgs {
     /// Run probing (QPBO-P) in the QSSR rounds of the qpbo method (slower; rarely lowers the cost).
     #[arg(long)]
     pub probe: bool,
-    /// Use the multinomial (positive literals only) form of the cost.
+    /// Polynomial form for the qpbo method: literal, multinomial, or auto (both in parallel, best kept).
+    #[arg(long, default_value = "auto", value_parser = parse_representation)]
+    pub representation: Representation,
+    /// Shorthand for --representation multinomial.
     #[arg(long)]
     pub multinomial: bool,
     /// QPBO-I rounds on the residue (qpbo method).
@@ -69,6 +102,10 @@ fn parse_method(s: &str) -> Result<Method, String> {
     s.parse()
 }
 
+fn parse_representation(s: &str) -> Result<Representation, String> {
+    s.parse()
+}
+
 fn parse_quadratizer(s: &str) -> Result<Quadratizer, String> {
     s.parse()
 }
@@ -77,7 +114,38 @@ fn parse_quadratizer(s: &str) -> Result<Quadratizer, String> {
 pub fn run(command: MlnCommand) -> anyhow::Result<()> {
     match command {
         MlnCommand::Infer(args) => infer(&args),
+        MlnCommand::Generate(args) => generate(&args),
     }
+}
+
+fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
+    use mln::generate::{friends_smokers, image_denoising, FriendsSmokersOptions};
+    let g = match args.problem {
+        Problem::Fs | Problem::NegFs => friends_smokers(
+            &FriendsSmokersOptions {
+                persons: args.size.unwrap_or(200),
+                negate: matches!(args.problem, Problem::NegFs),
+                ..FriendsSmokersOptions::default()
+            },
+            args.seed,
+        ),
+        Problem::Id => image_denoising(args.size.unwrap_or(90), args.seed),
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    for (name, text) in [
+        ("prog.mln", &g.program),
+        ("evidence.db", &g.evidence),
+        ("query.db", &g.query),
+    ] {
+        let path = args.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    println!(
+        "wrote prog.mln, evidence.db and query.db to {}",
+        args.out.display()
+    );
+    Ok(())
 }
 
 fn infer(args: &InferArgs) -> anyhow::Result<()> {
@@ -103,16 +171,18 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
         &evidence,
         &evidence_label,
         &query,
-        &GroundOptions {
-            multinomial: args.multinomial,
-            ..GroundOptions::default()
-        },
+        &GroundOptions::default(),
     )
     .context("grounding")?;
     let ground_s = t1.elapsed().as_secs_f64();
     let mut options = InferOptions {
         method: args.method,
         quadratizer: args.quadratize,
+        representation: if args.multinomial {
+            Representation::Multinomial
+        } else {
+            args.representation
+        },
         probe: args.probe,
         improve_rounds: args.improve,
         ..InferOptions::default()
@@ -148,6 +218,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
             "program": args.program.display().to_string(),
             "method": args.method.name(),
             "quadratize": args.quadratize.name(),
+            "representation": if args.multinomial { "multinomial" } else { args.representation.name() },
             "seed": args.seed,
             "cost": r.scores.cost,
             "violated_weight": r.scores.violated_weight,
