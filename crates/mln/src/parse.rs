@@ -853,12 +853,14 @@ fn parse_primary(
     }
 }
 
-/// Parses evidence text: ground atoms `P(A,B)` or `!P(A,B)`, one per line.
-pub fn parse_evidence(
+/// Runs `per_line` on a cursor over each non-empty statement line of an evidence or query
+/// file (comments removed), collecting the results.
+fn parse_atom_lines<T>(
     text: &str,
     path: &str,
     program: &Program,
-) -> Result<Vec<EvidenceAtom>, ParseError> {
+    mut per_line: impl FnMut(&mut Cursor<'_>, &PredIndex) -> Result<T, ParseError>,
+) -> Result<Vec<T>, ParseError> {
     let text = &*blank_block_comments(text);
     let idx: PredIndex = program
         .predicates
@@ -868,41 +870,59 @@ pub fn parse_evidence(
         .collect();
     let mut out = Vec::new();
     for (i, raw) in text.lines().enumerate() {
-        let line_no = i + 1;
         let line = strip_comment(raw);
         if line.trim().is_empty() {
             continue;
         }
-        let toks = lex(line, path, line_no)?;
+        let toks = lex(line, path, i + 1)?;
         let mut cur = Cursor {
             toks: &toks,
             pos: 0,
             path,
-            line: line_no,
+            line: i + 1,
             line_len: line.chars().count(),
         };
+        out.push(per_line(&mut cur, &idx)?);
+    }
+    Ok(out)
+}
+
+/// Parses one atom that must fill the rest of the line; returns it with its column.
+fn parse_whole_line_atom(
+    cur: &mut Cursor<'_>,
+    program: &Program,
+    idx: &PredIndex,
+    what: &str,
+) -> Result<(Atom, usize), ParseError> {
+    let col = cur.col();
+    let Formula::Atom(atom) = parse_primary(cur, program, idx)? else {
+        return Err(ParseError::Syntax {
+            path: cur.path.to_owned(),
+            line: cur.line,
+            col,
+            message: format!("expected a {what} like P(A, B)"),
+        });
+    };
+    if cur.peek().is_some() {
+        return Err(cur.error(format!("unexpected {} after the {what}", cur.found())));
+    }
+    Ok((atom, col))
+}
+
+/// Parses evidence text: ground atoms `P(A,B)` or `!P(A,B)`, one per line.
+pub fn parse_evidence(
+    text: &str,
+    path: &str,
+    program: &Program,
+) -> Result<Vec<EvidenceAtom>, ParseError> {
+    parse_atom_lines(text, path, program, |cur, idx| {
         let value = if cur.peek() == Some(&Tok::Not) {
             cur.pos += 1;
             false
         } else {
             true
         };
-        let atom_col = cur.col();
-        let f = parse_primary(&mut cur, program, &idx)?;
-        let Formula::Atom(atom) = f else {
-            return Err(ParseError::Syntax {
-                path: path.to_owned(),
-                line: line_no,
-                col: atom_col,
-                message: "expected a ground atom like P(A, B)".into(),
-            });
-        };
-        if cur.peek().is_some() {
-            return Err(cur.error(format!(
-                "unexpected {} after the evidence atom",
-                cur.found()
-            )));
-        }
+        let (atom, col) = parse_whole_line_atom(cur, program, idx, "ground evidence atom")?;
         let mut args = Vec::with_capacity(atom.args.len());
         for t in atom.args {
             match t {
@@ -910,8 +930,8 @@ pub fn parse_evidence(
                 Term::Var(v) => {
                     return Err(ParseError::Syntax {
                         path: path.to_owned(),
-                        line: line_no,
-                        col: atom_col,
+                        line: cur.line,
+                        col,
                         message: format!(
                             "evidence must be ground, but `{v}` is a variable (constants start with an upper-case letter or a digit, or are quoted)"
                         ),
@@ -919,55 +939,20 @@ pub fn parse_evidence(
                 }
             }
         }
-        out.push(EvidenceAtom {
+        Ok(EvidenceAtom {
             predicate: atom.predicate,
             args,
             value,
-            line: line_no,
-        });
-    }
-    Ok(out)
+            line: cur.line,
+        })
+    })
 }
 
 /// Parses query text: one atom per line, variables allowed.
 pub fn parse_query(text: &str, path: &str, program: &Program) -> Result<Vec<Atom>, ParseError> {
-    let text = &*blank_block_comments(text);
-    let idx: PredIndex = program
-        .predicates
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (p.name.clone(), i))
-        .collect();
-    let mut out = Vec::new();
-    for (i, raw) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let line = strip_comment(raw);
-        if line.trim().is_empty() {
-            continue;
-        }
-        let toks = lex(line, path, line_no)?;
-        let mut cur = Cursor {
-            toks: &toks,
-            pos: 0,
-            path,
-            line: line_no,
-            line_len: line.chars().count(),
-        };
-        let col = cur.col();
-        let Formula::Atom(atom) = parse_primary(&mut cur, program, &idx)? else {
-            return Err(ParseError::Syntax {
-                path: path.to_owned(),
-                line: line_no,
-                col,
-                message: "expected a query atom like P(x, y)".into(),
-            });
-        };
-        if cur.peek().is_some() {
-            return Err(cur.error(format!("unexpected {} after the query atom", cur.found())));
-        }
-        out.push(atom);
-    }
-    Ok(out)
+    parse_atom_lines(text, path, program, |cur, idx| {
+        parse_whole_line_atom(cur, program, idx, "query atom").map(|(atom, _)| atom)
+    })
 }
 
 /// Parses a `-q P1,P2` predicate list into one all-variable query atom per predicate.
