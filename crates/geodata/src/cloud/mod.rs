@@ -510,6 +510,40 @@ impl<'a> Sink<'a> {
     }
 }
 
+/// Reads the ASCII line of point `point` (of `expected`) into `line` (cleared first): a
+/// line that is missing or lacks its line end is a cut file; non-UTF-8 text is a bad value
+/// of `field`.
+pub(crate) fn read_point_line(
+    r: &mut impl std::io::BufRead,
+    line: &mut String,
+    path: &Path,
+    line_no: usize,
+    field: &str,
+    point: usize,
+    expected: usize,
+) -> Result<()> {
+    line.clear();
+    let n = r.read_line(line).map_err(|e| match e.kind() {
+        std::io::ErrorKind::InvalidData => CloudError::BadValue {
+            path: path_buf(path),
+            at: Location::Line(line_no),
+            field: field.to_owned(),
+            value: "non-UTF-8 text".into(),
+        },
+        _ => io_err(path)(e),
+    })?;
+    // A point line without its line end is a cut file (the last number may be partial).
+    if n == 0 || !line.ends_with('\n') {
+        return Err(CloudError::Truncated {
+            path: path_buf(path),
+            at: Location::Line(line_no),
+            point,
+            expected,
+        });
+    }
+    Ok(())
+}
+
 pub(crate) fn io_err(path: &Path) -> impl Fn(std::io::Error) -> CloudError + '_ {
     move |source| CloudError::Io {
         path: path.to_path_buf(),

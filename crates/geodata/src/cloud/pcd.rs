@@ -9,7 +9,10 @@
 //! ascii and binary bodies are streamed.
 
 use super::ply::{assign, Role, Scalar};
-use super::{io_err, path_buf, read_full, CloudError, Encoding, Location, PointCloud, PointRecord};
+use super::{
+    io_err, path_buf, read_full, read_point_line, CloudError, Encoding, Location, PointCloud,
+    PointRecord,
+};
 use super::{Columns, Precision, ReadOptions, ReadReport, Result, Sink};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
@@ -339,26 +342,8 @@ pub fn read_pcd(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
         let mut line_no = h.lines;
         let mut i = 0usize;
         while i < h.points {
-            line.clear();
             line_no += 1;
-            let n = r.read_line(&mut line).map_err(|e| match e.kind() {
-                std::io::ErrorKind::InvalidData => CloudError::BadValue {
-                    path: path_buf(path),
-                    at: Location::Line(line_no),
-                    field: "point".into(),
-                    value: "non-UTF-8 text".into(),
-                },
-                _ => io_err(path)(e),
-            })?;
-            // A point line without its line end is a cut file (the last number may be partial).
-            if n == 0 || !line.ends_with('\n') {
-                return Err(CloudError::Truncated {
-                    path: path_buf(path),
-                    at: Location::Line(line_no),
-                    point: i,
-                    expected: h.points,
-                });
-            }
+            read_point_line(&mut r, &mut line, path, line_no, "point", i, h.points)?;
             let at = Location::Line(line_no);
             let mut tokens = line.split_whitespace();
             let mut rec = PointRecord::default();

@@ -7,7 +7,10 @@
 //! after `vertex` are read through and discarded, so the byte offsets stay right.
 //! Reference: Greg Turk, "The PLY Polygon File Format" (1994).
 
-use super::{io_err, path_buf, read_full, CloudError, Encoding, Location, PointCloud, PointRecord};
+use super::{
+    io_err, path_buf, read_full, read_point_line, CloudError, Encoding, Location, PointCloud,
+    PointRecord,
+};
 use super::{Columns, Precision, ReadOptions, ReadReport, Result, Sink};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
@@ -589,26 +592,16 @@ fn read_ascii_body(
     for element in &header.elements {
         let is_vertex = element.name == "vertex";
         for i in 0..element.count {
-            line.clear();
             line_no += 1;
-            let n = r.read_line(&mut line).map_err(|e| match e.kind() {
-                std::io::ErrorKind::InvalidData => CloudError::BadValue {
-                    path: path_buf(path),
-                    at: Location::Line(line_no),
-                    field: element.name.clone(),
-                    value: "non-UTF-8 text".into(),
-                },
-                _ => io_err(path)(e),
-            })?;
-            // A point line without its line end is a cut file (the last number may be partial).
-            if n == 0 || !line.ends_with('\n') {
-                return Err(CloudError::Truncated {
-                    path: path_buf(path),
-                    at: Location::Line(line_no),
-                    point: i,
-                    expected: element.count,
-                });
-            }
+            read_point_line(
+                &mut *r,
+                &mut line,
+                path,
+                line_no,
+                &element.name,
+                i,
+                element.count,
+            )?;
             let at = Location::Line(line_no);
             let mut tokens = line.split_whitespace();
             let mut next = |field: &str, ty: Scalar| -> Result<f64> {
