@@ -452,6 +452,23 @@ impl<'a> Cursor<'a> {
     }
 }
 
+/// After a list item: `,` continues the list (true), `closer` ends it (false), anything else
+/// is an error naming both.
+fn list_continues(cur: &mut Cursor<'_>, closer: &Tok) -> Result<bool, ParseError> {
+    match cur.bump() {
+        Some(Tok::Comma) => Ok(true),
+        Some(t) if t == closer => Ok(false),
+        _ => {
+            cur.pos -= 1;
+            Err(cur.error(format!(
+                "expected `,` or {}, found {}",
+                closer.describe(),
+                cur.found()
+            )))
+        }
+    }
+}
+
 fn is_variable(name: &str) -> bool {
     name.starts_with(|c: char| c.is_lowercase())
 }
@@ -511,15 +528,8 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
                             )));
                         }
                     }
-                    match cur.bump() {
-                        Some(Tok::Comma) => {}
-                        Some(Tok::RParen) => break,
-                        _ => {
-                            cur.pos -= 1;
-                            return Err(
-                                cur.error(format!("expected `,` or `)`, found {}", cur.found()))
-                            );
-                        }
+                    if !list_continues(&mut cur, &Tok::RParen)? {
+                        break;
                     }
                 }
                 if cur.peek().is_some() {
@@ -641,13 +651,8 @@ fn parse_domain(cur: &mut Cursor<'_>) -> Result<Vec<String>, ParseError> {
                 )));
             }
         }
-        match cur.bump() {
-            Some(Tok::Comma) => {}
-            Some(Tok::RBrace) => break,
-            _ => {
-                cur.pos -= 1;
-                return Err(cur.error(format!("expected `,` or `}}`, found {}", cur.found())));
-            }
+        if !list_continues(cur, &Tok::RBrace)? {
+            break;
         }
     }
     if cur.peek().is_some() {
@@ -795,15 +800,8 @@ fn parse_primary(
             if cur.peek() != Some(&Tok::RParen) {
                 loop {
                     args.push(parse_term(cur)?);
-                    match cur.bump() {
-                        Some(Tok::Comma) => {}
-                        Some(Tok::RParen) => break,
-                        _ => {
-                            cur.pos -= 1;
-                            return Err(
-                                cur.error(format!("expected `,` or `)`, found {}", cur.found()))
-                            );
-                        }
+                    if !list_continues(cur, &Tok::RParen)? {
+                        break;
                     }
                 }
             } else {
