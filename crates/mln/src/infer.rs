@@ -2,7 +2,7 @@
 //! MaxWalkSAT on ground formulas or on monomials.
 
 use crate::ground::{GroundProblem, Scores};
-use crate::walksat::{max_walk_sat, monomial_factors, Factor, WalkSatOptions};
+use crate::walksat::{max_walk_sat, max_walk_sat_frozen, monomial_factors, Factor, WalkSatOptions};
 use pbo::qssr::{solve, QssrOptions};
 use pbo::quadratize::Quadratizer;
 use std::time::Instant;
@@ -106,6 +106,10 @@ pub struct InferOptions {
     pub improve_rounds: usize,
     /// MaxWalkSAT settings (also the seed of every random step).
     pub walksat: WalkSatOptions,
+    /// QPBO method: flips of a MaxWalkSAT polish on the ground formulas, started from the
+    /// QSSR answer with persistent atoms frozen (0: no polish). The polish never worsens it;
+    /// on LP 200 000 flips lower the cost by 0.2 % for 1.4 s more.
+    pub polish_flips: usize,
 }
 
 impl Default for InferOptions {
@@ -117,6 +121,7 @@ impl Default for InferOptions {
             probe: false,
             improve_rounds: 50,
             walksat: WalkSatOptions::default(),
+            polish_flips: 0,
         }
     }
 }
@@ -136,6 +141,18 @@ pub struct MapResult {
     pub seconds_quadratize: f64,
     /// Seconds solving (QPBO, probing, improve or WalkSAT).
     pub seconds_solve: f64,
+}
+
+/// The ground formulas as WalkSAT factors.
+fn formula_factors(problem: &GroundProblem) -> Vec<Factor> {
+    problem
+        .factors
+        .iter()
+        .map(|f| Factor {
+            weight: f.weight,
+            clauses: f.clauses.clone(),
+        })
+        .collect()
 }
 
 /// Runs MAP inference on a ground problem.
@@ -174,29 +191,36 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
                     r
                 }
             };
+            let mut assignment = r.assignment;
+            if options.polish_flips > 0 && r.labelled_fraction < 1.0 {
+                let frozen: Vec<bool> = r.persistent.iter().map(Option::is_some).collect();
+                let (x, _) = max_walk_sat_frozen(
+                    &formula_factors(problem),
+                    n,
+                    Some(&assignment),
+                    Some(&frozen),
+                    &WalkSatOptions {
+                        max_flips: options.polish_flips,
+                        ..options.walksat.clone()
+                    },
+                );
+                if problem.cost.evaluate(&x) < problem.cost.evaluate(&assignment) {
+                    assignment = x;
+                }
+            }
             (
-                r.assignment,
+                assignment,
                 Some(r.lower_bound),
                 r.labelled_fraction,
                 r.seconds.quadratize,
             )
         }
-        Method::MaxWalkSat => {
-            let factors: Vec<Factor> = problem
-                .factors
-                .iter()
-                .map(|f| Factor {
-                    weight: f.weight,
-                    clauses: f.clauses.clone(),
-                })
-                .collect();
-            (
-                max_walk_sat(&factors, n, None, &options.walksat).0,
-                None,
-                0.0,
-                0.0,
-            )
-        }
+        Method::MaxWalkSat => (
+            max_walk_sat(&formula_factors(problem), n, None, &options.walksat).0,
+            None,
+            0.0,
+            0.0,
+        ),
         Method::MaxWalkSatMonomials => {
             let factors = monomial_factors(&problem.cost);
             (

@@ -70,11 +70,23 @@ pub fn cost(factors: &[Factor], x: &[bool]) -> f64 {
         .sum()
 }
 
-/// Runs MaxWalkSAT from `start` (or all-false) and returns the best assignment and its cost.
+/// Runs MaxWalkSAT from `start` (or a random assignment) and returns the best assignment
+/// and its cost.
 pub fn max_walk_sat(
     factors: &[Factor],
     num_vars: usize,
     start: Option<&[bool]>,
+    options: &WalkSatOptions,
+) -> (Vec<bool>, f64) {
+    max_walk_sat_frozen(factors, num_vars, start, None, options)
+}
+
+/// [`max_walk_sat`] where variables with `frozen[v]` never flip (e.g. persistencies).
+pub fn max_walk_sat_frozen(
+    factors: &[Factor],
+    num_vars: usize,
+    start: Option<&[bool]>,
+    frozen: Option<&[bool]>,
     options: &WalkSatOptions,
 ) -> (Vec<bool>, f64) {
     let chains = options.chains.max(1);
@@ -85,7 +97,7 @@ pub fn max_walk_sat(
                 .seed
                 .wrapping_mul(0x9E37_79B9_7F4A_7C15)
                 .wrapping_add(c as u64);
-            Chain::new(factors, num_vars, start, seed).run(options)
+            Chain::new(factors, num_vars, start, seed).run(options, frozen)
         })
         .collect();
     let mut best: Option<(Vec<bool>, f64)> = None;
@@ -253,7 +265,8 @@ impl<'a> Chain<'a> {
         self.x[v] = !self.x[v];
     }
 
-    fn run(mut self, options: &WalkSatOptions) -> (Vec<bool>, f64) {
+    fn run(mut self, options: &WalkSatOptions, frozen: Option<&[bool]>) -> (Vec<bool>, f64) {
+        let is_frozen = |v: usize| frozen.is_some_and(|f| f.get(v).copied().unwrap_or(false));
         let mut best = (self.x.clone(), self.cost);
         for _ in 0..options.max_flips {
             if self.bad.is_empty() {
@@ -269,8 +282,12 @@ impl<'a> Chain<'a> {
                     .collect();
                 v.sort_unstable();
                 v.dedup();
+                v.retain(|&v| !is_frozen(v));
                 v
             };
+            if vars.is_empty() {
+                continue; // a bad factor over frozen variables only
+            }
             let v = if self.rng.gen_bool(options.noise) {
                 vars[self.rng.gen_range(0..vars.len())]
             } else {
@@ -348,6 +365,32 @@ mod tests {
             let x: Vec<bool> = (0..3).map(|i| m >> i & 1 == 1).collect();
             assert_eq!(cost(&fs, &x) + f.constant(), f.evaluate(&x));
         }
+    }
+
+    #[test]
+    fn frozen_variables_never_flip_and_start_is_never_worsened() {
+        let mut f = Polynomial::new(30);
+        for i in 0..29u32 {
+            f.add_term(
+                if i % 4 == 0 { -2.0 } else { 1.0 },
+                &[Literal::pos(i), Literal::pos(i + 1)],
+            );
+            f.add_term(-0.5, &[Literal::pos(i)]);
+        }
+        let fs = monomial_factors(&f);
+        let start: Vec<bool> = (0..30).map(|i| i % 3 == 0).collect();
+        let frozen: Vec<bool> = (0..30).map(|i| i % 5 == 0).collect();
+        let o = WalkSatOptions {
+            max_flips: 3_000,
+            chains: 2,
+            noise: 0.5,
+            seed: 3,
+        };
+        let (x, c) = max_walk_sat_frozen(&fs, 30, Some(&start), Some(&frozen), &o);
+        for i in (0..30).step_by(5) {
+            assert_eq!(x[i], start[i], "frozen variable {i} flipped");
+        }
+        assert!(c <= cost(&fs, &start) + 1e-12);
     }
 
     #[test]

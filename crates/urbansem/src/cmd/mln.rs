@@ -18,6 +18,32 @@ pub enum MlnCommand {
     Infer(InferArgs),
     /// Generate a synthetic problem of the thesis (prog.mln, evidence.db, query.db).
     Generate(GenerateArgs),
+    /// Score another engine's MAP answer (its true query atoms, one per line) with our evaluator.
+    Score(ScoreArgs),
+}
+
+/// Options of `urbansem mln score`.
+#[derive(Args)]
+pub struct ScoreArgs {
+    /// The MLN program.
+    #[arg(short = 'i', long = "input")]
+    pub program: PathBuf,
+    /// Evidence files (repeat or separate with commas).
+    #[arg(short = 'e', long = "evidence", value_delimiter = ',')]
+    pub evidence: Vec<PathBuf>,
+    /// Query predicates, comma-separated.
+    #[arg(short = 'q', long = "queries", conflicts_with = "query_file")]
+    pub queries: Option<String>,
+    /// A query file.
+    #[arg(long)]
+    pub query_file: Option<PathBuf>,
+    /// The answer: ground atoms that are true (`P(A,B)`; `!P(A,B)` lines are false); every
+    /// other unknown atom is false.
+    #[arg(long)]
+    pub answer: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Which synthetic problem to generate.
@@ -84,6 +110,9 @@ pub struct InferArgs {
     /// QPBO-I rounds on the residue (qpbo method).
     #[arg(long, default_value_t = 50)]
     pub improve: usize,
+    /// MaxWalkSAT flips polishing the qpbo answer (persistent atoms frozen; 0: none).
+    #[arg(long, default_value_t = 0, value_name = "FLIPS")]
+    pub polish: usize,
     /// Flips per MaxWalkSAT chain.
     #[arg(long, default_value_t = 1_000_000)]
     pub flips: usize,
@@ -115,7 +144,97 @@ pub fn run(command: MlnCommand) -> anyhow::Result<()> {
     match command {
         MlnCommand::Infer(args) => infer(&args),
         MlnCommand::Generate(args) => generate(&args),
+        MlnCommand::Score(args) => score(&args),
     }
+}
+
+/// Reads program, evidence and query and grounds them (shared by infer and score).
+fn load_and_ground(
+    program_path: &std::path::Path,
+    evidence_paths: &[PathBuf],
+    queries: Option<&str>,
+    query_file: Option<&std::path::Path>,
+) -> anyhow::Result<(
+    mln::parse::Program,
+    mln::ground::GroundProblem,
+    Vec<mln::parse::Atom>,
+    f64,
+    f64,
+)> {
+    let t0 = Instant::now();
+    let program = read_program(program_path).context("reading the program")?;
+    let mut evidence = Vec::new();
+    for e in evidence_paths {
+        evidence.extend(read_evidence(e, &program).context("reading evidence")?);
+    }
+    let query = match (queries, query_file) {
+        (Some(list), _) => parse_query_predicates(list, &program)?,
+        (None, Some(f)) => read_query(f, &program).context("reading the query file")?,
+        (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
+    };
+    let parse_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let evidence_label = evidence_paths
+        .first()
+        .map_or_else(|| "(no evidence)".to_owned(), |p| p.display().to_string());
+    let problem = ground(
+        &program,
+        &evidence,
+        &evidence_label,
+        &query,
+        &GroundOptions::default(),
+    )
+    .context("grounding")?;
+    Ok((program, problem, query, parse_s, t1.elapsed().as_secs_f64()))
+}
+
+fn score(args: &ScoreArgs) -> anyhow::Result<()> {
+    let (program, problem, _query, _, _) = load_and_ground(
+        &args.program,
+        &args.evidence,
+        args.queries.as_deref(),
+        args.query_file.as_deref(),
+    )?;
+    let answer = read_evidence(&args.answer, &program).context("reading the answer")?;
+    let index: std::collections::HashMap<String, usize> = (0..problem.atoms.len())
+        .map(|i| (problem.atom_name(&program, i), i))
+        .collect();
+    let mut x = vec![false; problem.atoms.len()];
+    let mut not_unknown = 0usize;
+    for a in &answer {
+        let name = format!(
+            "{}({})",
+            program.predicates[a.predicate].name,
+            a.args.join(",")
+        );
+        match index.get(&name) {
+            Some(&i) => x[i] = a.value,
+            None => not_unknown += 1,
+        }
+    }
+    let s = problem.score(&x);
+    if args.json {
+        let out = json!({
+            "answer": args.answer.display().to_string(),
+            "answer_atoms": answer.len(),
+            "answer_atoms_not_unknown": not_unknown,
+            "cost": s.cost,
+            "violated_weight": s.violated_weight,
+            "hard_violations": s.hard_violations,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "{}: {} atoms ({} are not unknown atoms of this ground problem)",
+            args.answer.display(),
+            answer.len(),
+            not_unknown
+        );
+        println!("cost              {}", s.cost);
+        println!("violated weight   {}", s.violated_weight);
+        println!("hard violations   {}", s.hard_violations);
+    }
+    Ok(())
 }
 
 fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
@@ -150,31 +269,12 @@ fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
 
 fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let program = read_program(&args.program).context("reading the program")?;
-    let mut evidence = Vec::new();
-    for e in &args.evidence {
-        evidence.extend(read_evidence(e, &program).context("reading evidence")?);
-    }
-    let query = match (&args.queries, &args.query_file) {
-        (Some(list), _) => parse_query_predicates(list, &program)?,
-        (None, Some(f)) => read_query(f, &program).context("reading the query file")?,
-        (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
-    };
-    let parse_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let evidence_label = args
-        .evidence
-        .first()
-        .map_or_else(|| "(no evidence)".to_owned(), |p| p.display().to_string());
-    let problem = ground(
-        &program,
-        &evidence,
-        &evidence_label,
-        &query,
-        &GroundOptions::default(),
-    )
-    .context("grounding")?;
-    let ground_s = t1.elapsed().as_secs_f64();
+    let (program, problem, query, parse_s, ground_s) = load_and_ground(
+        &args.program,
+        &args.evidence,
+        args.queries.as_deref(),
+        args.query_file.as_deref(),
+    )?;
     let mut options = InferOptions {
         method: args.method,
         quadratizer: args.quadratize,
@@ -185,6 +285,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
         },
         probe: args.probe,
         improve_rounds: args.improve,
+        polish_flips: args.polish,
         ..InferOptions::default()
     };
     options.walksat.seed = args.seed;
