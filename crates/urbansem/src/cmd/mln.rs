@@ -22,10 +22,10 @@ pub enum MlnCommand {
     Score(ScoreArgs),
 }
 
-/// Options of `urbansem mln score`.
+/// The ground problem's inputs, shared by `infer` and `score`.
 #[derive(Args)]
-pub struct ScoreArgs {
-    /// The MLN program.
+pub struct ProblemArgs {
+    /// The MLN program (Alchemy/Tuffy/RockIt syntax).
     #[arg(short = 'i', long = "input")]
     pub program: PathBuf,
     /// Evidence files (repeat or separate with commas).
@@ -34,9 +34,17 @@ pub struct ScoreArgs {
     /// Query predicates, comma-separated.
     #[arg(short = 'q', long = "queries", conflicts_with = "query_file")]
     pub queries: Option<String>,
-    /// A query file.
+    /// A query file: one atom per line (variables allowed; ground atoms list a canopy).
     #[arg(long)]
     pub query_file: Option<PathBuf>,
+}
+
+/// Options of `urbansem mln score`.
+#[derive(Args)]
+pub struct ScoreArgs {
+    /// Program, evidence and query.
+    #[command(flatten)]
+    pub problem: ProblemArgs,
     /// The answer: ground atoms that are true (`P(A,B)`; `!P(A,B)` lines are false); every
     /// other unknown atom is false.
     #[arg(long)]
@@ -77,18 +85,9 @@ pub struct GenerateArgs {
 /// Options of `urbansem mln infer`.
 #[derive(Args)]
 pub struct InferArgs {
-    /// The MLN program (Alchemy/Tuffy/RockIt syntax).
-    #[arg(short = 'i', long = "input")]
-    pub program: PathBuf,
-    /// Evidence files (repeat or separate with commas).
-    #[arg(short = 'e', long = "evidence", value_delimiter = ',')]
-    pub evidence: Vec<PathBuf>,
-    /// Query predicates, comma-separated.
-    #[arg(short = 'q', long = "queries", conflicts_with = "query_file")]
-    pub queries: Option<String>,
-    /// A query file: one atom per line (variables allowed; ground atoms list a canopy).
-    #[arg(long)]
-    pub query_file: Option<PathBuf>,
+    /// Program, evidence and query.
+    #[command(flatten)]
+    pub problem: ProblemArgs,
     /// Write the MAP state of the query atoms here (Alchemy's format: `Atom(A,B) 1`).
     #[arg(short = 'r', long = "result")]
     pub result: Option<PathBuf>,
@@ -150,10 +149,7 @@ pub fn run(command: MlnCommand) -> anyhow::Result<()> {
 
 /// Reads program, evidence and query and grounds them (shared by infer and score).
 fn load_and_ground(
-    program_path: &std::path::Path,
-    evidence_paths: &[PathBuf],
-    queries: Option<&str>,
-    query_file: Option<&std::path::Path>,
+    args: &ProblemArgs,
 ) -> anyhow::Result<(
     mln::parse::Program,
     mln::ground::GroundProblem,
@@ -162,19 +158,20 @@ fn load_and_ground(
     f64,
 )> {
     let t0 = Instant::now();
-    let program = read_program(program_path).context("reading the program")?;
+    let program = read_program(&args.program).context("reading the program")?;
     let mut evidence = Vec::new();
-    for e in evidence_paths {
+    for e in &args.evidence {
         evidence.extend(read_evidence(e, &program).context("reading evidence")?);
     }
-    let query = match (queries, query_file) {
+    let query = match (args.queries.as_deref(), args.query_file.as_deref()) {
         (Some(list), _) => parse_query_predicates(list, &program)?,
         (None, Some(f)) => read_query(f, &program).context("reading the query file")?,
         (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
     };
     let parse_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let evidence_label = evidence_paths
+    let evidence_label = args
+        .evidence
         .first()
         .map_or_else(|| "(no evidence)".to_owned(), |p| p.display().to_string());
     let problem = ground(
@@ -189,12 +186,7 @@ fn load_and_ground(
 }
 
 fn score(args: &ScoreArgs) -> anyhow::Result<()> {
-    let (program, problem, _query, _, _) = load_and_ground(
-        &args.program,
-        &args.evidence,
-        args.queries.as_deref(),
-        args.query_file.as_deref(),
-    )?;
+    let (program, problem, _query, _, _) = load_and_ground(&args.problem)?;
     let answer = read_evidence(&args.answer, &program).context("reading the answer")?;
     let index: std::collections::HashMap<String, usize> = (0..problem.atoms.len())
         .map(|i| (problem.atom_name(&program, i), i))
@@ -269,12 +261,7 @@ fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
 
 fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let (program, problem, query, parse_s, ground_s) = load_and_ground(
-        &args.program,
-        &args.evidence,
-        args.queries.as_deref(),
-        args.query_file.as_deref(),
-    )?;
+    let (program, problem, query, parse_s, ground_s) = load_and_ground(&args.problem)?;
     let mut options = InferOptions {
         method: args.method,
         quadratizer: args.quadratize,
@@ -316,7 +303,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let higher = problem.higher_order_factors();
     if args.json {
         let out = json!({
-            "program": args.program.display().to_string(),
+            "program": args.problem.program.display().to_string(),
             "method": args.method.name(),
             "quadratize": args.quadratize.name(),
             "representation": if args.multinomial { "multinomial" } else { args.representation.name() },
@@ -342,7 +329,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     } else {
         println!(
             "{}: {} ground atoms, {} ground formulas ({} higher-order)",
-            args.program.display(),
+            args.problem.program.display(),
             problem.atoms.len(),
             problem.factors.len(),
             higher
