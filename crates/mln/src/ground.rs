@@ -445,7 +445,7 @@ pub fn ground(
         open,
         canopy,
         domains,
-        const_ids: consts.ids.clone(),
+        const_ids: std::mem::take(&mut consts.ids),
     };
 
     let soft_total: f64 = program

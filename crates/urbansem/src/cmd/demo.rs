@@ -161,6 +161,7 @@ fn stage_city(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
         svg.circle(i.position, 2.0, "fill:#3050c0");
     }
     svg.scale_bar(100.0);
+    let city_svg = svg.finish();
     let street_m: f64 = map.streets.segments.iter().map(|s| s.length_m).sum();
     let (lat0, lon0) = map.frame.origin();
     Ok(StageOutput {
@@ -190,8 +191,8 @@ fn stage_city(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
             map.streets.neighbour_pairs.len(),
             generate_s
         ),
-        figures: vec![svg.finish()],
-        files: vec![("city.svg", svg.finish().into_bytes())],
+        files: vec![("city.svg", city_svg.clone().into_bytes())],
+        figures: vec![city_svg],
     })
 }
 
