@@ -510,6 +510,23 @@ impl<'a> Sink<'a> {
     }
 }
 
+/// Writes `x y z` as ASCII text at the cloud's stored precision (f32 values print as f32,
+/// so that reading them back gives the same numbers).
+pub(crate) fn write_ascii_position(
+    w: &mut impl std::io::Write,
+    precision: Precision,
+    position: [f64; 3],
+) -> std::io::Result<()> {
+    match precision {
+        Precision::F32 => write!(
+            w,
+            "{} {} {}",
+            position[0] as f32, position[1] as f32, position[2] as f32
+        ),
+        Precision::F64 => write!(w, "{} {} {}", position[0], position[1], position[2]),
+    }
+}
+
 /// Reads the ASCII line of point `point` (of `expected`) into `line` (cleared first): a
 /// line that is missing or lacks its line end is a cut file; non-UTF-8 text is a bad value
 /// of `field`.

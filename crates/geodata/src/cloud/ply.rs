@@ -11,7 +11,7 @@ use super::{
     io_err, path_buf, read_full, read_point_line, CloudError, Encoding, Location, PointCloud,
     PointRecord,
 };
-use super::{Columns, Precision, ReadOptions, ReadReport, Result, Sink};
+use super::{write_ascii_position, Columns, Precision, ReadOptions, ReadReport, Result, Sink};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 use std::path::Path;
@@ -722,16 +722,7 @@ fn write_ply_to(w: &mut impl Write, cloud: &PointCloud, encoding: Encoding) -> s
     for i in 0..cloud.len() {
         let Some(p) = cloud.get(i) else { break };
         if encoding == Encoding::Ascii {
-            match cloud.precision {
-                Precision::F32 => write!(
-                    w,
-                    "{} {} {}",
-                    p.position[0] as f32, p.position[1] as f32, p.position[2] as f32
-                )?,
-                Precision::F64 => {
-                    write!(w, "{} {} {}", p.position[0], p.position[1], p.position[2])?
-                }
-            }
+            write_ascii_position(w, cloud.precision, p.position)?;
             if c.intensity {
                 write!(w, " {}", p.intensity)?;
             }
