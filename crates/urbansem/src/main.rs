@@ -34,6 +34,10 @@ enum Command {
     /// Simulation: procedural cities and labelled scan datasets.
     #[command(subcommand)]
     Sim(cmd::sim::SimCommand),
+    /// Street geometry: offset and width per OSM street segment.
+    Streets(cmd::streets::StreetsArgs),
+    /// Global localization of a 3-D scan on OSM building outlines.
+    Localize(cmd::localize::LocalizeArgs),
     /// Benchmarks against the peer implementations named in the issues.
     #[command(subcommand)]
     Bench(cmd::bench::BenchCommand),
@@ -48,6 +52,8 @@ fn main() -> ExitCode {
         Command::Osm(c) => cmd::osm::run(c),
         Command::Cloud(c) => cmd::cloud::run(c),
         Command::Sim(c) => cmd::sim::run(c),
+        Command::Streets(a) => cmd::streets::run(a),
+        Command::Localize(a) => cmd::localize::run(a),
         Command::Bench(c) => cmd::bench::run(c),
     };
     match result {

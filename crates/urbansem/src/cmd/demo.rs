@@ -27,14 +27,19 @@ pub struct DemoArgs {
 }
 
 /// One stage's contribution: its summary entry and its report section.
-struct StageOutput {
-    key: &'static str,
-    summary: Value,
-    title: &'static str,
-    text_html: String,
-    figures: Vec<String>,
+pub(crate) struct StageOutput {
+    /// Key of the stage's entry in `summary.json`.
+    pub(crate) key: &'static str,
+    /// The stage's entry in `summary.json` (an object; `seconds` is added).
+    pub(crate) summary: Value,
+    /// Section title in `index.html`.
+    pub(crate) title: &'static str,
+    /// Section text (HTML).
+    pub(crate) text_html: String,
+    /// Inline figures (HTML: `<svg>` or `<img>`).
+    pub(crate) figures: Vec<String>,
     /// Figures also written as files into the output folder: (file name, bytes).
-    files: Vec<(&'static str, Vec<u8>)>,
+    pub(crate) files: Vec<(&'static str, Vec<u8>)>,
 }
 
 type Stage = fn(&DemoArgs) -> anyhow::Result<StageOutput>;

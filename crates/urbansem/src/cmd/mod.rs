@@ -3,7 +3,9 @@
 pub mod bench;
 pub mod cloud;
 pub mod demo;
+pub mod localize;
 pub mod mln;
 pub mod osm;
 pub mod pbo;
 pub mod sim;
+pub mod streets;
