@@ -11,6 +11,7 @@
 //! - [`cloud`]: the column-wise [`cloud::PointCloud`] and its PLY/PCD/LAS/LAZ/KITTI IO.
 //! - [`mercator`]: scaled-Mercator georeferencing used by the KITTI and MCD datasets.
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
+//! - [`sim`]: the urban scan simulator (scene from a map, ray-cast scanner, datasets with truth).
 
 pub mod city;
 pub mod classes;
@@ -19,3 +20,4 @@ pub mod datasets;
 pub mod mercator;
 pub mod osm;
 pub mod projection;
+pub mod sim;

@@ -1,0 +1,1398 @@
+//! The simulated world built from an OSM map: buildings, ground, clutter, and ray casting.
+//!
+//! - **Buildings**: every outline extruded to its height (`height` tag, else
+//!   `building:levels` × 3 m + 1 m, else seeded 8–25 m). With the *map-error model* on,
+//!   the world's buildings differ from the map as OSM outlines differ from reality: each
+//!   is shifted (normal, σ per axis, clipped) and rotated about its centroid, some map
+//!   buildings do not exist in the world, and the world has extra buildings the map lacks.
+//! - **Ground**: the paved driving area at z = 0 (capsules of radius wₛ/2 about each true
+//!   centre line, see [`super::truth`]); everything else 0.15 m higher behind a kerb:
+//!   sidewalks (capsules of radius wₛ/2 + sidewalk width, footways and paths, pedestrian
+//!   areas, and a paved strip along every facade) and grass elsewhere.
+//! - **Clutter** a map does not have: parked cars along the kerbs, street trees and trees
+//!   on grass, poles, bicycles, pedestrians, and fenced construction sites.
+//!
+//! Object ids: building `i` of [`Scene::buildings`] has id `i + 1`; the driving area of
+//! segment `s` has [`Scene::street_object`]`(s)`, its sidewalks
+//! [`Scene::sidewalk_object`]`(s)`; clutter objects follow; grass and plazas have id 0.
+
+use super::raycast::{Caster, Shape};
+use super::truth::{offset_centre_line, street_truth, StreetTruth, TruthOptions};
+use super::{mix64, normal, purpose, stream_rng, SimError};
+use crate::classes::Class;
+use crate::osm::geometry::{point_in_polygon, point_in_ring, point_segment_distance, signed_area};
+use crate::osm::model::StreetSegment;
+use crate::osm::OsmMap;
+use crate::projection::LocalFrame;
+use rand::Rng;
+use rstar::primitives::{GeomWithData, Rectangle};
+use rstar::{RTree, AABB};
+use serde::Serialize;
+
+/// Options of the OSM map-error model (world buildings vs map outlines).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MapErrorOptions {
+    /// Standard deviation of each building's shift per axis, metres.
+    pub shift_sigma_m: f64,
+    /// Largest shift per axis, metres.
+    pub max_shift_m: f64,
+    /// Standard deviation of each building's rotation about its centroid, radians.
+    pub rotation_sigma_rad: f64,
+    /// Probability that a map building does not exist in the world.
+    pub removed_probability: f64,
+    /// World buildings missing from the map, per km² of map.
+    pub extra_per_km2: f64,
+}
+
+impl MapErrorOptions {
+    /// No map error: the world's buildings are the map's.
+    pub fn none() -> Self {
+        MapErrorOptions {
+            shift_sigma_m: 0.0,
+            max_shift_m: 0.0,
+            rotation_sigma_rad: 0.0,
+            removed_probability: 0.0,
+            extra_per_km2: 0.0,
+        }
+    }
+
+    /// Errors of the size reported for OSM outlines: σ = 1 m shifts (≤ 3 m), σ = 1.5°
+    /// rotations, 3 % of map buildings missing from the world, 15 extra buildings per km².
+    pub fn osm_like() -> Self {
+        MapErrorOptions {
+            shift_sigma_m: 1.0,
+            max_shift_m: 3.0,
+            rotation_sigma_rad: 1.5_f64.to_radians(),
+            removed_probability: 0.03,
+            extra_per_km2: 15.0,
+        }
+    }
+}
+
+/// How much clutter the world has.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClutterOptions {
+    /// Probability that a 6 m parking slot along a kerb holds a car.
+    pub car_probability: f64,
+    /// Probability of a street tree per 13 m of sidewalk and side.
+    pub tree_probability: f64,
+    /// Distance between poles along a street, metres.
+    pub pole_spacing_m: f64,
+    /// Probability of a bicycle per 20 m of sidewalk and side.
+    pub bicycle_probability: f64,
+    /// Probability of a pedestrian per 15 m of sidewalk and side.
+    pub pedestrian_probability: f64,
+    /// Probability that a segment has a fenced construction site on a sidewalk.
+    pub construction_probability: f64,
+    /// Probability of a tree on grass per 20 m of street and side.
+    pub grass_tree_probability: f64,
+}
+
+impl Default for ClutterOptions {
+    fn default() -> Self {
+        ClutterOptions {
+            car_probability: 0.35,
+            tree_probability: 0.45,
+            pole_spacing_m: 30.0,
+            bicycle_probability: 0.25,
+            pedestrian_probability: 0.3,
+            construction_probability: 0.04,
+            grass_tree_probability: 0.3,
+        }
+    }
+}
+
+/// Options of the simulated world.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneOptions {
+    /// True street geometry model.
+    pub truth: TruthOptions,
+    /// OSM map-error model (off by default).
+    pub map_error: MapErrorOptions,
+    /// Clutter.
+    pub clutter: ClutterOptions,
+    /// Kerb height: everything off the driving area is this much higher, metres.
+    pub kerb_m: f64,
+    /// Height range of buildings without `height` or `building:levels`, metres.
+    pub building_height_range_m: [f64; 2],
+    /// Width of the paved strip along every facade, metres.
+    pub facade_path_m: f64,
+    /// Grid cell side of the ray caster, metres.
+    pub cell_m: f64,
+}
+
+impl Default for SceneOptions {
+    fn default() -> Self {
+        SceneOptions {
+            truth: TruthOptions::default(),
+            map_error: MapErrorOptions::none(),
+            clutter: ClutterOptions::default(),
+            kerb_m: 0.15,
+            building_height_range_m: [8.0, 25.0],
+            facade_path_m: 1.5,
+            cell_m: 4.0,
+        }
+    }
+}
+
+/// A building of the world.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WorldBuilding {
+    /// The map building it comes from (`None`: an extra building the map lacks).
+    pub map_index: Option<usize>,
+    /// Outer ring, counter-clockwise, metres in the local frame.
+    pub outer: Vec<[f64; 2]>,
+    /// Holes.
+    pub inners: Vec<Vec<[f64; 2]>>,
+    /// Height of the walls, metres.
+    pub height_m: f64,
+    /// Shift applied to the map outline, metres (zero without map error).
+    pub shift_m: [f64; 2],
+    /// Rotation applied about the outline's centroid, radians.
+    pub rotation_rad: f64,
+}
+
+/// A clutter object with its true oriented bounding box.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SceneObject {
+    /// Object id carried by its points.
+    pub id: u32,
+    /// Class of its points.
+    pub class: Class,
+    /// Centre of the bounding box, metres.
+    pub centre: [f64; 3],
+    /// Half extents of the box along its yaw direction, across, and up, metres.
+    pub half_extents: [f64; 3],
+    /// Yaw of the box's first axis, counter-clockwise from east, radians.
+    pub yaw_rad: f64,
+    /// The street segment it was placed along.
+    pub segment: usize,
+}
+
+/// What the map-error model did.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct MapErrorReport {
+    /// Map buildings absent from the world (indices into the map's buildings).
+    pub removed: Vec<usize>,
+    /// World buildings absent from the map.
+    pub extra: usize,
+    /// Mean shift length of the kept buildings, metres.
+    pub mean_shift_m: f64,
+}
+
+/// What a surface point is: class, object id, and a material index for intensity and colour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Surface {
+    /// Class of the point.
+    pub class: Class,
+    /// Object id of the point.
+    pub object: u32,
+}
+
+/// Where a ray met the world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneHit {
+    /// Distance along the ray, metres.
+    pub t: f64,
+    /// Hit point, metres in the local frame.
+    pub point: [f64; 3],
+    /// Unit normal facing the ray.
+    pub normal: [f64; 3],
+    /// What was hit.
+    pub surface: Surface,
+}
+
+/// The ground at a point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GroundCell {
+    /// Street, sidewalk or grass.
+    pub class: Class,
+    /// Object id (street or sidewalk of a segment; 0 for grass and plazas).
+    pub object: u32,
+    /// Ground height, metres.
+    pub z: f64,
+    /// The segment whose driving area or sidewalk this is.
+    pub segment: Option<usize>,
+}
+
+/// A sensor pose: position of the sensor origin and heading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Pose {
+    /// Sensor origin, metres in the local frame (z above the street surface).
+    pub position: [f64; 3],
+    /// Heading of the sensor's x axis, counter-clockwise from east (local frame), radians.
+    pub yaw_rad: f64,
+}
+
+/// A capsule of the ground index: a true centre line with its street and sidewalk radii.
+#[derive(Debug, Clone, Copy)]
+struct Capsule {
+    a: [f64; 2],
+    b: [f64; 2],
+    street_r: f64,
+    sidewalk_r: f64,
+    drivable: bool,
+    segment: usize,
+}
+
+/// A uniform grid over capsules for ground classification.
+#[derive(Debug, Clone)]
+struct GroundIndex {
+    min: [f64; 2],
+    cell_m: f64,
+    nx: usize,
+    ny: usize,
+    cell_start: Vec<u32>,
+    items: Vec<u32>,
+    capsules: Vec<Capsule>,
+}
+
+impl GroundIndex {
+    fn new(capsules: Vec<Capsule>, min: [f64; 2], max: [f64; 2], cell_m: f64) -> Self {
+        let nx = (((max[0] - min[0]) / cell_m).ceil() as usize).max(1);
+        let ny = (((max[1] - min[1]) / cell_m).ceil() as usize).max(1);
+        let range = |c: &Capsule| {
+            let r = c.sidewalk_r;
+            let lo = [c.a[0].min(c.b[0]) - r, c.a[1].min(c.b[1]) - r];
+            let hi = [c.a[0].max(c.b[0]) + r, c.a[1].max(c.b[1]) + r];
+            let f = |v: f64, k: usize, n: usize| {
+                (((v - min[k]) / cell_m).floor().max(0.0) as usize).min(n - 1)
+            };
+            (
+                f(lo[0], 0, nx),
+                f(lo[1], 1, ny),
+                f(hi[0], 0, nx),
+                f(hi[1], 1, ny),
+            )
+        };
+        let mut counts = vec![0u32; nx * ny + 1];
+        for c in &capsules {
+            let (x0, y0, x1, y1) = range(c);
+            for iy in y0..=y1 {
+                for ix in x0..=x1 {
+                    counts[iy * nx + ix + 1] += 1;
+                }
+            }
+        }
+        for c in 0..nx * ny {
+            counts[c + 1] += counts[c];
+        }
+        let mut fill = counts.clone();
+        let mut items = vec![0u32; counts[nx * ny] as usize];
+        for (i, c) in capsules.iter().enumerate() {
+            let (x0, y0, x1, y1) = range(c);
+            for iy in y0..=y1 {
+                for ix in x0..=x1 {
+                    let cell = iy * nx + ix;
+                    items[fill[cell] as usize] = i as u32;
+                    fill[cell] += 1;
+                }
+            }
+        }
+        GroundIndex {
+            min,
+            cell_m,
+            nx,
+            ny,
+            cell_start: counts,
+            items,
+            capsules,
+        }
+    }
+
+    fn near(&self, p: [f64; 2]) -> impl Iterator<Item = &Capsule> {
+        let fx = (p[0] - self.min[0]) / self.cell_m;
+        let fy = (p[1] - self.min[1]) / self.cell_m;
+        let slice: &[u32] = if fx >= 0.0 && fy >= 0.0 {
+            let (ix, iy) = (fx as usize, fy as usize);
+            if ix < self.nx && iy < self.ny {
+                let c = iy * self.nx + ix;
+                &self.items[self.cell_start[c] as usize..self.cell_start[c + 1] as usize]
+            } else {
+                &[]
+            }
+        } else {
+            &[]
+        };
+        slice.iter().map(|&i| &self.capsules[i as usize])
+    }
+}
+
+/// A pedestrian area: its ring and bounding box.
+type Plaza = (Vec<[f64; 2]>, [f64; 2], [f64; 2]);
+
+/// The simulated world.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The map's local frame.
+    pub frame: LocalFrame,
+    /// The map's street segments (the indices every truth refers to).
+    pub segments: Vec<StreetSegment>,
+    /// True street geometry per segment.
+    pub truth: Vec<StreetTruth>,
+    /// Buildings of the world.
+    pub buildings: Vec<WorldBuilding>,
+    /// Clutter objects with their true boxes.
+    pub objects: Vec<SceneObject>,
+    /// What the map-error model changed.
+    pub map_error: MapErrorReport,
+    /// Kerb height, metres.
+    pub kerb_m: f64,
+    /// Extent of the map (min, max), metres.
+    pub bounds: ([f64; 2], [f64; 2]),
+    facade_path_m: f64,
+    plazas: Vec<Plaza>,
+    surfaces: Vec<Surface>,
+    caster: Caster,
+    ground: GroundIndex,
+    building_boxes: RTree<GeomWithData<Rectangle<[f64; 2]>, usize>>,
+}
+
+fn ring_bounds(ring: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
+    ring.iter().fold(
+        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+        |(lo, hi), p| {
+            (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            )
+        },
+    )
+}
+
+fn centroid(ring: &[[f64; 2]]) -> [f64; 2] {
+    let n = ring.len().max(1) as f64;
+    let s = ring
+        .iter()
+        .fold([0.0, 0.0], |s, p| [s[0] + p[0], s[1] + p[1]]);
+    [s[0] / n, s[1] / n]
+}
+
+fn transform_ring(ring: &[[f64; 2]], c: [f64; 2], rot: f64, shift: [f64; 2]) -> Vec<[f64; 2]> {
+    let (s, co) = rot.sin_cos();
+    ring.iter()
+        .map(|p| {
+            let q = [p[0] - c[0], p[1] - c[1]];
+            [
+                c[0] + co * q[0] - s * q[1] + shift[0],
+                c[1] + s * q[0] + co * q[1] + shift[1],
+            ]
+        })
+        .collect()
+}
+
+fn check_probability(name: &'static str, value: f64) -> Result<(), SimError> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(SimError::InvalidOption {
+            name,
+            value,
+            expected: "a probability in [0, 1]",
+        })
+    }
+}
+
+fn check_non_negative(name: &'static str, value: f64) -> Result<(), SimError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(SimError::InvalidOption {
+            name,
+            value,
+            expected: "a finite value ≥ 0",
+        })
+    }
+}
+
+impl SceneOptions {
+    fn validate(&self) -> Result<(), SimError> {
+        let e = &self.map_error;
+        check_non_negative("map_error.shift_sigma_m", e.shift_sigma_m)?;
+        check_non_negative("map_error.max_shift_m", e.max_shift_m)?;
+        check_non_negative("map_error.rotation_sigma_rad", e.rotation_sigma_rad)?;
+        check_probability("map_error.removed_probability", e.removed_probability)?;
+        check_non_negative("map_error.extra_per_km2", e.extra_per_km2)?;
+        let c = &self.clutter;
+        for (name, p) in [
+            ("clutter.car_probability", c.car_probability),
+            ("clutter.tree_probability", c.tree_probability),
+            ("clutter.bicycle_probability", c.bicycle_probability),
+            ("clutter.pedestrian_probability", c.pedestrian_probability),
+            (
+                "clutter.construction_probability",
+                c.construction_probability,
+            ),
+            ("clutter.grass_tree_probability", c.grass_tree_probability),
+        ] {
+            check_probability(name, p)?;
+        }
+        if !(c.pole_spacing_m.is_finite() && c.pole_spacing_m >= 1.0) {
+            return Err(SimError::InvalidOption {
+                name: "clutter.pole_spacing_m",
+                value: c.pole_spacing_m,
+                expected: "a distance ≥ 1 m",
+            });
+        }
+        check_non_negative("kerb_m", self.kerb_m)?;
+        check_non_negative("facade_path_m", self.facade_path_m)?;
+        let [lo, hi] = self.building_height_range_m;
+        if !(lo.is_finite() && hi.is_finite() && lo >= 3.0 && hi >= lo) {
+            return Err(SimError::InvalidOption {
+                name: "building_height_range_m",
+                value: lo,
+                expected: "3 m ≤ min ≤ max",
+            });
+        }
+        if !(self.cell_m.is_finite() && self.cell_m >= 0.5) {
+            return Err(SimError::InvalidOption {
+                name: "cell_m",
+                value: self.cell_m,
+                expected: "a cell side ≥ 0.5 m",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Builder state for clutter: shapes, surfaces and objects grow together.
+struct Clutter<'a> {
+    shapes: Vec<Shape>,
+    surfaces: Vec<Surface>,
+    objects: Vec<SceneObject>,
+    next_id: u32,
+    buildings: &'a RTree<GeomWithData<Rectangle<[f64; 2]>, usize>>,
+    world: &'a [WorldBuilding],
+}
+
+impl Clutter<'_> {
+    fn inside_building(&self, p: [f64; 2], margin: f64) -> bool {
+        let query = AABB::from_corners(
+            [p[0] - margin, p[1] - margin],
+            [p[0] + margin, p[1] + margin],
+        );
+        self.buildings
+            .locate_in_envelope_intersecting(&query)
+            .any(|g| {
+                let b = &self.world[g.data];
+                point_in_polygon(p, &b.outer, &b.inners)
+                    || (margin > 0.0
+                        && ring_edges(&b.outer)
+                            .any(|(a, c)| point_segment_distance(p, a, c) < margin))
+            })
+    }
+
+    fn add(
+        &mut self,
+        class: Class,
+        shapes: Vec<Shape>,
+        bbox: ([f64; 3], [f64; 3], f64),
+        segment: usize,
+    ) {
+        let id = self.next_id;
+        self.next_id += 1;
+        for s in shapes {
+            self.shapes.push(s);
+            self.surfaces.push(Surface { class, object: id });
+        }
+        self.objects.push(SceneObject {
+            id,
+            class,
+            centre: bbox.0,
+            half_extents: bbox.1,
+            yaw_rad: bbox.2,
+            segment,
+        });
+    }
+}
+
+fn ring_edges(ring: &[[f64; 2]]) -> impl Iterator<Item = ([f64; 2], [f64; 2])> + '_ {
+    (0..ring.len()).map(move |i| (ring[i], ring[(i + 1) % ring.len()]))
+}
+
+impl Scene {
+    /// Builds the world of a map; deterministic for a seed.
+    ///
+    /// O(B + S + clutter) to build, plus the caster's grid.
+    pub fn build(map: &OsmMap, options: &SceneOptions, seed: u64) -> Result<Scene, SimError> {
+        options.validate()?;
+        if map.buildings.is_empty() && map.streets.segments.is_empty() {
+            return Err(SimError::EmptyMap);
+        }
+        let truth = street_truth(map, &options.truth, seed)?;
+        let segments = map.streets.segments.clone();
+
+        // Map extent.
+        let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let all_points = map
+            .buildings
+            .iter()
+            .flat_map(|b| b.outer.iter())
+            .chain(segments.iter().flat_map(|s| [&s.a, &s.b]));
+        for p in all_points {
+            for k in 0..2 {
+                min[k] = min[k].min(p[k]);
+                max[k] = max[k].max(p[k]);
+            }
+        }
+
+        // World buildings with the map-error model.
+        let e = &options.map_error;
+        let mut buildings = Vec::with_capacity(map.buildings.len());
+        let mut report = MapErrorReport::default();
+        let mut shift_sum = 0.0;
+        for (i, b) in map.buildings.iter().enumerate() {
+            let mut rng = stream_rng(seed, purpose::MAP_ERROR, i as u64);
+            let removed_draw: f64 = rng.gen();
+            if removed_draw < e.removed_probability {
+                report.removed.push(i);
+                continue;
+            }
+            let shift = [
+                (e.shift_sigma_m * normal(&mut rng)).clamp(-e.max_shift_m, e.max_shift_m),
+                (e.shift_sigma_m * normal(&mut rng)).clamp(-e.max_shift_m, e.max_shift_m),
+            ];
+            let rotation = e.rotation_sigma_rad * normal(&mut rng);
+            let c = centroid(&b.outer);
+            let mut hrng = stream_rng(seed, purpose::HEIGHT, i as u64);
+            let [hlo, hhi] = options.building_height_range_m;
+            let drawn = hrng.gen_range(hlo..=hhi);
+            let height_m = b
+                .height_m
+                .filter(|h| h.is_finite() && *h >= 2.0)
+                .or(b
+                    .levels
+                    .filter(|l| l.is_finite() && *l >= 1.0)
+                    .map(|l| 3.0 * l + 1.0))
+                .unwrap_or(drawn)
+                .min(300.0);
+            shift_sum += (shift[0] * shift[0] + shift[1] * shift[1]).sqrt();
+            buildings.push(WorldBuilding {
+                map_index: Some(i),
+                outer: transform_ring(&b.outer, c, rotation, shift),
+                inners: b
+                    .inners
+                    .iter()
+                    .map(|r| transform_ring(r, c, rotation, shift))
+                    .collect(),
+                height_m,
+                shift_m: shift,
+                rotation_rad: rotation,
+            });
+        }
+        report.mean_shift_m = shift_sum / buildings.len().max(1) as f64;
+
+        // Ground capsules.
+        let mut capsules = Vec::new();
+        for (s, (seg, t)) in segments.iter().zip(&truth).enumerate() {
+            if !t.on_ground || seg.length_m <= 0.0 {
+                continue;
+            }
+            let [a, b] = offset_centre_line(seg, t);
+            let street_r = 0.5 * t.width_m;
+            capsules.push(Capsule {
+                a,
+                b,
+                street_r: if t.drivable { street_r } else { 0.0 },
+                sidewalk_r: street_r + if t.drivable { t.sidewalk_m } else { 0.0 },
+                drivable: t.drivable,
+                segment: s,
+            });
+        }
+        let margin = 60.0;
+        let (gmin, gmax) = if min[0].is_finite() {
+            (
+                [min[0] - margin, min[1] - margin],
+                [max[0] + margin, max[1] + margin],
+            )
+        } else {
+            ([-margin, -margin], [margin, margin])
+        };
+        let ground = GroundIndex::new(capsules, gmin, gmax, 8.0);
+        let plazas = map
+            .highways
+            .iter()
+            .filter(|h| h.area && h.points.len() >= 3)
+            .map(|h| {
+                let (lo, hi) = ring_bounds(&h.points);
+                (h.points.clone(), lo, hi)
+            })
+            .collect();
+
+        let building_tree = |bs: &[WorldBuilding]| {
+            RTree::bulk_load(
+                bs.iter()
+                    .enumerate()
+                    .map(|(i, b)| {
+                        let (lo, hi) = ring_bounds(&b.outer);
+                        GeomWithData::new(Rectangle::from_corners(lo, hi), i)
+                    })
+                    .collect(),
+            )
+        };
+        let mut scene = Scene {
+            frame: map.frame,
+            segments,
+            truth,
+            buildings,
+            objects: Vec::new(),
+            map_error: report,
+            kerb_m: options.kerb_m,
+            bounds: (gmin, gmax),
+            facade_path_m: options.facade_path_m,
+            plazas,
+            surfaces: Vec::new(),
+            caster: Caster::new(Vec::new(), options.cell_m, (gmin, gmax)),
+            ground,
+            building_boxes: RTree::new(),
+        };
+
+        // Extra buildings in free space (grass), away from every street and building.
+        if e.extra_per_km2 > 0.0 && min[0].is_finite() {
+            let area_km2 = (max[0] - min[0]) * (max[1] - min[1]) / 1e6;
+            let wanted = (e.extra_per_km2 * area_km2).round() as usize;
+            let mut rng = stream_rng(seed, purpose::EXTRA_BUILDINGS, 0);
+            let mut tree = building_tree(&scene.buildings);
+            let mut placed = 0;
+            for _ in 0..wanted * 50 {
+                if placed >= wanted {
+                    break;
+                }
+                let c = [
+                    rng.gen_range(min[0]..=max[0]),
+                    rng.gen_range(min[1]..=max[1]),
+                ];
+                let (hx, hy) = (rng.gen_range(4.0..10.0), rng.gen_range(4.0..10.0));
+                let yaw: f64 = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+                let height_m = rng.gen_range(
+                    options.building_height_range_m[0]..=options.building_height_range_m[1],
+                );
+                let (s, co) = yaw.sin_cos();
+                let outer: Vec<[f64; 2]> = [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]]
+                    .iter()
+                    .map(|q| [c[0] + co * q[0] - s * q[1], c[1] + s * q[0] + co * q[1]])
+                    .collect();
+                let mut probe = outer.clone();
+                probe.push(c);
+                let free = probe.iter().all(|&p| {
+                    scene.ground_class_without_facades(p).class == Class::Grass
+                        && scene.ground.near(p).all(|cap| {
+                            point_segment_distance(p, cap.a, cap.b) > cap.sidewalk_r + 4.0
+                        })
+                });
+                let (lo, hi) = ring_bounds(&outer);
+                let query =
+                    AABB::from_corners([lo[0] - 3.0, lo[1] - 3.0], [hi[0] + 3.0, hi[1] + 3.0]);
+                if !free
+                    || tree
+                        .locate_in_envelope_intersecting(&query)
+                        .next()
+                        .is_some()
+                {
+                    continue;
+                }
+                tree.insert(GeomWithData::new(
+                    Rectangle::from_corners(lo, hi),
+                    scene.buildings.len(),
+                ));
+                scene.buildings.push(WorldBuilding {
+                    map_index: None,
+                    outer,
+                    inners: Vec::new(),
+                    height_m,
+                    shift_m: [0.0, 0.0],
+                    rotation_rad: 0.0,
+                });
+                placed += 1;
+            }
+            scene.map_error.extra = placed;
+        }
+        scene.building_boxes = building_tree(&scene.buildings);
+
+        // Walls.
+        let mut shapes = Vec::new();
+        let mut surfaces = Vec::new();
+        for (i, b) in scene.buildings.iter().enumerate() {
+            let object = i as u32 + 1;
+            for ring in std::iter::once(&b.outer).chain(b.inners.iter()) {
+                for (a, c) in ring_edges(ring) {
+                    shapes.push(Shape::Wall {
+                        a,
+                        b: c,
+                        z_min: -0.5,
+                        z_max: b.height_m,
+                    });
+                    surfaces.push(Surface {
+                        class: Class::Building,
+                        object,
+                    });
+                }
+            }
+        }
+        let walls = shapes.len();
+        let mut clutter = Clutter {
+            shapes,
+            surfaces,
+            objects: Vec::new(),
+            next_id: scene.sidewalk_object(scene.segments.len()),
+            buildings: &scene.building_boxes,
+            world: &scene.buildings,
+        };
+        scene.place_clutter(&mut clutter, &options.clutter, seed);
+        let Clutter {
+            shapes,
+            surfaces,
+            objects,
+            ..
+        } = clutter;
+        debug_assert!(shapes.len() >= walls);
+        scene.surfaces = surfaces;
+        scene.objects = objects;
+        scene.caster = Caster::new(shapes, options.cell_m, (gmin, gmax));
+        Ok(scene)
+    }
+
+    /// Object id of segment `s`'s driving area.
+    pub fn street_object(&self, s: usize) -> u32 {
+        (self.buildings.len() + 1 + s) as u32
+    }
+
+    /// Object id of segment `s`'s sidewalks (both sides).
+    pub fn sidewalk_object(&self, s: usize) -> u32 {
+        (self.buildings.len() + 1 + self.segments.len() + s) as u32
+    }
+
+    /// Number of solid shapes the caster holds (walls and clutter parts).
+    pub fn shape_count(&self) -> usize {
+        self.caster.shapes().len()
+    }
+
+    fn place_clutter(&self, out: &mut Clutter<'_>, o: &ClutterOptions, seed: u64) {
+        for (s, (seg, t)) in self.segments.iter().zip(&self.truth).enumerate() {
+            if !t.drivable || !t.on_ground || seg.length_m < 20.0 {
+                continue;
+            }
+            let mut rng = stream_rng(seed, purpose::CLUTTER, s as u64);
+            let e = [
+                (seg.b[0] - seg.a[0]) / seg.length_m,
+                (seg.b[1] - seg.a[1]) / seg.length_m,
+            ];
+            let n = [-e[1], e[0]];
+            let yaw = e[1].atan2(e[0]);
+            let at = |tt: f64, u: f64| {
+                [
+                    seg.a[0] + tt * e[0] + u * n[0],
+                    seg.a[1] + tt * e[1] + u * n[1],
+                ]
+            };
+            let end_margin = 10.0;
+            let (t0, t1) = (end_margin, seg.length_m - end_margin);
+            let half_w = 0.5 * t.width_m;
+            let sw = t.sidewalk_m;
+            // The ground under a clutter object must be of the expected class.
+            let ground_is = |p: [f64; 2], class: Class| self.ground_at(p).class == class;
+            for side in [-1.0_f64, 1.0] {
+                // Parked cars in 6 m slots along the kerb.
+                if t.width_m >= 5.5 {
+                    let mut tt = t0;
+                    while tt + 5.0 <= t1 {
+                        let draw: f64 = rng.gen();
+                        let (len, wid, hei) = (
+                            rng.gen_range(3.8..5.0),
+                            rng.gen_range(1.7..1.95),
+                            rng.gen_range(1.4..1.8),
+                        );
+                        let jitter = rng.gen_range(-0.4..0.4);
+                        if draw < o.car_probability {
+                            let u = t.offset_m + side * (half_w - 0.25 - wid / 2.0);
+                            let c = at(tt + 3.0 + jitter, u);
+                            let yaw_car = yaw + 0.03 * normal(&mut rng);
+                            if ground_is(c, Class::Street) && !out.inside_building(c, 1.0) {
+                                let centre = [c[0], c[1], hei / 2.0];
+                                let half = [len / 2.0, wid / 2.0, hei / 2.0];
+                                out.add(
+                                    Class::Car,
+                                    vec![Shape::OrientedBox {
+                                        centre,
+                                        half,
+                                        yaw_rad: yaw_car,
+                                    }],
+                                    (centre, half, yaw_car),
+                                    s,
+                                );
+                            }
+                        }
+                        tt += 6.0;
+                    }
+                }
+                // Street trees on the sidewalk.
+                if sw >= 1.5 {
+                    let mut tt = t0 + rng.gen_range(0.0..6.0);
+                    while tt <= t1 {
+                        let draw: f64 = rng.gen();
+                        let trunk_r = rng.gen_range(0.15..0.3);
+                        let trunk_h = rng.gen_range(2.0..3.5);
+                        let crown_r = rng.gen_range(1.5..3.0);
+                        let crown_h = rng.gen_range(1.5..3.0);
+                        if draw < o.tree_probability {
+                            let u = t.offset_m + side * (half_w + 0.5 * sw.min(3.0));
+                            let c = at(tt, u);
+                            if ground_is(c, Class::Sidewalk) && !out.inside_building(c, crown_r) {
+                                out.add_tree(c, trunk_r, trunk_h, crown_r, crown_h, self.kerb_m, s);
+                            }
+                        }
+                        tt += 13.0;
+                    }
+                }
+                // Poles along the kerb.
+                if sw >= 1.0 {
+                    let mut tt =
+                        t0 + rng.gen_range(0.0..o.pole_spacing_m.min(t1 - t0).max(0.0) + 1e-9);
+                    while tt <= t1 {
+                        let h = rng.gen_range(5.0..8.0);
+                        let c = at(tt, t.offset_m + side * (half_w + 0.4));
+                        if ground_is(c, Class::Sidewalk) && !out.inside_building(c, 0.5) {
+                            let z0 = self.kerb_m;
+                            out.add(
+                                Class::Pole,
+                                vec![Shape::Cylinder {
+                                    centre: c,
+                                    radius: 0.08,
+                                    z_min: z0,
+                                    z_max: z0 + h,
+                                }],
+                                ([c[0], c[1], z0 + h / 2.0], [0.08, 0.08, h / 2.0], 0.0),
+                                s,
+                            );
+                        }
+                        tt += o.pole_spacing_m;
+                    }
+                }
+                // Bicycles near the facade side of the sidewalk.
+                if sw >= 2.0 {
+                    let mut tt = t0;
+                    while tt <= t1 {
+                        let draw: f64 = rng.gen();
+                        let along = rng.gen_range(0.0..20.0);
+                        if draw < o.bicycle_probability && tt + along <= t1 {
+                            let c = at(tt + along, t.offset_m + side * (half_w + sw - 0.5));
+                            if ground_is(c, Class::Sidewalk) && !out.inside_building(c, 1.0) {
+                                let centre = [c[0], c[1], self.kerb_m + 0.525];
+                                let half = [0.875, 0.3, 0.525];
+                                out.add(
+                                    Class::Bicycle,
+                                    vec![Shape::OrientedBox {
+                                        centre,
+                                        half,
+                                        yaw_rad: yaw,
+                                    }],
+                                    (centre, half, yaw),
+                                    s,
+                                );
+                            }
+                        }
+                        tt += 20.0;
+                    }
+                }
+                // Pedestrians.
+                if sw >= 1.5 {
+                    let mut tt = t0;
+                    while tt <= t1 {
+                        let draw: f64 = rng.gen();
+                        let along = rng.gen_range(0.0..15.0);
+                        let lateral = rng.gen_range(0.5..(sw - 0.5).max(0.51));
+                        let h = rng.gen_range(1.6..1.9);
+                        if draw < o.pedestrian_probability && tt + along <= t1 {
+                            let c = at(tt + along, t.offset_m + side * (half_w + lateral));
+                            if ground_is(c, Class::Sidewalk) && !out.inside_building(c, 0.5) {
+                                let z0 = self.kerb_m;
+                                out.add(
+                                    Class::Other,
+                                    vec![Shape::Cylinder {
+                                        centre: c,
+                                        radius: 0.25,
+                                        z_min: z0,
+                                        z_max: z0 + h,
+                                    }],
+                                    ([c[0], c[1], z0 + h / 2.0], [0.25, 0.25, h / 2.0], 0.0),
+                                    s,
+                                );
+                            }
+                        }
+                        tt += 15.0;
+                    }
+                }
+                // Trees on grass behind the sidewalk.
+                let mut tt = t0;
+                while tt <= t1 {
+                    let draw: f64 = rng.gen();
+                    let lateral = half_w + sw + rng.gen_range(3.0..15.0);
+                    let (trunk_r, trunk_h) = (rng.gen_range(0.2..0.4), rng.gen_range(2.0..4.0));
+                    let (crown_r, crown_h) = (rng.gen_range(2.0..4.0), rng.gen_range(2.0..4.0));
+                    if draw < o.grass_tree_probability {
+                        let c = at(tt, t.offset_m + side * lateral);
+                        if ground_is(c, Class::Grass) && !out.inside_building(c, crown_r) {
+                            out.add_tree(c, trunk_r, trunk_h, crown_r, crown_h, self.kerb_m, s);
+                        }
+                    }
+                    tt += 20.0;
+                }
+            }
+            // A fenced construction site on one sidewalk.
+            let draw: f64 = rng.gen();
+            let len = rng.gen_range(6.0..12.0);
+            let side = if rng.gen::<bool>() { 1.0 } else { -1.0 };
+            if draw < o.construction_probability && sw >= 2.5 && t1 - t0 > len {
+                let mid = 0.5 * (t0 + t1);
+                let u_mid = t.offset_m + side * (half_w + 0.5 * sw);
+                let c = at(mid, u_mid);
+                let across = sw - 0.6;
+                if ground_is(c, Class::Sidewalk) && !out.inside_building(c, across / 2.0 + 0.2) {
+                    let h = 1.8;
+                    let z = self.kerb_m + h / 2.0;
+                    let th = 0.025;
+                    let mut parts = Vec::new();
+                    for k in [-1.0, 1.0] {
+                        let q = at(mid, u_mid + k * across / 2.0);
+                        parts.push(Shape::OrientedBox {
+                            centre: [q[0], q[1], z],
+                            half: [len / 2.0, th, h / 2.0],
+                            yaw_rad: yaw,
+                        });
+                        let q = at(mid + k * len / 2.0, u_mid);
+                        parts.push(Shape::OrientedBox {
+                            centre: [q[0], q[1], z],
+                            half: [th, across / 2.0, h / 2.0],
+                            yaw_rad: yaw,
+                        });
+                    }
+                    out.add(
+                        Class::Other,
+                        parts,
+                        ([c[0], c[1], z], [len / 2.0, across / 2.0, h / 2.0], yaw),
+                        s,
+                    );
+                }
+            }
+        }
+    }
+
+    /// The ground at a point (ignoring the paved strips along facades).
+    fn ground_class_without_facades(&self, p: [f64; 2]) -> GroundCell {
+        let mut street: Option<usize> = None;
+        let mut sidewalk: Option<(f64, usize)> = None;
+        for cap in self.ground.near(p) {
+            let dist = point_segment_distance(p, cap.a, cap.b);
+            if cap.drivable && dist <= cap.street_r {
+                if street.is_none_or(|s| cap.segment < s) {
+                    street = Some(cap.segment);
+                }
+            } else if dist <= cap.sidewalk_r {
+                let excess = dist - cap.street_r;
+                if sidewalk.is_none_or(|(e, s)| excess < e || (excess == e && cap.segment < s)) {
+                    sidewalk = Some((excess, cap.segment));
+                }
+            }
+        }
+        if let Some(s) = street {
+            return GroundCell {
+                class: Class::Street,
+                object: self.street_object(s),
+                z: 0.0,
+                segment: Some(s),
+            };
+        }
+        if let Some((_, s)) = sidewalk {
+            return GroundCell {
+                class: Class::Sidewalk,
+                object: self.sidewalk_object(s),
+                z: self.kerb_m,
+                segment: Some(s),
+            };
+        }
+        let in_plaza = self.plazas.iter().any(|(ring, lo, hi)| {
+            p[0] >= lo[0]
+                && p[0] <= hi[0]
+                && p[1] >= lo[1]
+                && p[1] <= hi[1]
+                && point_in_ring(p, ring)
+        });
+        GroundCell {
+            class: if in_plaza {
+                Class::Sidewalk
+            } else {
+                Class::Grass
+            },
+            object: 0,
+            z: self.kerb_m,
+            segment: None,
+        }
+    }
+
+    /// The ground at a point: street, sidewalk (incl. plazas and facade strips) or grass.
+    pub fn ground_at(&self, p: [f64; 2]) -> GroundCell {
+        let mut cell = self.ground_class_without_facades(p);
+        if cell.class == Class::Grass && self.facade_path_m > 0.0 {
+            let r = self.facade_path_m;
+            let query = AABB::from_corners([p[0] - r, p[1] - r], [p[0] + r, p[1] + r]);
+            let near_facade = self
+                .building_boxes
+                .locate_in_envelope_intersecting(&query)
+                .any(|g| {
+                    let b = &self.buildings[g.data];
+                    std::iter::once(&b.outer)
+                        .chain(b.inners.iter())
+                        .any(|ring| {
+                            ring_edges(ring).any(|(a, c)| point_segment_distance(p, a, c) <= r)
+                        })
+                });
+            if near_facade {
+                cell.class = Class::Sidewalk;
+            }
+        }
+        cell
+    }
+
+    /// Whether a point lies inside a world building.
+    pub fn inside_building(&self, p: [f64; 2]) -> bool {
+        let query = AABB::from_point(p);
+        self.building_boxes
+            .locate_in_envelope_intersecting(&query)
+            .any(|g| {
+                let b = &self.buildings[g.data];
+                point_in_polygon(p, &b.outer, &b.inners)
+            })
+    }
+
+    /// The first surface the ray `o + t·d` (d unit) meets before `t_max`, ground included.
+    pub fn cast(&self, o: [f64; 3], d: [f64; 3], t_max: f64) -> Option<SceneHit> {
+        let ground = self.cast_ground(o, d, t_max);
+        let limit = ground.map_or(t_max, |g| g.t);
+        if let Some(h) = self.caster.cast(o, d, limit) {
+            return Some(SceneHit {
+                t: h.t,
+                point: [o[0] + h.t * d[0], o[1] + h.t * d[1], o[2] + h.t * d[2]],
+                normal: h.normal,
+                surface: self.surfaces[h.shape],
+            });
+        }
+        ground
+    }
+
+    /// The ray's hit with the analytic ground (street at 0, everything else at the kerb height).
+    fn cast_ground(&self, o: [f64; 3], d: [f64; 3], t_max: f64) -> Option<SceneHit> {
+        if d[2] >= -1e-12 || o[2] <= self.kerb_m {
+            return None;
+        }
+        let at = |t: f64| [o[0] + t * d[0], o[1] + t * d[1]];
+        let t_kerb = (self.kerb_m - o[2]) / d[2];
+        if t_kerb >= t_max {
+            return None;
+        }
+        let upper = self.ground_at(at(t_kerb));
+        let hit = |t: f64, cell: GroundCell, normal: [f64; 3]| SceneHit {
+            t,
+            point: [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]],
+            normal,
+            surface: Surface {
+                class: cell.class,
+                object: cell.object,
+            },
+        };
+        if upper.class != Class::Street {
+            return Some(hit(t_kerb, upper, [0.0, 0.0, 1.0]));
+        }
+        let t_street = -o[2] / d[2];
+        if t_street >= t_max {
+            return None;
+        }
+        let lower = self.ground_at(at(t_street));
+        if lower.class == Class::Street {
+            return Some(hit(t_street, lower, [0.0, 0.0, 1.0]));
+        }
+        // The ray passes the kerb face between the two planes: find the crossing.
+        let (mut lo, mut hi) = (t_kerb, t_street);
+        let mut cell = lower;
+        for _ in 0..12 {
+            let mid = 0.5 * (lo + hi);
+            let c = self.ground_at(at(mid));
+            if c.class == Class::Street {
+                lo = mid;
+            } else {
+                hi = mid;
+                cell = c;
+            }
+        }
+        let horizontal = [-d[0], -d[1], 0.0];
+        let len = (horizontal[0] * horizontal[0] + horizontal[1] * horizontal[1]).sqrt();
+        let normal = if len > 0.0 {
+            [horizontal[0] / len, horizontal[1] / len, 0.0]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
+        Some(hit(hi, cell, normal))
+    }
+
+    /// `n` seeded sensor poses on sidewalks: on the ground, ≥ 1 m from walls and clutter,
+    /// the sensor `height_m` above the sidewalk, heading uniform.
+    pub fn sample_sidewalk_poses(&self, n: usize, seed: u64) -> Result<Vec<Pose>, SimError> {
+        self.sample_poses_with_height(n, 1.8, seed)
+    }
+
+    /// Like [`Scene::sample_sidewalk_poses`] with a given sensor height above the ground.
+    pub fn sample_poses_with_height(
+        &self,
+        n: usize,
+        height_m: f64,
+        seed: u64,
+    ) -> Result<Vec<Pose>, SimError> {
+        let candidates: Vec<usize> = (0..self.segments.len())
+            .filter(|&s| {
+                let t = &self.truth[s];
+                t.drivable && t.on_ground && t.sidewalk_m >= 1.0 && self.segments[s].length_m >= 5.0
+            })
+            .collect();
+        let total: f64 = candidates.iter().map(|&s| self.segments[s].length_m).sum();
+        let tries = n * 200 + 100;
+        if candidates.is_empty() || total <= 0.0 {
+            return Err(SimError::NoPoses {
+                wanted: n,
+                found: 0,
+                tries: 0,
+            });
+        }
+        let mut poses = Vec::with_capacity(n);
+        let mut rng = stream_rng(seed, purpose::POSES, 0);
+        for _ in 0..tries {
+            if poses.len() == n {
+                break;
+            }
+            let mut pick = rng.gen_range(0.0..total);
+            let mut chosen = candidates[candidates.len() - 1];
+            for &s in &candidates {
+                pick -= self.segments[s].length_m;
+                if pick < 0.0 {
+                    chosen = s;
+                    break;
+                }
+            }
+            let seg = &self.segments[chosen];
+            let t = &self.truth[chosen];
+            let along = rng.gen_range(0.1..0.9) * seg.length_m;
+            let side = if rng.gen::<bool>() { 1.0 } else { -1.0 };
+            let lateral = 0.5 * t.width_m + rng.gen_range(0.3..(t.sidewalk_m - 0.3).max(0.31));
+            let yaw = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+            let e = [
+                (seg.b[0] - seg.a[0]) / seg.length_m,
+                (seg.b[1] - seg.a[1]) / seg.length_m,
+            ];
+            let u = t.offset_m + side * lateral;
+            let p = [
+                seg.a[0] + along * e[0] - u * e[1],
+                seg.a[1] + along * e[1] + u * e[0],
+            ];
+            let cell = self.ground_at(p);
+            if cell.class != Class::Sidewalk
+                || self.inside_building(p)
+                || !self.clear_of_shapes(p, 1.0)
+            {
+                continue;
+            }
+            poses.push(Pose {
+                position: [p[0], p[1], cell.z + height_m],
+                yaw_rad: yaw,
+            });
+        }
+        if poses.len() < n {
+            return Err(SimError::NoPoses {
+                wanted: n,
+                found: poses.len(),
+                tries,
+            });
+        }
+        Ok(poses)
+    }
+
+    /// Whether no wall or clutter footprint comes within `r` metres of `p`.
+    pub fn clear_of_shapes(&self, p: [f64; 2], r: f64) -> bool {
+        let shapes = self.caster.shapes();
+        let mut probes = vec![p];
+        for k in 0..8 {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            probes.push([p[0] + r * a.cos(), p[1] + r * a.sin()]);
+        }
+        probes.iter().all(|&q| {
+            self.caster
+                .shapes_near(q)
+                .iter()
+                .all(|&i| match shapes[i as usize] {
+                    Shape::Wall { a, b, .. } => point_segment_distance(p, a, b) > r,
+                    other => {
+                        let (lo, hi) = other.footprint();
+                        p[0] < lo[0] - r || p[0] > hi[0] + r || p[1] < lo[1] - r || p[1] > hi[1] + r
+                    }
+                })
+        })
+    }
+
+    /// A stable colour for an object (facades and cars differ from object to object).
+    pub fn object_tint(object: u32) -> [i32; 3] {
+        let h = mix64(u64::from(object));
+        [
+            (h & 0x3f) as i32 - 32,
+            ((h >> 8) & 0x3f) as i32 - 32,
+            ((h >> 16) & 0x3f) as i32 - 32,
+        ]
+    }
+
+    /// Signed area of the world's buildings, m² (a cheap summary for reports).
+    pub fn building_area_m2(&self) -> f64 {
+        self.buildings.iter().map(|b| signed_area(&b.outer)).sum()
+    }
+}
+
+impl Clutter<'_> {
+    #[allow(clippy::too_many_arguments)]
+    fn add_tree(
+        &mut self,
+        c: [f64; 2],
+        trunk_r: f64,
+        trunk_h: f64,
+        crown_r: f64,
+        crown_h: f64,
+        z0: f64,
+        segment: usize,
+    ) {
+        let crown_z = z0 + trunk_h + 0.8 * crown_h;
+        let top = crown_z + crown_h;
+        self.add(
+            Class::Tree,
+            vec![
+                Shape::Cylinder {
+                    centre: c,
+                    radius: trunk_r,
+                    z_min: z0,
+                    z_max: z0 + trunk_h + 0.5,
+                },
+                Shape::Spheroid {
+                    centre: [c[0], c[1], crown_z],
+                    radius_xy: crown_r,
+                    radius_z: crown_h,
+                },
+            ],
+            (
+                [c[0], c[1], 0.5 * (z0 + top)],
+                [crown_r, crown_r, 0.5 * (top - z0)],
+                0.0,
+            ),
+            segment,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::city::{generate_city, CityOptions};
+
+    pub(crate) fn small_map(seed: u64) -> OsmMap {
+        let xml = generate_city(
+            &CityOptions {
+                size_m: 400.0,
+                ..CityOptions::default()
+            },
+            seed,
+        )
+        .unwrap();
+        OsmMap::from_xml_str(&xml).unwrap()
+    }
+
+    #[test]
+    fn scene_has_every_kind_of_clutter_and_is_deterministic() {
+        let map = small_map(3);
+        let a = Scene::build(&map, &SceneOptions::default(), 5).unwrap();
+        let b = Scene::build(&map, &SceneOptions::default(), 5).unwrap();
+        assert_eq!(a.objects, b.objects);
+        assert_eq!(a.buildings, b.buildings);
+        assert_eq!(a.buildings.len(), map.buildings.len());
+        for class in [Class::Car, Class::Tree, Class::Pole, Class::Other] {
+            assert!(
+                a.objects.iter().any(|o| o.class == class),
+                "no {class} in the scene"
+            );
+        }
+        for o in &a.objects {
+            assert!(!a.inside_building([o.centre[0], o.centre[1]]), "{o:?}");
+        }
+    }
+
+    #[test]
+    fn map_error_moves_removes_and_adds_buildings() {
+        let map = small_map(4);
+        let options = SceneOptions {
+            map_error: MapErrorOptions {
+                extra_per_km2: 60.0,
+                removed_probability: 0.1,
+                ..MapErrorOptions::osm_like()
+            },
+            ..SceneOptions::default()
+        };
+        let scene = Scene::build(&map, &options, 2).unwrap();
+        assert!(!scene.map_error.removed.is_empty());
+        assert!(scene.map_error.extra > 0);
+        assert!(scene.map_error.mean_shift_m > 0.3 && scene.map_error.mean_shift_m < 3.0);
+        for b in &scene.buildings {
+            assert!(b.shift_m[0].abs() <= 3.0 && b.shift_m[1].abs() <= 3.0);
+        }
+        assert_eq!(
+            scene.buildings.len(),
+            map.buildings.len() - scene.map_error.removed.len() + scene.map_error.extra
+        );
+    }
+
+    #[test]
+    fn ground_classes_follow_the_truth() {
+        let map = small_map(5);
+        let scene = Scene::build(&map, &SceneOptions::default(), 1).unwrap();
+        let (s, (seg, t)) = scene
+            .segments
+            .iter()
+            .zip(&scene.truth)
+            .enumerate()
+            .find(|(_, (seg, t))| t.drivable && t.sidewalk_m > 1.0 && seg.length_m > 30.0)
+            .unwrap();
+        let [a, b] = offset_centre_line(seg, t);
+        let mid = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+        let cell = scene.ground_at(mid);
+        assert_eq!(cell.class, Class::Street);
+        assert_eq!(cell.z, 0.0);
+        let e = [(b[0] - a[0]) / seg.length_m, (b[1] - a[1]) / seg.length_m];
+        let side = [
+            mid[0] - e[1] * (t.width_m / 2.0 + 0.5),
+            mid[1] + e[0] * (t.width_m / 2.0 + 0.5),
+        ];
+        let cell = scene.ground_at(side);
+        assert_eq!(cell.class, Class::Sidewalk, "segment {s}");
+        assert_eq!(cell.z, scene.kerb_m);
+    }
+
+    #[test]
+    fn rejects_empty_maps_and_bad_options() {
+        let map = small_map(1);
+        let bad = SceneOptions {
+            kerb_m: f64::NAN,
+            ..SceneOptions::default()
+        };
+        assert!(matches!(
+            Scene::build(&map, &bad, 1),
+            Err(SimError::InvalidOption { name: "kerb_m", .. })
+        ));
+        let mut empty = map.clone();
+        empty.buildings.clear();
+        empty.streets = Default::default();
+        assert!(matches!(
+            Scene::build(&empty, &SceneOptions::default(), 1),
+            Err(SimError::EmptyMap)
+        ));
+    }
+}
