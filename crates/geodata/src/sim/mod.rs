@@ -119,6 +119,7 @@ pub(crate) mod purpose {
     pub const POSES: u64 = 7;
     pub const SENSOR_COLUMN: u64 = 8;
     pub const ROUTE: u64 = 9;
+    pub const ANNOTATOR: u64 = 10;
 }
 
 /// Standard normal sample (Box–Muller; one draw per call, deterministic for the stream).

@@ -48,8 +48,9 @@ type Stage = fn(&DemoArgs) -> anyhow::Result<StageOutput>;
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output folder {}", args.out.display()))?;
-    let stages: [(&str, Stage); 4] = [
+    let stages: [(&str, Stage); 5] = [
         ("geodata: embedded default city", stage_city),
+        ("geodata: simulated scans", crate::cmd::sim::demo_stage),
         ("pbo: binary image denoising (QPBO)", stage_denoise),
         (
             "pbo: higher-order functions (QSSR per quadratizer)",

@@ -1,9 +1,29 @@
-//! `urbansem sim …`: procedural cities (and, later, simulated labelled scans).
+//! `urbansem sim …`: procedural cities, simulated labelled scan datasets, simulator speed.
 
 use anyhow::Context;
-use clap::Subcommand;
-use geodata::city::{generate_city_with_stats, CityOptions};
-use std::path::PathBuf;
+use clap::{Subcommand, ValueEnum};
+use geodata::city::{generate_city, generate_city_with_stats, CityOptions};
+use geodata::osm::OsmMap;
+use geodata::sim::dataset::{
+    write_localization, write_relations, write_streets, DatasetSummary, LocalizationOptions,
+    RelationsOptions, StreetsOptions,
+};
+use geodata::sim::scene::{MapErrorOptions, Scene, SceneOptions};
+use geodata::sim::sensor::{scan_with, ScanFrame, SensorOptions};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Which dataset `urbansem sim dataset` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DatasetKind {
+    /// Scans at random sidewalk poses with their true poses (truth.json).
+    Localization,
+    /// Scans along a route registered into one cloud, true offset and width per segment.
+    Streets,
+    /// Viewpoint scenes with objects, true boxes and true On/LeftOf/Behind relations.
+    Relations,
+}
 
 /// Subcommands of `urbansem sim`.
 #[derive(Subcommand)]
@@ -19,6 +39,66 @@ pub enum SimCommand {
         /// Side length of the square city in metres.
         #[arg(long, default_value_t = 1000.0)]
         size_m: f64,
+    },
+    /// Simulate a labelled dataset with exact ground truth (PLY + JSON) from an OSM map.
+    Dataset {
+        /// Kind of dataset.
+        #[arg(long, value_enum)]
+        kind: DatasetKind,
+        /// OSM map (.osm or .osm.pbf); default: the embedded default city, written into OUT.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed of every random step (same seed, byte-identical dataset).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Number of scans (localization) or scenes (relations); streets: largest number of scans.
+        #[arg(long)]
+        scans: Option<usize>,
+        /// Turn the OSM map-error model off (localization has it on by default).
+        #[arg(long)]
+        no_map_error: bool,
+        /// Turn the OSM map-error model on (streets and relations have it off by default).
+        #[arg(long, conflicts_with = "no_map_error")]
+        map_error: bool,
+        /// Azimuth step of the scanner, degrees.
+        #[arg(long)]
+        h_step_deg: Option<f64>,
+        /// Elevation step of the scanner, degrees.
+        #[arg(long)]
+        v_step_deg: Option<f64>,
+        /// Range limit of the scanner, metres.
+        #[arg(long)]
+        range_m: Option<f64>,
+        /// Streets: length of the route, metres.
+        #[arg(long, default_value_t = 2500.0)]
+        route_m: f64,
+        /// Streets: distance between scans along the route, metres.
+        #[arg(long, default_value_t = 20.0)]
+        spacing_m: f64,
+        /// Relations: rate at which the annotator flips a relation label.
+        #[arg(long, default_value_t = 0.0)]
+        annotator_noise: f64,
+        /// Relations: number of training scenes (the first ones).
+        #[arg(long, default_value_t = 48)]
+        train: usize,
+    },
+    /// Measure the simulator's ray-casting speed (rays per second) on a map.
+    Bench {
+        /// OSM map; default: the embedded default city.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// Number of scans to time.
+        #[arg(long, default_value_t = 8)]
+        scans: usize,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -44,5 +124,420 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
             );
             Ok(())
         }
+        SimCommand::Dataset {
+            kind,
+            map,
+            out,
+            seed,
+            scans,
+            no_map_error,
+            map_error,
+            h_step_deg,
+            v_step_deg,
+            range_m,
+            route_m,
+            spacing_m,
+            annotator_noise,
+            train,
+        } => {
+            std::fs::create_dir_all(&out)
+                .with_context(|| format!("creating the output folder {}", out.display()))?;
+            let (map, map_path) = load_or_default(map.as_deref(), &out)?;
+            let tune = |mut sensor: SensorOptions| {
+                if let Some(h) = h_step_deg {
+                    sensor.h_step_deg = h;
+                }
+                if let Some(v) = v_step_deg {
+                    sensor.v_step_deg = v;
+                }
+                if let Some(r) = range_m {
+                    sensor.range_max_m = r;
+                }
+                sensor
+            };
+            let scene_with = |on_by_default: bool| SceneOptions {
+                map_error: if (on_by_default && !no_map_error) || map_error {
+                    MapErrorOptions::osm_like()
+                } else {
+                    MapErrorOptions::none()
+                },
+                ..SceneOptions::default()
+            };
+            let bar = ProgressBar::new(0);
+            bar.set_style(
+                ProgressStyle::with_template("{bar:30} {pos}/{len} scans [{elapsed}<{eta}]")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            let progress = |done: usize, total: usize| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            };
+            let started = Instant::now();
+            let summary: DatasetSummary = match kind {
+                DatasetKind::Localization => {
+                    let defaults = LocalizationOptions::default();
+                    let options = LocalizationOptions {
+                        scans: scans.unwrap_or(defaults.scans),
+                        scene: scene_with(true),
+                        sensor: tune(defaults.sensor),
+                        ..defaults
+                    };
+                    write_localization(&map, &map_path, &out, &options, seed, &progress)
+                }
+                DatasetKind::Streets => {
+                    let defaults = StreetsOptions::default();
+                    let options = StreetsOptions {
+                        route_m,
+                        spacing_m,
+                        max_scans: scans.unwrap_or(0),
+                        scene: scene_with(false),
+                        sensor: tune(defaults.sensor.clone()),
+                        ..defaults
+                    };
+                    write_streets(&map, &map_path, &out, &options, seed, &progress)
+                }
+                DatasetKind::Relations => {
+                    let defaults = RelationsOptions::default();
+                    let options = RelationsOptions {
+                        scenes: scans.unwrap_or(defaults.scenes),
+                        train,
+                        annotator_noise,
+                        scene: scene_with(false),
+                        sensor: tune(defaults.sensor.clone()),
+                        ..defaults
+                    };
+                    write_relations(&map, &map_path, &out, &options, seed, &progress)
+                }
+            }
+            .with_context(|| format!("simulating the {kind:?} dataset into {}", out.display()))?;
+            bar.finish_and_clear();
+            println!(
+                "{}: {:?} dataset, {} scans, {} points, {:.1} M rays in {:.1} s ({:.2} M rays/s), total {:.1} s",
+                out.display(),
+                kind,
+                summary.scans,
+                summary.points,
+                summary.rays as f64 / 1e6,
+                summary.cast_seconds,
+                summary.rays as f64 / summary.cast_seconds.max(1e-9) / 1e6,
+                started.elapsed().as_secs_f64()
+            );
+            Ok(())
+        }
+        SimCommand::Bench {
+            map,
+            scans,
+            seed,
+            json,
+        } => bench(map.as_deref(), scans, seed, json),
     }
+}
+
+/// Loads the map, or writes the embedded default city into `out` and loads that.
+fn load_or_default(map: Option<&Path>, out: &Path) -> anyhow::Result<(OsmMap, String)> {
+    match map {
+        Some(path) => Ok((
+            OsmMap::load(path).with_context(|| format!("loading the map {}", path.display()))?,
+            path.display().to_string(),
+        )),
+        None => {
+            let xml = generate_city(&CityOptions::default(), 1)
+                .context("generating the embedded default city")?;
+            let path = out.join("city.osm");
+            std::fs::write(&path, &xml).with_context(|| format!("writing {}", path.display()))?;
+            Ok((
+                OsmMap::from_xml_str(&xml).context("parsing the embedded default city")?,
+                path.display().to_string(),
+            ))
+        }
+    }
+}
+
+/// Result of the simulator benchmark.
+#[derive(serde::Serialize)]
+pub(crate) struct SimBench {
+    pub(crate) map: String,
+    pub(crate) scene_seconds: f64,
+    pub(crate) shapes: usize,
+    pub(crate) scans: usize,
+    pub(crate) rays: usize,
+    pub(crate) points: usize,
+    pub(crate) cast_seconds: f64,
+    pub(crate) rays_per_second: f64,
+    pub(crate) threads: usize,
+}
+
+/// Times scene building and `scans` default scans from sidewalk poses.
+pub(crate) fn measure(
+    map: &OsmMap,
+    name: &str,
+    scans: usize,
+    seed: u64,
+) -> anyhow::Result<SimBench> {
+    let t = Instant::now();
+    let scene = Scene::build(map, &SceneOptions::default(), seed).context("building the scene")?;
+    let scene_seconds = t.elapsed().as_secs_f64();
+    let poses = scene
+        .sample_sidewalk_poses(scans, seed)
+        .context("placing scanner poses")?;
+    let sensor = SensorOptions::default();
+    let t = Instant::now();
+    let (mut rays, mut points) = (0, 0);
+    for (i, pose) in poses.iter().enumerate() {
+        let (_, stats) = scan_with(&scene, pose, &sensor, seed + i as u64, ScanFrame::World)
+            .context("scanning")?;
+        rays += stats.rays;
+        points += stats.points;
+    }
+    let cast_seconds = t.elapsed().as_secs_f64();
+    Ok(SimBench {
+        map: name.to_string(),
+        scene_seconds,
+        shapes: scene.shape_count(),
+        scans: poses.len(),
+        rays,
+        points,
+        cast_seconds,
+        rays_per_second: rays as f64 / cast_seconds.max(1e-9),
+        threads: rayon::current_num_threads(),
+    })
+}
+
+fn bench(map: Option<&Path>, scans: usize, seed: u64, json: bool) -> anyhow::Result<()> {
+    let (map, name) = match map {
+        Some(path) => (
+            OsmMap::load(path).with_context(|| format!("loading the map {}", path.display()))?,
+            path.display().to_string(),
+        ),
+        None => (
+            geodata::city::default_city_map().context("generating the embedded default city")?,
+            "embedded default city".to_string(),
+        ),
+    };
+    let b = measure(&map, &name, scans, seed)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&b)?);
+    } else {
+        println!(
+            "{}: scene with {} shapes built in {:.2} s; {} scans, {:.1} M rays, {} points in {:.2} s on {} threads: {:.2} M rays/s (target ≥ 1.0)",
+            b.map,
+            b.shapes,
+            b.scene_seconds,
+            b.scans,
+            b.rays as f64 / 1e6,
+            b.points,
+            b.cast_seconds,
+            b.threads,
+            b.rays_per_second / 1e6
+        );
+    }
+    Ok(())
+}
+
+/// The demo's simulator stage: scans on the embedded default city, a map and a scan top view.
+pub(crate) fn demo_stage(
+    args: &crate::cmd::demo::DemoArgs,
+) -> anyhow::Result<crate::cmd::demo::StageOutput> {
+    use crate::report::{encode_png_rgb, Html, Svg};
+    use geodata::classes::Class;
+    use serde_json::json;
+
+    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let options = SceneOptions {
+        map_error: MapErrorOptions::osm_like(),
+        ..SceneOptions::default()
+    };
+    let scene = Scene::build(&map, &options, args.seed).context("building the scene")?;
+    let poses = scene
+        .sample_sidewalk_poses(6, args.seed)
+        .context("placing scanner poses")?;
+    let sensor = SensorOptions::default();
+    let started = Instant::now();
+    let mut clouds = Vec::new();
+    let mut rays = 0;
+    for (i, pose) in poses.iter().enumerate() {
+        let (cloud, stats) = scan_with(
+            &scene,
+            pose,
+            &sensor,
+            args.seed + i as u64,
+            ScanFrame::World,
+        )
+        .context("scanning")?;
+        rays += stats.rays;
+        clouds.push(cloud);
+    }
+    let cast_seconds = started.elapsed().as_secs_f64();
+    let mut histogram = [0usize; Class::COUNT];
+    for cloud in &clouds {
+        for (k, n) in cloud.class_histogram().iter().enumerate() {
+            histogram[k] += n;
+        }
+    }
+    let points: usize = histogram.iter().sum();
+
+    // The figures show the scan that sees most building points.
+    let building_points = |c: &geodata::cloud::PointCloud| {
+        c.label.as_deref().map_or(0, |l| {
+            l.iter().filter(|&&v| v == Class::Building.id()).count()
+        })
+    };
+    let shown = (0..clouds.len())
+        .max_by_key(|&i| (building_points(&clouds[i]), std::cmp::Reverse(i)))
+        .unwrap_or(0);
+    // Map around that pose: true streets and sidewalks, world buildings, map outlines.
+    let centre = [poses[shown].position[0], poses[shown].position[1]];
+    let half = 110.0;
+    let (min, max) = (
+        [centre[0] - half, centre[1] - half],
+        [centre[0] + half, centre[1] + half],
+    );
+    let mut svg = Svg::new(700.0, min, max);
+    let ppm = svg.pixels_per_metre();
+    for (seg, t) in scene.segments.iter().zip(&scene.truth) {
+        if !t.on_ground {
+            continue;
+        }
+        let line = geodata::sim::truth::offset_centre_line(seg, t);
+        let sidewalk_px = (t.width_m + 2.0 * if t.drivable { t.sidewalk_m } else { 0.0 }) * ppm;
+        svg.polyline(
+            &line,
+            &format!("stroke:#c8c6c2;stroke-width:{sidewalk_px:.1};stroke-linecap:round"),
+        );
+    }
+    for (seg, t) in scene.segments.iter().zip(&scene.truth) {
+        if t.on_ground && t.drivable {
+            let line = geodata::sim::truth::offset_centre_line(seg, t);
+            svg.polyline(
+                &line,
+                &format!(
+                    "stroke:#5a5a62;stroke-width:{:.1};stroke-linecap:round",
+                    t.width_m * ppm
+                ),
+            );
+        }
+    }
+    for b in &scene.buildings {
+        svg.polygon(&b.outer, "fill:#c98c3c;fill-opacity:0.85;stroke:none");
+    }
+    for b in &map.buildings {
+        svg.polygon(
+            &b.outer,
+            "fill:none;stroke:#d02020;stroke-width:0.8;stroke-dasharray:3,2",
+        );
+    }
+    for o in &scene.objects {
+        let [r, g, b] = o.class.color_rgb();
+        let (sn, cs) = o.yaw_rad.sin_cos();
+        let [hx, hy, _] = o.half_extents;
+        let corners: Vec<[f64; 2]> = [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]]
+            .iter()
+            .map(|q| {
+                [
+                    o.centre[0] + cs * q[0] - sn * q[1],
+                    o.centre[1] + sn * q[0] + cs * q[1],
+                ]
+            })
+            .collect();
+        svg.polygon(
+            &corners,
+            &format!("fill:rgb({r},{g},{b});fill-opacity:0.8;stroke:none"),
+        );
+    }
+    for p in &poses {
+        let (s, c) = p.yaw_rad.sin_cos();
+        svg.polyline(
+            &[
+                [p.position[0], p.position[1]],
+                [p.position[0] + 8.0 * c, p.position[1] + 8.0 * s],
+            ],
+            "stroke:#1040c0;stroke-width:2",
+        );
+        svg.circle([p.position[0], p.position[1]], 4.0, "fill:#1040c0");
+    }
+    svg.scale_bar(50.0);
+    let map_svg = svg.finish();
+
+    // Top view of the first scan, coloured by class (the highest point per pixel wins).
+    let side = 640usize;
+    let metres_per_px = 80.0 / side as f64;
+    let mut top = vec![f64::NEG_INFINITY; side * side];
+    let mut rgb = vec![255u8; side * side * 3];
+    let cloud = &clouds[shown];
+    let labels = cloud.label.as_deref().unwrap_or(&[]);
+    for (p, &l) in cloud.positions.iter().zip(labels) {
+        let x = ((p[0] - centre[0]) / metres_per_px + side as f64 / 2.0).floor();
+        let y = (side as f64 / 2.0 - (p[1] - centre[1]) / metres_per_px).floor();
+        if x < 0.0 || y < 0.0 || x >= side as f64 || y >= side as f64 {
+            continue;
+        }
+        let i = y as usize * side + x as usize;
+        if p[2] > top[i] {
+            top[i] = p[2];
+            let c = Class::from_id(l).unwrap_or(Class::Unlabelled).color_rgb();
+            rgb[3 * i..3 * i + 3].copy_from_slice(&c);
+        }
+    }
+    let png = encode_png_rgb(side as u32, side as u32, &rgb);
+    let legend: String = Class::ALL[1..]
+        .iter()
+        .map(|c| {
+            let [r, g, b] = c.color_rgb();
+            format!(
+                r#"<span style="display:inline-block;width:10px;height:10px;background:rgb({r},{g},{b})"></span> {} "#,
+                c.name()
+            )
+        })
+        .collect();
+    let rays_per_second = rays as f64 / cast_seconds.max(1e-9);
+    let class_counts: serde_json::Map<String, serde_json::Value> = Class::ALL
+        .iter()
+        .map(|c| (c.name().to_string(), json!(histogram[c.id() as usize])))
+        .collect();
+    Ok(crate::cmd::demo::StageOutput {
+        key: "simulator",
+        summary: json!({
+            "scans": clouds.len(),
+            "rays": rays,
+            "points": points,
+            "cast_seconds": cast_seconds,
+            "rays_per_second": rays_per_second,
+            "objects": scene.objects.len(),
+            "map_error": {
+                "removed_buildings": scene.map_error.removed.len(),
+                "extra_buildings": scene.map_error.extra,
+                "mean_shift_m": scene.map_error.mean_shift_m,
+            },
+            "points_per_class": class_counts,
+        }),
+        title: "geodata: simulated laser scans with ground truth",
+        text_html: format!(
+            "The world built from the map: true street areas (dark: driving area, light: \
+             sidewalks; offset and width per segment), buildings as they are in the world \
+             (filled) against the map's outlines (dashed red: the OSM map-error model shifted \
+             them by {:.2} m on average, removed {} and added {}), and {} clutter objects the map \
+             does not have (cars, trees, poles, bicycles, pedestrians, construction fences). \
+             Blue: {} scanner poses on sidewalks. {} rays cast in {:.2} s \
+             (<b>{:.2} M rays/s</b>), {} labelled points. Right: top view of the scan at the centre of the map \
+             (80 m × 80 m), coloured by label: {}",
+            scene.map_error.mean_shift_m,
+            scene.map_error.removed.len(),
+            scene.map_error.extra,
+            scene.objects.len(),
+            clouds.len(),
+            rays,
+            cast_seconds,
+            rays_per_second / 1e6,
+            points,
+            legend
+        ),
+        figures: vec![
+            map_svg.clone(),
+            Html::png_img(&png, "top view of a simulated scan", side as u32),
+        ],
+        files: vec![
+            ("sim-map.svg", map_svg.into_bytes()),
+            ("sim-scan-top.png", png),
+        ],
+    })
 }
