@@ -2,3 +2,219 @@
 //!
 //! Where it sits in the pipeline: reads the OSM map and the scan through `geodata`, and
 //! returns ranked candidate poses in the map's local frame (and WGS84).
+//!
+//! Stages, one module each, in data-flow order:
+//!
+//! - [`surfaces`]: voxel downsampling, normals per occupied cell, cells with a horizontal
+//!   normal (vertical surfaces) projected to the ground plane (§5.3.2).
+//! - [`segments`]: one 2-D histogram per normal-yaw bin, the progressive probabilistic Hough
+//!   transform (Matas et al. 2000) per histogram, merging of near-coincident segments.
+//! - [`chamfer`]: map edges from the outlines and the directional distance-transform tensor
+//!   of FDCM (Liu et al., CVPR 2010) with integral DTs and a lower-bound pyramid.
+//! - [`candidates`]: exact branch-and-bound search of d_DCM (eq. 5.3) over rotation ×
+//!   translation, every pose within a factor of the minimum, non-maximum suppression,
+//!   filtering by buildings and streets (§5.3.4).
+//! - [`visibility`]: the map edges visible from a position (angular sweep with occlusion).
+//! - [`rank`]: forward, reverse and symmetric costs (eqs. 5.4, 5.5) per candidate, ranking,
+//!   confidence.
+//! - [`refine`]: continuous 2-D alignment of the best candidates.
+//! - [`hashing`]: the geometric-hashing baseline of Cham et al. (2010).
+//! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables.
+
+pub mod candidates;
+pub mod chamfer;
+pub mod eval;
+pub mod hashing;
+pub mod pipeline;
+pub mod rank;
+pub mod refine;
+pub mod segments;
+pub mod surfaces;
+pub mod visibility;
+
+use serde::Serialize;
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// A 2-D line segment, metres, in whatever frame its owner says.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Segment {
+    /// Start point.
+    pub a: [f64; 2],
+    /// End point.
+    pub b: [f64; 2],
+}
+
+impl Segment {
+    /// A segment from `a` to `b`.
+    pub fn new(a: [f64; 2], b: [f64; 2]) -> Segment {
+        Segment { a, b }
+    }
+
+    /// Length in metres.
+    pub fn length(&self) -> f64 {
+        (self.b[0] - self.a[0]).hypot(self.b[1] - self.a[1])
+    }
+
+    /// Orientation of the line in [0, π) radians (direction sign ignored).
+    pub fn orientation_rad(&self) -> f64 {
+        wrap_pi(f64::atan2(self.b[1] - self.a[1], self.b[0] - self.a[0]))
+    }
+
+    /// The segment moved by a 2-D pose (rotation by `yaw_rad`, then translation).
+    pub fn transformed(&self, pose: &Pose2) -> Segment {
+        Segment {
+            a: pose.apply(self.a),
+            b: pose.apply(self.b),
+        }
+    }
+
+    /// Euclidean distance from a point to the segment.
+    pub fn distance_to(&self, p: [f64; 2]) -> f64 {
+        point_segment_distance(p, self.a, self.b)
+    }
+}
+
+/// A planar pose: the sensor's position and heading in the map's local frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Pose2 {
+    /// East, metres.
+    pub x: f64,
+    /// North, metres.
+    pub y: f64,
+    /// Heading counter-clockwise from the local frame's x axis (grid east), radians.
+    pub yaw_rad: f64,
+}
+
+impl Pose2 {
+    /// Maps a point from the sensor frame into the map frame.
+    pub fn apply(&self, p: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.yaw_rad.sin_cos();
+        [c * p[0] - s * p[1] + self.x, s * p[0] + c * p[1] + self.y]
+    }
+
+    /// Distance between the positions, metres.
+    pub fn distance_to(&self, other: &Pose2) -> f64 {
+        (self.x - other.x).hypot(self.y - other.y)
+    }
+
+    /// Absolute heading difference in [0, π], radians.
+    pub fn yaw_error_to(&self, other: &Pose2) -> f64 {
+        angle_diff(self.yaw_rad, other.yaw_rad)
+    }
+}
+
+/// Absolute difference of two angles in [0, π].
+pub fn angle_diff(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::TAU);
+    d.min(std::f64::consts::TAU - d)
+}
+
+/// Absolute difference of two line orientations (period π) in [0, π/2].
+pub fn orientation_diff(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::PI);
+    d.min(std::f64::consts::PI - d)
+}
+
+/// An angle wrapped into [0, π).
+pub fn wrap_pi(a: f64) -> f64 {
+    let w = a.rem_euclid(std::f64::consts::PI);
+    if w >= std::f64::consts::PI {
+        0.0
+    } else {
+        w
+    }
+}
+
+/// Euclidean distance from `p` to the segment `a`–`b`.
+pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+/// Why localization could not run.
+#[derive(Debug, Error)]
+pub enum LocalizeError {
+    /// A scan point is NaN or infinite.
+    #[error(
+        "scan point {index} is not finite ({value:?}); check the scan file for NaN coordinates"
+    )]
+    NonFinitePoint {
+        /// Index of the point in the scan.
+        index: usize,
+        /// Its coordinates.
+        value: [f64; 3],
+    },
+    /// An option is out of range.
+    #[error("invalid localization option {name} = {value}: {expected}")]
+    InvalidOption {
+        /// Option name.
+        name: &'static str,
+        /// Value given.
+        value: f64,
+        /// What is accepted.
+        expected: &'static str,
+    },
+    /// The map's distance-transform grid would be too large.
+    #[error("the map spans {width_m:.0} m × {height_m:.0} m, more than {max_cells} grid cells at {grid_m} m; use a coarser grid or a smaller extract")]
+    MapTooLarge {
+        /// Width of the edge bounding box, metres.
+        width_m: f64,
+        /// Height of the edge bounding box, metres.
+        height_m: f64,
+        /// Grid resolution, metres.
+        grid_m: f64,
+        /// Cell limit.
+        max_cells: usize,
+    },
+    /// A dataset file is malformed or missing.
+    #[error("{path}: {message}")]
+    Dataset {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Reading a point cloud failed.
+    #[error(transparent)]
+    Cloud(#[from] geodata::cloud::CloudError),
+    /// Reading an OSM map failed.
+    #[error(transparent)]
+    Osm(#[from] geodata::osm::OsmError),
+    /// Reading a real dataset failed.
+    #[error(transparent)]
+    RealDataset(#[from] geodata::datasets::DatasetError),
+}
+
+/// Result type of this crate.
+pub type Result<T> = std::result::Result<T, LocalizeError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_applies_rotation_then_translation() {
+        let pose = Pose2 {
+            x: 10.0,
+            y: -2.0,
+            yaw_rad: std::f64::consts::FRAC_PI_2,
+        };
+        let p = pose.apply([1.0, 0.0]);
+        assert!((p[0] - 10.0).abs() < 1e-12 && (p[1] + 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn angle_helpers() {
+        assert!((angle_diff(0.1, std::f64::consts::TAU - 0.1) - 0.2).abs() < 1e-12);
+        assert!((orientation_diff(0.05, std::f64::consts::PI - 0.05) - 0.1).abs() < 1e-12);
+        let s = Segment::new([1.0, 1.0], [0.0, 0.0]);
+        assert!((s.orientation_rad() - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
+    }
+}

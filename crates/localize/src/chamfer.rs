@@ -1,0 +1,588 @@
+//! Map edges and the directional distance-transform tensor of Fast Directional Chamfer
+//! Matching (Liu, Tuzel, Veeraraghavan, Chellappa, "Fast directional chamfer matching",
+//! CVPR 2010, doi:10.1109/CVPR.2010.5539837), with a lower-bound pyramid for the search.
+//!
+//! The tensor has one channel per quantized edge orientation (default 12 over [0, π)). Channel
+//! c at cell x holds `min_e |x − e| + λ·max(0, Δφ(φ_c, φ_e) − w/2)`, truncated at τ, over the
+//! map edges e (exact point-to-segment distances from the cell centre; w the channel width),
+//! so for any template orientation inside channel c the value is at most the continuous
+//! directional cost of eq. 5.3. Values are stored as u8 in units of τ/255. Building the
+//! tensor costs O(Σ_e (|e| + 2τ)·2τ / grid²) per channel; channels run in parallel.
+//!
+//! [`IntegralDt`] holds FDCM's integral distance transforms along each channel's direction,
+//! so the sum of a channel over a digital line is two look-ups.
+//!
+//! [`BoundPyramid`] level h (stride s = 2^h) holds, per channel, the minimum of the tensor over
+//! the window of 2s × 2s cells starting at each multiple of s: every s × s window (aligned or
+//! not) lies inside one of them, which gives the lower bounds of the branch-and-bound search.
+
+use crate::{orientation_diff, LocalizeError, Result, Segment};
+use geodata::osm::OsmMap;
+use rayon::prelude::*;
+
+/// Options of the distance-transform tensor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChamferOptions {
+    /// Grid cell size, metres.
+    pub grid_m: f64,
+    /// Number of orientation channels over [0, π).
+    pub channels: usize,
+    /// Orientation penalty λ, metres per radian.
+    pub lambda_m_per_rad: f64,
+    /// Truncation τ of the distance, metres.
+    pub truncation_m: f64,
+    /// Largest number of grid cells (per channel).
+    pub max_cells: usize,
+}
+
+impl Default for ChamferOptions {
+    fn default() -> Self {
+        ChamferOptions {
+            grid_m: 0.5,
+            channels: 12,
+            lambda_m_per_rad: 2.0,
+            truncation_m: 3.0,
+            max_cells: 64_000_000,
+        }
+    }
+}
+
+/// The building outline edges (outer and inner rings) of a map, in its local frame.
+pub fn map_edges(map: &OsmMap) -> Vec<Segment> {
+    let mut edges = Vec::new();
+    for b in &map.buildings {
+        for ring in std::iter::once(&b.outer).chain(b.inners.iter()) {
+            for (i, &a) in ring.iter().enumerate() {
+                let Some(&b) = ring.get((i + 1) % ring.len()) else {
+                    continue;
+                };
+                let s = Segment::new(a, b);
+                if s.length() > 1e-6 && a.iter().chain(b.iter()).all(|v| v.is_finite()) {
+                    edges.push(s);
+                }
+            }
+        }
+    }
+    edges
+}
+
+/// Bounding box `(min, max)` of segments, `None` when empty.
+pub fn bounding_box(segments: &[Segment]) -> Option<([f64; 2], [f64; 2])> {
+    let mut it = segments.iter().flat_map(|s| [s.a, s.b]);
+    let first = it.next()?;
+    Some(it.fold((first, first), |(lo, hi), p| {
+        (
+            [lo[0].min(p[0]), lo[1].min(p[1])],
+            [hi[0].max(p[0]), hi[1].max(p[1])],
+        )
+    }))
+}
+
+/// The directional distance-transform tensor (u8, units of τ/255).
+#[derive(Debug, Clone)]
+pub struct DtTensor {
+    /// Lower-left corner of cell (0, 0), metres in the map frame.
+    pub origin: [f64; 2],
+    /// Cell size, metres.
+    pub grid_m: f64,
+    /// Cells along x.
+    pub width: usize,
+    /// Cells along y.
+    pub height: usize,
+    /// Orientation channels.
+    pub channels: usize,
+    /// Stored units per metre (255 / τ).
+    pub units_per_m: f64,
+    /// λ, metres per radian.
+    pub lambda_m_per_rad: f64,
+    data: Vec<u8>,
+}
+
+impl DtTensor {
+    /// Builds the tensor over the edges' bounding box plus τ (cells outside hold τ).
+    pub fn build(edges: &[Segment], options: &ChamferOptions) -> Result<DtTensor> {
+        let checks = [
+            ("grid_m", options.grid_m, options.grid_m > 0.0),
+            (
+                "truncation_m",
+                options.truncation_m,
+                options.truncation_m > 0.0,
+            ),
+            (
+                "lambda_m_per_rad",
+                options.lambda_m_per_rad,
+                options.lambda_m_per_rad >= 0.0,
+            ),
+            (
+                "channels",
+                options.channels as f64,
+                (1..=255).contains(&options.channels),
+            ),
+        ];
+        for (name, value, ok) in checks {
+            if !ok || !value.is_finite() {
+                return Err(LocalizeError::InvalidOption {
+                    name,
+                    value,
+                    expected: "a positive finite number (channels 1..=255, λ ≥ 0)",
+                });
+            }
+        }
+        let tau = options.truncation_m;
+        let (min, max) = bounding_box(edges).unwrap_or(([0.0, 0.0], [0.0, 0.0]));
+        let origin = [min[0] - tau - options.grid_m, min[1] - tau - options.grid_m];
+        let width = ((max[0] + tau - origin[0]) / options.grid_m).ceil() as usize + 2;
+        let height = ((max[1] + tau - origin[1]) / options.grid_m).ceil() as usize + 2;
+        if width.saturating_mul(height) > options.max_cells {
+            return Err(LocalizeError::MapTooLarge {
+                width_m: max[0] - min[0],
+                height_m: max[1] - min[1],
+                grid_m: options.grid_m,
+                max_cells: options.max_cells,
+            });
+        }
+        let channels = options.channels;
+        let bin = std::f64::consts::PI / channels as f64;
+        let units_per_m = 255.0 / tau;
+        let edge_channels: Vec<(Segment, f64)> =
+            edges.iter().map(|e| (*e, e.orientation_rad())).collect();
+        let mut data = vec![255u8; width * height * channels];
+        let g = options.grid_m;
+        data.par_chunks_mut(width * height)
+            .enumerate()
+            .for_each(|(c, plane)| {
+                let phi_c = c as f64 * bin;
+                let mut dist = vec![tau as f32; width * height];
+                for (e, phi_e) in &edge_channels {
+                    let pen = options.lambda_m_per_rad
+                        * (orientation_diff(phi_c, *phi_e) - 0.5 * bin).max(0.0);
+                    if pen >= tau {
+                        continue;
+                    }
+                    let reach = tau - pen;
+                    let lo = [e.a[0].min(e.b[0]) - reach, e.a[1].min(e.b[1]) - reach];
+                    let hi = [e.a[0].max(e.b[0]) + reach, e.a[1].max(e.b[1]) + reach];
+                    let x0 = (((lo[0] - origin[0]) / g).floor().max(0.0)) as usize;
+                    let y0 = (((lo[1] - origin[1]) / g).floor().max(0.0)) as usize;
+                    let x1 = ((((hi[0] - origin[0]) / g).ceil()) as usize).min(width - 1);
+                    let y1 = ((((hi[1] - origin[1]) / g).ceil()) as usize).min(height - 1);
+                    for y in y0..=y1 {
+                        let cy = origin[1] + (y as f64 + 0.5) * g;
+                        let row = &mut dist[y * width..(y + 1) * width];
+                        for (x, cell) in row.iter_mut().enumerate().take(x1 + 1).skip(x0) {
+                            let cx = origin[0] + (x as f64 + 0.5) * g;
+                            let v = (e.distance_to([cx, cy]) + pen) as f32;
+                            if v < *cell {
+                                *cell = v;
+                            }
+                        }
+                    }
+                }
+                for (out, d) in plane.iter_mut().zip(&dist) {
+                    *out = ((*d as f64).min(tau) * units_per_m).round() as u8;
+                }
+            });
+        Ok(DtTensor {
+            origin,
+            grid_m: g,
+            width,
+            height,
+            channels,
+            units_per_m,
+            lambda_m_per_rad: options.lambda_m_per_rad,
+            data,
+        })
+    }
+
+    /// The channel of a line orientation (radians, any value; period π).
+    pub fn channel_of(&self, orientation_rad: f64) -> usize {
+        let bin = std::f64::consts::PI / self.channels as f64;
+        let k = (crate::wrap_pi(orientation_rad) / bin).round() as usize;
+        k % self.channels
+    }
+
+    /// The cell containing a map point (may be outside the grid).
+    pub fn cell_of(&self, p: [f64; 2]) -> (i64, i64) {
+        (
+            ((p[0] - self.origin[0]) / self.grid_m).floor() as i64,
+            ((p[1] - self.origin[1]) / self.grid_m).floor() as i64,
+        )
+    }
+
+    /// The lower-left corner of a cell, metres in the map frame.
+    pub fn corner_of(&self, x: i64, y: i64) -> [f64; 2] {
+        [
+            self.origin[0] + x as f64 * self.grid_m,
+            self.origin[1] + y as f64 * self.grid_m,
+        ]
+    }
+
+    /// The stored value (units of τ/255) of a channel at a cell; τ (255) outside the grid.
+    #[inline]
+    pub fn get(&self, c: usize, x: i64, y: i64) -> u8 {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height {
+            return 255;
+        }
+        self.data
+            .get((c * self.height + y as usize) * self.width + x as usize)
+            .copied()
+            .unwrap_or(255)
+    }
+
+    /// Value in metres of a channel at a map point.
+    pub fn value_m(&self, c: usize, p: [f64; 2]) -> f64 {
+        let (x, y) = self.cell_of(p);
+        self.get(c, x, y) as f64 / self.units_per_m
+    }
+
+    /// Memory held, bytes.
+    pub fn bytes(&self) -> usize {
+        self.data.len()
+    }
+}
+
+/// Integral distance transforms of FDCM: per channel, the running sum of the channel along
+/// digital lines in the channel's direction.
+#[derive(Debug, Clone)]
+pub struct IntegralDt {
+    width: usize,
+    height: usize,
+    /// Per channel, the running sums.
+    sums: Vec<Vec<u32>>,
+    /// Per channel, each pixel's predecessor on its digital line (`u32::MAX`: none).
+    prev: Vec<Vec<u32>>,
+}
+
+impl IntegralDt {
+    /// Builds the integral DTs of every channel (O(cells · channels)).
+    pub fn build(dt: &DtTensor) -> IntegralDt {
+        let (w, h) = (dt.width, dt.height);
+        let bin = std::f64::consts::PI / dt.channels as f64;
+        let per_channel: Vec<(Vec<u32>, Vec<u32>)> = (0..dt.channels)
+            .into_par_iter()
+            .map(|c| {
+                let phi = c as f64 * bin;
+                let (dx, dy) = (phi.cos(), phi.sin());
+                let mut sums = vec![0u32; w * h];
+                let mut prev = vec![u32::MAX; w * h];
+                // Each pixel's predecessor is one step back along the direction, rounded.
+                let x_major = dx.abs() >= dy.abs();
+                let order: Vec<usize> = if x_major {
+                    (0..w)
+                        .flat_map(|x| (0..h).map(move |y| y * w + x))
+                        .collect()
+                } else {
+                    (0..h)
+                        .flat_map(|y| (0..w).map(move |x| y * w + x))
+                        .collect()
+                };
+                for idx in order {
+                    let (x, y) = ((idx % w) as i64, (idx / w) as i64);
+                    let (px, py) = if x_major {
+                        (x - 1, y - step_offset(x, dy / dx))
+                    } else {
+                        (x - step_offset(y, dx / dy), y - 1)
+                    };
+                    let v = dt.get(c, x, y) as u32;
+                    if px >= 0 && py >= 0 && (px as usize) < w && (py as usize) < h {
+                        let p = py as usize * w + px as usize;
+                        sums[idx] = sums[p] + v;
+                        prev[idx] = p as u32;
+                    } else {
+                        sums[idx] = v;
+                    }
+                }
+                (sums, prev)
+            })
+            .collect();
+        let (sums, prev) = per_channel.into_iter().unzip();
+        IntegralDt {
+            width: w,
+            height: h,
+            sums,
+            prev,
+        }
+    }
+
+    /// Sum of channel `c` over the digital line of `steps` + 1 pixels ending at (x, y),
+    /// walking back along the channel direction: O(steps) only to find the start, O(1) sums.
+    pub fn line_sum(&self, c: usize, x: usize, y: usize, steps: usize) -> Option<u32> {
+        let (sums, prev) = (self.sums.get(c)?, self.prev.get(c)?);
+        let end = y.checked_mul(self.width)?.checked_add(x)?;
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        let mut start = end;
+        for _ in 0..steps {
+            let p = *prev.get(start)?;
+            if p == u32::MAX {
+                return None;
+            }
+            start = p as usize;
+        }
+        let before = match *prev.get(start)? {
+            u32::MAX => 0,
+            p => *sums.get(p as usize)?,
+        };
+        Some(sums.get(end)? - before)
+    }
+
+    /// The pixels of the digital line of `steps` + 1 pixels ending at (x, y), last first.
+    pub fn line_pixels(&self, c: usize, x: usize, y: usize, steps: usize) -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        let Some(prev) = self.prev.get(c) else {
+            return out;
+        };
+        let mut idx = y * self.width + x;
+        out.push((x, y));
+        for _ in 0..steps {
+            match prev.get(idx) {
+                Some(&p) if p != u32::MAX => {
+                    idx = p as usize;
+                    out.push((idx % self.width, idx / self.width));
+                }
+                _ => break,
+            }
+        }
+        out
+    }
+}
+
+/// The minor-axis step taken when the major coordinate moves from `m - 1` to `m` on the
+/// digital line of slope `slope` through the origin.
+fn step_offset(m: i64, slope: f64) -> i64 {
+    (m as f64 * slope).round() as i64 - ((m - 1) as f64 * slope).round() as i64
+}
+
+/// Multi-resolution lower bounds of a [`DtTensor`] (see the module doc).
+#[derive(Debug, Clone)]
+pub struct BoundPyramid {
+    levels: Vec<BoundLevel>,
+    /// Exact minimum over the 2 × 2 cells starting at each cell (cell −1 stored at 0).
+    fine: BoundLevel,
+}
+
+#[derive(Debug, Clone)]
+struct BoundLevel {
+    /// Stored blocks along x (block index −1 ..= n − 2 stored at 0 ..= n − 1).
+    w: usize,
+    h: usize,
+    data: Vec<u8>,
+}
+
+impl BoundPyramid {
+    /// Builds levels 1 ..= `top` (level 0 is the tensor itself).
+    pub fn build(dt: &DtTensor, top: u32) -> BoundPyramid {
+        let mut levels: Vec<BoundLevel> = Vec::new();
+        for h in 1..=top {
+            let s = 1i64 << h;
+            let nw = (dt.width as i64 + s - 1) / s + 1;
+            let nh = (dt.height as i64 + s - 1) / s + 1;
+            let (w, hh) = (nw as usize, nh as usize);
+            let mut data = vec![255u8; w * hh * dt.channels];
+            let prev = levels.last();
+            data.par_chunks_mut(w * hh)
+                .enumerate()
+                .for_each(|(c, plane)| {
+                    for bj in 0..hh {
+                        for bi in 0..w {
+                            let (i, j) = (bi as i64 - 1, bj as i64 - 1);
+                            let mut m = 255u8;
+                            match prev {
+                                None => {
+                                    for y in (2 * j)..(2 * j + 4) {
+                                        for x in (2 * i)..(2 * i + 4) {
+                                            m = m.min(dt.get(c, x, y));
+                                        }
+                                    }
+                                }
+                                Some(p) => {
+                                    for y in [2 * j, 2 * j + 2] {
+                                        for x in [2 * i, 2 * i + 2] {
+                                            m = m.min(p.get(dt.channels, c, x, y));
+                                        }
+                                    }
+                                }
+                            }
+                            plane[bj * w + bi] = m;
+                        }
+                    }
+                });
+            levels.push(BoundLevel { w, h: hh, data });
+        }
+        let (w, hh) = (dt.width + 1, dt.height + 1);
+        let mut data = vec![255u8; w * hh * dt.channels];
+        data.par_chunks_mut(w * hh)
+            .enumerate()
+            .for_each(|(c, plane)| {
+                for bj in 0..hh {
+                    for bi in 0..w {
+                        let (i, j) = (bi as i64 - 1, bj as i64 - 1);
+                        plane[bj * w + bi] = dt
+                            .get(c, i, j)
+                            .min(dt.get(c, i + 1, j))
+                            .min(dt.get(c, i, j + 1))
+                            .min(dt.get(c, i + 1, j + 1));
+                    }
+                }
+            });
+        BoundPyramid {
+            levels,
+            fine: BoundLevel { w, h: hh, data },
+        }
+    }
+
+    /// Minimum of channel `c` over the 2 × 2 cells starting at cell (x, y); 255 beyond the grid.
+    #[inline]
+    pub fn get_fine(&self, channels: usize, c: usize, x: i64, y: i64) -> u8 {
+        self.fine.get(channels, c, x, y)
+    }
+
+    /// Highest level.
+    pub fn top(&self) -> u32 {
+        self.levels.len() as u32
+    }
+
+    /// Lower bound of channel `c` over every cell window of size 2^level starting in block
+    /// `(bi, bj)` (block index = cell index >> level); 255 beyond the grid.
+    #[inline]
+    pub fn get(&self, channels: usize, level: u32, c: usize, bi: i64, bj: i64) -> u8 {
+        match self.levels.get(level as usize - 1) {
+            Some(l) => l.get(channels, c, bi, bj),
+            None => 0,
+        }
+    }
+
+    /// Memory held, bytes.
+    pub fn bytes(&self) -> usize {
+        self.levels.iter().map(|l| l.data.len()).sum::<usize>() + self.fine.data.len()
+    }
+}
+
+impl BoundLevel {
+    #[inline]
+    fn get(&self, _channels: usize, c: usize, bi: i64, bj: i64) -> u8 {
+        let (x, y) = (bi + 1, bj + 1);
+        if x < 0 || y < 0 || x as usize >= self.w || y as usize >= self.h {
+            return 255;
+        }
+        self.data
+            .get((c * self.h + y as usize) * self.w + x as usize)
+            .copied()
+            .unwrap_or(255)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn random_edges(rng: &mut ChaCha8Rng, n: usize, span: f64) -> Vec<Segment> {
+        (0..n)
+            .map(|_| {
+                let a = [rng.gen_range(0.0..span), rng.gen_range(0.0..span)];
+                let ang: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
+                let l = rng.gen_range(2.0..15.0);
+                Segment::new(a, [a[0] + l * ang.cos(), a[1] + l * ang.sin()])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn tensor_matches_the_direct_directional_distance() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let edges = random_edges(&mut rng, 15, 40.0);
+        let o = ChamferOptions::default();
+        let dt = DtTensor::build(&edges, &o).unwrap();
+        let bin = std::f64::consts::PI / o.channels as f64;
+        for _ in 0..2000 {
+            let x = rng.gen_range(0..dt.width as i64);
+            let y = rng.gen_range(0..dt.height as i64);
+            let c = rng.gen_range(0..o.channels);
+            let centre = [
+                dt.origin[0] + (x as f64 + 0.5) * o.grid_m,
+                dt.origin[1] + (y as f64 + 0.5) * o.grid_m,
+            ];
+            let direct = edges
+                .iter()
+                .map(|e| {
+                    e.distance_to(centre)
+                        + o.lambda_m_per_rad
+                            * (orientation_diff(c as f64 * bin, e.orientation_rad()) - 0.5 * bin)
+                                .max(0.0)
+                })
+                .fold(o.truncation_m, f64::min);
+            let stored = dt.get(c, x, y) as f64 / dt.units_per_m;
+            assert!(
+                (stored - direct).abs() <= 0.5 / dt.units_per_m + 1e-6,
+                "{stored} vs {direct}"
+            );
+        }
+    }
+
+    #[test]
+    fn pyramid_bounds_every_window() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let edges = random_edges(&mut rng, 10, 30.0);
+        let dt = DtTensor::build(&edges, &ChamferOptions::default()).unwrap();
+        let pyr = BoundPyramid::build(&dt, 4);
+        for _ in 0..3000 {
+            let level = rng.gen_range(1..=4u32);
+            let s = 1i64 << level;
+            let x = rng.gen_range(-20..dt.width as i64 + 20);
+            let y = rng.gen_range(-20..dt.height as i64 + 20);
+            let c = rng.gen_range(0..dt.channels);
+            let mut true_min = 255u8;
+            for yy in y..y + s {
+                for xx in x..x + s {
+                    true_min = true_min.min(dt.get(c, xx, yy));
+                }
+            }
+            let lb = pyr.get(dt.channels, level, c, x >> level, y >> level);
+            assert!(
+                lb <= true_min,
+                "level {level} at ({x},{y}): {lb} > {true_min}"
+            );
+            if level == 1 {
+                assert_eq!(pyr.get_fine(dt.channels, c, x, y), true_min);
+            }
+        }
+    }
+
+    #[test]
+    fn integral_line_sums_equal_direct_sums() {
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let edges = random_edges(&mut rng, 10, 30.0);
+        let dt = DtTensor::build(&edges, &ChamferOptions::default()).unwrap();
+        let idt = IntegralDt::build(&dt);
+        for _ in 0..500 {
+            let c = rng.gen_range(0..dt.channels);
+            let x = rng.gen_range(0..dt.width);
+            let y = rng.gen_range(0..dt.height);
+            let steps = rng.gen_range(0..20);
+            let pixels = idt.line_pixels(c, x, y, steps);
+            if pixels.len() != steps + 1 {
+                assert_eq!(idt.line_sum(c, x, y, steps), None);
+                continue;
+            }
+            let direct: u32 = pixels
+                .iter()
+                .map(|&(px, py)| dt.get(c, px as i64, py as i64) as u32)
+                .sum();
+            assert_eq!(idt.line_sum(c, x, y, steps), Some(direct));
+            // Consecutive pixels are neighbours along the channel direction.
+            for w in pixels.windows(2) {
+                let (dx, dy) = (w[0].0 as i64 - w[1].0 as i64, w[0].1 as i64 - w[1].1 as i64);
+                assert!(dx.abs() <= 1 && dy.abs() <= 1 && (dx, dy) != (0, 0));
+            }
+        }
+    }
+
+    #[test]
+    fn empty_edge_set_gives_a_constant_tensor() {
+        let dt = DtTensor::build(&[], &ChamferOptions::default()).unwrap();
+        assert!((0..dt.width as i64).all(|x| dt.get(0, x, 0) == 255));
+    }
+}

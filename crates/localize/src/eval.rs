@@ -1,0 +1,256 @@
+//! Evaluation inputs and measures: simulated `localization` datasets (`dataset.json`,
+//! `truth.json`, `scan_NNN.ply`), the real MCD `kth_day_06` scans levelled into the sensor
+//! frame with their documented poses, and N_accurate of thesis §5.4.3.
+
+use crate::{LocalizeError, Pose2, Result};
+use geodata::datasets::mcd::McdSequence;
+use geodata::osm::OsmMap;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// One scan of an evaluation set: its name, true pose and points (sensor frame, levelled).
+#[derive(Debug, Clone)]
+pub struct EvalScan {
+    /// Scan file name (or MCD frame number).
+    pub name: String,
+    /// True pose in the map's local frame (yaw from grid east).
+    pub truth: Pose2,
+    /// Points in the gravity-levelled sensor frame.
+    pub points: Vec<[f64; 3]>,
+}
+
+fn dataset_err(path: &Path, message: impl Into<String>) -> LocalizeError {
+    LocalizeError::Dataset {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    let text = std::fs::read_to_string(path).map_err(|e| dataset_err(path, e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| {
+        dataset_err(
+            path,
+            format!(
+                "invalid JSON at line {} column {}: {e}",
+                e.line(),
+                e.column()
+            ),
+        )
+    })
+}
+
+/// A simulated `localization` dataset folder.
+#[derive(Debug, Clone)]
+pub struct SimDataset {
+    /// The folder.
+    pub dir: PathBuf,
+    /// The map file (resolved: as given, or relative to the folder).
+    pub map_path: PathBuf,
+    /// Scan names with their true poses, sorted by name.
+    pub truth: Vec<(String, Pose2)>,
+}
+
+impl SimDataset {
+    /// Reads `dataset.json` and `truth.json`.
+    pub fn open(dir: impl AsRef<Path>) -> Result<SimDataset> {
+        let dir = dir.as_ref().to_path_buf();
+        let meta_path = dir.join("dataset.json");
+        let meta = read_json(&meta_path)?;
+        let kind = meta.get("kind").and_then(Value::as_str).unwrap_or("");
+        if kind != "localization" {
+            return Err(dataset_err(
+                &meta_path,
+                format!("\"kind\" is {kind:?}, expected \"localization\""),
+            ));
+        }
+        let map = meta
+            .get("map")
+            .and_then(Value::as_str)
+            .ok_or_else(|| dataset_err(&meta_path, "missing string \"map\""))?;
+        let mut map_path = PathBuf::from(map);
+        if !map_path.exists() && dir.join(map).exists() {
+            map_path = dir.join(map);
+        }
+        let truth_path = dir.join("truth.json");
+        let truth_v = read_json(&truth_path)?;
+        let obj = truth_v
+            .as_object()
+            .ok_or_else(|| dataset_err(&truth_path, "expected an object of scan name → pose"))?;
+        let mut truth = Vec::new();
+        for (name, v) in obj {
+            let num = |k: &str| -> Result<f64> {
+                v.get(k)
+                    .and_then(Value::as_f64)
+                    .filter(|x| x.is_finite())
+                    .ok_or_else(|| {
+                        dataset_err(
+                            &truth_path,
+                            format!("{name}: missing or non-finite \"{k}\""),
+                        )
+                    })
+            };
+            let yaw = match v.get("yaw_grid").and_then(Value::as_f64) {
+                Some(y) => y,
+                None => num("yaw")?,
+            };
+            truth.push((
+                name.clone(),
+                Pose2 {
+                    x: num("x")?,
+                    y: num("y")?,
+                    yaw_rad: yaw,
+                },
+            ));
+        }
+        truth.sort_by(|a, b| a.0.cmp(&b.0));
+        Ok(SimDataset {
+            dir,
+            map_path,
+            truth,
+        })
+    }
+
+    /// Loads one scan's points.
+    pub fn load(&self, index: usize) -> Result<EvalScan> {
+        let (name, truth) = self
+            .truth
+            .get(index)
+            .ok_or_else(|| dataset_err(&self.dir, format!("no scan {index}")))?;
+        let cloud = geodata::cloud::read_cloud(self.dir.join(name))?;
+        Ok(EvalScan {
+            name: name.clone(),
+            truth: *truth,
+            points: cloud.positions,
+        })
+    }
+}
+
+/// Whether a folder is an MCD sequence (has `pose_inW.csv`).
+pub fn is_mcd(dir: &Path) -> bool {
+    dir.join("pose_inW.csv").exists()
+}
+
+/// The MCD scans of a sequence (every `stride`-th frame), levelled into the sensor frame with
+/// their documented poses in the map's local frame.
+pub fn mcd_scans(dir: &Path, map: &OsmMap, stride: usize) -> Result<Vec<EvalScan>> {
+    let seq = McdSequence::open(dir)?;
+    let frames = seq.frames()?;
+    let mut out = Vec::new();
+    for f in frames.into_iter().step_by(stride.max(1)) {
+        let scan = seq.load_scan(f)?;
+        let iso = scan.local_from_sensor(&map.frame);
+        let (_, _, yaw) = iso.rotation.euler_angles();
+        let t = iso.translation.vector;
+        let mut cloud = scan.cloud.clone();
+        cloud.transform(&iso);
+        let (s, c) = yaw.sin_cos();
+        let points = cloud
+            .positions
+            .iter()
+            .map(|p| {
+                let (dx, dy, dz) = (p[0] - t.x, p[1] - t.y, p[2] - t.z);
+                [c * dx + s * dy, -s * dx + c * dy, dz]
+            })
+            .collect();
+        out.push(EvalScan {
+            name: format!("{f:010}"),
+            truth: Pose2 {
+                x: t.x,
+                y: t.y,
+                yaw_rad: yaw.rem_euclid(std::f64::consts::TAU),
+            },
+            points,
+        });
+    }
+    Ok(out)
+}
+
+/// Thresholds of an accurate pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Accuracy {
+    /// Largest position error, metres.
+    pub max_m: f64,
+    /// Largest heading error, radians.
+    pub max_rad: f64,
+}
+
+impl Accuracy {
+    /// The thesis' thresholds for the chamfer methods: 4 m, 0.2 rad.
+    pub const THESIS: Accuracy = Accuracy {
+        max_m: 4.0,
+        max_rad: 0.2,
+    };
+    /// The thesis' thresholds for the hashing baseline: 5 m, π/6.
+    pub const HASHING: Accuracy = Accuracy {
+        max_m: 5.0,
+        max_rad: std::f64::consts::FRAC_PI_6,
+    };
+
+    /// Whether `pose` is accurate with respect to `truth`.
+    pub fn accepts(&self, pose: &Pose2, truth: &Pose2) -> bool {
+        pose.distance_to(truth) <= self.max_m && pose.yaw_error_to(truth) <= self.max_rad
+    }
+}
+
+/// Whether one of the `k` best-ranked poses within `w` metres of the truth is accurate
+/// (thesis §5.4.3); `ranked` is best first.
+pub fn accurate_within(ranked: &[Pose2], truth: &Pose2, k: usize, w: f64, acc: Accuracy) -> bool {
+    ranked
+        .iter()
+        .filter(|p| p.distance_to(truth) <= w)
+        .take(k)
+        .any(|p| acc.accepts(p, truth))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn n_accurate_counts_within_radius() {
+        let truth = Pose2 {
+            x: 0.0,
+            y: 0.0,
+            yaw_rad: 0.0,
+        };
+        let far = Pose2 {
+            x: 300.0,
+            y: 0.0,
+            yaw_rad: 0.0,
+        };
+        let near_bad = Pose2 {
+            x: 30.0,
+            y: 0.0,
+            yaw_rad: 0.0,
+        };
+        let good = Pose2 {
+            x: 1.0,
+            y: 1.0,
+            yaw_rad: 0.1,
+        };
+        let ranked = [far, near_bad, good];
+        assert!(!accurate_within(
+            &ranked,
+            &truth,
+            1,
+            f64::INFINITY,
+            Accuracy::THESIS
+        ));
+        assert!(accurate_within(
+            &ranked,
+            &truth,
+            3,
+            f64::INFINITY,
+            Accuracy::THESIS
+        ));
+        assert!(!accurate_within(&ranked, &truth, 1, 50.0, Accuracy::THESIS));
+        assert!(accurate_within(&ranked, &truth, 1, 10.0, Accuracy::THESIS));
+    }
+
+    #[test]
+    fn missing_dataset_names_the_file() {
+        let err = SimDataset::open("/nonexistent/dir").unwrap_err();
+        assert!(err.to_string().contains("dataset.json"), "{err}");
+    }
+}
