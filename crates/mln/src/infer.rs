@@ -3,14 +3,16 @@
 
 use crate::ground::{GroundProblem, Scores};
 use crate::walksat::{max_walk_sat, max_walk_sat_frozen, monomial_factors, Factor, WalkSatOptions};
-use pbo::qssr::{solve, QssrOptions};
+use pbo::qssr::{search_residue, solve, QssrOptions};
 use pbo::quadratize::Quadratizer;
+use pbo::tabu::TabuOptions;
 use std::time::Instant;
 
 /// Which MAP algorithm to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// Quadratize → QPBO → QSSR → probe → improve.
+    /// Quadratize → QPBO → QSSR → probe → improve; then each residue component is
+    /// enumerated (≤ 20 atoms) or improved by tabu search.
     #[default]
     Qpbo,
     /// MaxWalkSAT on ground formulas (Alchemy style).
@@ -104,6 +106,9 @@ pub struct InferOptions {
     pub probe: bool,
     /// QPBO-I rounds on the residue.
     pub improve_rounds: usize,
+    /// QPBO method: tabu-search flips per chain on each residue component too large to
+    /// enumerate (0: none); chains as in `walksat.chains`.
+    pub tabu_moves: usize,
     /// MaxWalkSAT settings (also the seed of every random step).
     pub walksat: WalkSatOptions,
     /// QPBO method: flips of a MaxWalkSAT polish on the ground formulas, started from the
@@ -120,6 +125,7 @@ impl Default for InferOptions {
             representation: Representation::Auto,
             probe: false,
             improve_rounds: 50,
+            tabu_moves: 20_000,
             walksat: WalkSatOptions::default(),
             polish_flips: 0,
         }
@@ -192,6 +198,22 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
                 }
             };
             let mut assignment = r.assignment;
+            if options.tabu_moves > 0 && !r.exact {
+                // On the literal form whichever representation won: the same function,
+                // and no 2^k expansion of long clauses.
+                search_residue(
+                    &problem.cost,
+                    &r.persistent,
+                    &mut assignment,
+                    qssr.exact_residue_vars,
+                    &TabuOptions {
+                        moves: options.tabu_moves,
+                        chains: options.walksat.chains,
+                        seed: options.walksat.seed,
+                        ..TabuOptions::default()
+                    },
+                );
+            }
             if options.polish_flips > 0 && r.labelled_fraction < 1.0 {
                 let frozen: Vec<bool> = r.persistent.iter().map(Option::is_some).collect();
                 let (x, _) = max_walk_sat_frozen(

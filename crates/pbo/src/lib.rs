@@ -8,6 +8,7 @@
 //! - [`maxflow`]: Boykov–Kolmogorov max-flow / min-cut with tree reuse.
 //! - [`qpbo`]: roof duality on the doubled graph, probing (QPBO-P) and improve (QPBO-I).
 //! - [`qssr`]: iterated quadratize → QPBO → fix persistencies in the original function.
+//! - [`tabu`]: one-flip tabu search and Gray-code enumeration with incremental gains.
 //! - [`opb`]: the pseudo-Boolean competition `.opb` objective format.
 //! - [`instances`]: seeded benchmark instances (denoising grid, random sparse, 3-D segmentation).
 
@@ -18,3 +19,4 @@ pub mod polynomial;
 pub mod qpbo;
 pub mod qssr;
 pub mod quadratize;
+pub mod tabu;

@@ -20,9 +20,11 @@
 //! assert_eq!(r.labelled_fraction, 1.0);
 //! ```
 
-use crate::polynomial::Polynomial;
+use crate::polynomial::{Literal, Polynomial};
 use crate::qpbo::{ImproveOptions, Label, ProbeOptions, Qpbo};
 use crate::quadratize::{quadratize, Quadratization, Quadratizer};
+use crate::tabu::{enumerate_minimum, tabu_search, TabuOptions};
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Options of [`solve`].
@@ -40,8 +42,11 @@ pub struct QssrOptions {
     pub seed: u64,
     /// At most this many QSSR rounds.
     pub max_rounds: usize,
-    /// Enumerate the residue exactly when at most this many free variables remain.
+    /// Enumerate a connected component of the residue exactly when it has at most this
+    /// many variables (at most 30).
     pub exact_residue_vars: usize,
+    /// Tabu search on each larger component of the residue after QPBO-I (`moves` 0: off).
+    pub tabu: TabuOptions,
 }
 
 impl Default for QssrOptions {
@@ -53,7 +58,11 @@ impl Default for QssrOptions {
             improve_rounds: 0,
             seed: 0,
             max_rounds: 100,
-            exact_residue_vars: 16,
+            exact_residue_vars: 20,
+            tabu: TabuOptions {
+                moves: 0,
+                ..TabuOptions::default()
+            },
         }
     }
 }
@@ -270,15 +279,16 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
         .enumerate()
         .filter_map(|(v, &o)| o.then_some(v))
         .collect();
-    let exact = free.len() <= options.exact_residue_vars;
-    if free.is_empty() {
-        // Everything that matters is persistent.
-    } else if exact {
-        enumerate_residue(&residual, &free, &mut assignment);
-        lower_bound = residual.evaluate(&assignment);
-    } else if options.improve_rounds > 0 {
+    let components = split_components(&residual, &free);
+    let max_exact = options.exact_residue_vars.min(30);
+    let exact = components.iter().all(|c| c.vars.len() <= max_exact);
+    if !exact && options.improve_rounds > 0 {
         let quad = quadratize(&residual, options.quadratizer);
         improve_residue(&quad, &mut assignment, options);
+    }
+    solve_components(&components, max_exact, &options.tabu, &mut assignment);
+    if exact {
+        lower_bound = residual.evaluate(&assignment);
     }
     seconds.improve = t2.elapsed().as_secs_f64();
 
@@ -304,22 +314,112 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
     }
 }
 
-/// Sets the free variables of the residue to a minimiser by enumerating all 2ᵏ values.
-fn enumerate_residue(residual: &Polynomial, free: &[usize], assignment: &mut [bool]) {
-    let mut x = assignment.to_vec();
-    let mut best = (f64::INFINITY, 0u64);
-    for mask in 0u64..(1u64 << free.len()) {
-        for (k, &v) in free.iter().enumerate() {
-            x[v] = mask >> k & 1 == 1;
-        }
-        let e = residual.evaluate(&x);
-        if e < best.0 {
-            best = (e, mask);
+/// Improves `assignment` on the residue of `f` after fixing `persistent` (as returned by
+/// [`solve`]): each connected component of the residue with at most `exact_vars` (≤ 30)
+/// variables is set to its minimum by enumeration, each larger one is improved by tabu
+/// search (if `tabu.moves` > 0) from its values in `assignment`. Components run in
+/// parallel; the result is never worse than `assignment`.
+pub fn search_residue(
+    f: &Polynomial,
+    persistent: &[Option<bool>],
+    assignment: &mut [bool],
+    exact_vars: usize,
+    tabu: &TabuOptions,
+) {
+    let residual = f.fix(persistent);
+    let free: Vec<usize> = residual
+        .occurring_vars()
+        .iter()
+        .enumerate()
+        .filter_map(|(v, &o)| o.then_some(v))
+        .collect();
+    let components = split_components(&residual, &free);
+    solve_components(&components, exact_vars.min(30), tabu, assignment);
+}
+
+/// Enumerates the small components and runs tabu search on the others, in parallel.
+fn solve_components(
+    components: &[Component],
+    max_exact: usize,
+    tabu: &TabuOptions,
+    assignment: &mut [bool],
+) {
+    let solved: Vec<Vec<bool>> = components
+        .par_iter()
+        .map(|c| {
+            let mut x: Vec<bool> = c.vars.iter().map(|&v| assignment[v]).collect();
+            if c.vars.len() <= max_exact {
+                let all: Vec<usize> = (0..c.vars.len()).collect();
+                enumerate_minimum(&c.poly, &all, &mut x);
+            } else if tabu.moves > 0 {
+                x = tabu_search(&c.poly, &x, tabu);
+            }
+            x
+        })
+        .collect();
+    for (c, x) in components.iter().zip(solved) {
+        for (&v, b) in c.vars.iter().zip(x) {
+            assignment[v] = b;
         }
     }
-    for (k, &v) in free.iter().enumerate() {
-        assignment[v] = best.1 >> k & 1 == 1;
+}
+
+/// A connected component of the residue: its variables and its terms over local indices.
+struct Component {
+    /// Residue variables; local variable i is `vars[i]`.
+    vars: Vec<usize>,
+    /// The component's terms (no constant) over local variables.
+    poly: Polynomial,
+}
+
+/// Splits `f` (whose occurring variables are `free`) into connected components of its
+/// variable–term graph, in order of their smallest variable.
+fn split_components(f: &Polynomial, free: &[usize]) -> Vec<Component> {
+    let n = f.num_vars();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut v: usize) -> usize {
+        while parent[v] != v {
+            parent[v] = parent[parent[v]];
+            v = parent[v];
+        }
+        v
     }
+    for (lits, _) in f.terms() {
+        let a = root(&mut parent, lits[0].var() as usize);
+        for l in &lits[1..] {
+            let b = root(&mut parent, l.var() as usize);
+            if a != b {
+                parent[b] = a;
+            }
+        }
+    }
+    let mut component_of = vec![usize::MAX; n];
+    let mut local = vec![0u32; n];
+    let mut components: Vec<Component> = Vec::new();
+    for &v in free {
+        let r = root(&mut parent, v);
+        if component_of[r] == usize::MAX {
+            component_of[r] = components.len();
+            components.push(Component {
+                vars: Vec::new(),
+                poly: Polynomial::new(0),
+            });
+        }
+        let c = &mut components[component_of[r]];
+        local[v] = c.vars.len() as u32;
+        c.vars.push(v);
+    }
+    let mut buffer = Vec::new();
+    for (lits, a) in f.terms() {
+        let c = component_of[root(&mut parent, lits[0].var() as usize)];
+        buffer.clear();
+        buffer.extend(
+            lits.iter()
+                .map(|l| Literal::new(local[l.var() as usize], !l.is_negated())),
+        );
+        components[c].poly.add_term(a, &buffer);
+    }
+    components
 }
 
 /// Runs QPBO-I on the quadratized residue, starting from `assignment`, and writes the
@@ -385,6 +485,48 @@ mod tests {
             prop_assert!(r.exact);
             prop_assert!((r.energy - min).abs() < 1e-9, "energy {} vs min {min}", r.energy);
             prop_assert!((r.lower_bound - min).abs() < 1e-9);
+        }
+    }
+
+    proptest! {
+        /// Components are solved separately: small ones exactly, larger ones by tabu search,
+        /// which reaches the optimum on these sizes and never loses to QPBO-I alone.
+        #[test]
+        fn residue_components_are_solved(f in arb_higher_order(10), seed in any::<u64>()) {
+            let (min, _) = f.brute_force_minimum();
+            let base = QssrOptions { exact_residue_vars: 3, improve_rounds: 5, seed, ..QssrOptions::default() };
+            let plain = solve(&f, &base);
+            let tabu = TabuOptions { moves: 2_000, seed, ..TabuOptions::default() };
+            let r = solve(&f, &QssrOptions { tabu, ..base });
+            prop_assert!(r.energy <= plain.energy + 1e-9);
+            prop_assert!((r.energy - min).abs() < 1e-9, "energy {} vs min {min}", r.energy);
+            prop_assert!(r.lower_bound <= min + 1e-9);
+        }
+    }
+
+    #[test]
+    fn components_partition_the_residue() {
+        use crate::polynomial::Literal as L;
+        let mut f = Polynomial::new(7);
+        f.add_term(1.0, &[L::pos(0), L::neg(3)]);
+        f.add_term(-2.0, &[L::pos(1), L::pos(5), L::neg(6)]);
+        f.add_term(0.5, &[L::neg(3)]);
+        f.add_term(4.0, &[L::pos(6)]);
+        let free = [0, 1, 3, 5, 6];
+        let cs = split_components(&f, &free);
+        assert_eq!(cs.len(), 2);
+        assert_eq!(cs[0].vars, vec![0, 3]);
+        assert_eq!(cs[1].vars, vec![1, 5, 6]);
+        for m in 0u32..128 {
+            let x: Vec<bool> = (0..7).map(|i| m >> i & 1 == 1).collect();
+            let sum: f64 = cs
+                .iter()
+                .map(|c| {
+                    c.poly
+                        .evaluate(&c.vars.iter().map(|&v| x[v]).collect::<Vec<_>>())
+                })
+                .sum();
+            assert_eq!(sum, f.evaluate(&x));
         }
     }
 

@@ -109,6 +109,10 @@ pub struct InferArgs {
     /// QPBO-I rounds on the residue (qpbo method).
     #[arg(long, default_value_t = 50)]
     pub improve: usize,
+    /// Tabu-search flips per chain on each residue component of the qpbo method that is too
+    /// large to enumerate (0: none).
+    #[arg(long, default_value_t = 20_000, value_name = "MOVES")]
+    pub tabu: usize,
     /// MaxWalkSAT flips polishing the qpbo answer (persistent atoms frozen; 0: none).
     #[arg(long, default_value_t = 0, value_name = "FLIPS")]
     pub polish: usize,
@@ -273,6 +277,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
         probe: args.probe,
         improve_rounds: args.improve,
         polish_flips: args.polish,
+        tabu_moves: args.tabu,
         ..InferOptions::default()
     };
     options.walksat.seed = args.seed;
