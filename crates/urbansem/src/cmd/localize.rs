@@ -1,16 +1,868 @@
 //! `urbansem localize …`: global localization of a scan on OSM building outlines (issue 6).
+//!
+//! - `urbansem localize --map MAP --scan SCAN [--cost dcm|forward|reverse|symmetric] [--top K] [--json] [--svg FILE]`
+//! - `urbansem localize eval --dataset DIR [--map MAP] [--method …] [--json] [--figures DIR]`
+//!   (DIR: a simulated `localization` dataset, or an MCD sequence folder with `--map`).
 
-use clap::Args;
+use crate::report::Svg;
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand, ValueEnum};
+use geodata::osm::OsmMap;
+use localize::eval::{accurate_within, is_mcd, mcd_scans, Accuracy, EvalScan, SimDataset};
+use localize::hashing::{CornerIndex, HashingOptions};
+use localize::pipeline::{Localization, LocalizeOptions, Localizer};
+use localize::rank::{rank_order, CostKind, Costs};
+use localize::{Pose2, Segment};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 /// Arguments of `urbansem localize`.
 #[derive(Args)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct LocalizeArgs {
-    /// Arguments (the command is being built; see issue 6).
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
-    pub rest: Vec<String>,
+    /// `eval`: accuracy and timings over a dataset.
+    #[command(subcommand)]
+    pub command: Option<LocalizeCommand>,
+    /// Localize one scan.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// Subcommands of `urbansem localize`.
+#[derive(Subcommand)]
+pub enum LocalizeCommand {
+    /// Localize every scan of a dataset and print N_accurate, per-scan errors and timings.
+    Eval(EvalArgs),
+}
+
+/// The cost that ranks candidates.
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum CostArg {
+    /// d_DCM of the search (eq. 5.3).
+    Dcm,
+    /// Forward d_f (eq. 5.4).
+    Forward,
+    /// Reverse d_r (eq. 5.5).
+    Reverse,
+    /// Symmetric d_s.
+    Symmetric,
+}
+
+impl CostArg {
+    fn kind(self) -> CostKind {
+        match self {
+            CostArg::Dcm => CostKind::Dcm,
+            CostArg::Forward => CostKind::Forward,
+            CostArg::Reverse => CostKind::Reverse,
+            CostArg::Symmetric => CostKind::Symmetric,
+        }
+    }
+}
+
+/// Arguments of one localization.
+#[derive(Args)]
+pub struct RunArgs {
+    /// OSM map (.osm or .osm.pbf).
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Gravity-levelled scan in the sensor frame (PLY, PCD, LAS/LAZ, KITTI .bin).
+    #[arg(long)]
+    pub scan: Option<PathBuf>,
+    /// Cost that ranks the candidates.
+    #[arg(long, value_enum, default_value = "reverse")]
+    pub cost: CostArg,
+    /// Number of candidates printed.
+    #[arg(long, default_value_t = 10)]
+    pub top: usize,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a figure (extracted segments over the map at the chosen pose, candidates).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    /// Grid of the distance-transform tensor, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub grid_m: f64,
+}
+
+/// Methods of `localize eval`.
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum Method {
+    /// d_DCM, d_f, d_r, d_s and the hashing baseline.
+    All,
+    /// d_DCM.
+    Dcm,
+    /// d_f.
+    Forward,
+    /// d_r.
+    Reverse,
+    /// d_s.
+    Symmetric,
+    /// Geometric hashing (Cham et al. 2010).
+    Hashing,
+}
+
+/// Arguments of `urbansem localize eval`.
+#[derive(Args)]
+pub struct EvalArgs {
+    /// A `localization` dataset folder, or an MCD sequence folder (needs --map).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// OSM map; default: the dataset's `map`.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Methods to evaluate (repeatable).
+    #[arg(long, value_enum, default_values_t = [Method::All])]
+    pub method: Vec<Method>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Write one SVG per scan into this folder.
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Evaluate at most this many scans.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Grid of the distance-transform tensor, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub grid_m: f64,
 }
 
 /// Runs `urbansem localize`.
-pub fn run(_args: LocalizeArgs) -> anyhow::Result<()> {
-    anyhow::bail!("urbansem localize is not available in this build yet (issue 6)")
+pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
+    match args.command {
+        Some(LocalizeCommand::Eval(e)) => eval(e),
+        None => run_one(args.run),
+    }
+}
+
+fn options(cost: CostKind, grid_m: f64) -> LocalizeOptions {
+    let mut o = LocalizeOptions {
+        rank_by: cost,
+        ..LocalizeOptions::default()
+    };
+    o.chamfer.grid_m = grid_m;
+    o
+}
+
+fn candidate_json(map: &OsmMap, rank: usize, c: &localize::pipeline::Candidate) -> Value {
+    let xy = [c.pose.x, c.pose.y];
+    let (lat, lon) = map.frame.to_wgs84(xy);
+    let yaw_geo =
+        (c.pose.yaw_rad + map.frame.convergence_rad(xy)).rem_euclid(std::f64::consts::TAU);
+    json!({
+        "rank": rank + 1,
+        "x": c.pose.x,
+        "y": c.pose.y,
+        "lat": lat,
+        "lon": lon,
+        "yaw": yaw_geo,
+        "yaw_grid": c.pose.yaw_rad,
+        "dcm": c.costs.dcm,
+        "forward": c.costs.forward,
+        "reverse": c.costs.reverse,
+        "symmetric": c.costs.symmetric,
+        "refined": c.refined,
+        "confidence": c.confidence,
+    })
+}
+
+fn run_one(args: RunArgs) -> anyhow::Result<()> {
+    let (Some(map_path), Some(scan_path)) = (&args.map, &args.scan) else {
+        bail!("urbansem localize needs --map MAP and --scan SCAN (or the `eval` subcommand)");
+    };
+    let t = Instant::now();
+    let map = OsmMap::load(map_path)
+        .with_context(|| format!("loading the map {}", map_path.display()))?;
+    let load_map_s = t.elapsed().as_secs_f64();
+    let localizer = Localizer::new(&map, options(args.cost.kind(), args.grid_m))
+        .with_context(|| format!("preparing the map {}", map_path.display()))?;
+    let t = Instant::now();
+    let cloud = geodata::cloud::read_cloud(scan_path)
+        .with_context(|| format!("reading the scan {}", scan_path.display()))?;
+    let read_scan_s = t.elapsed().as_secs_f64();
+    let result = localizer
+        .localize_points(&cloud.positions)
+        .with_context(|| format!("localizing {}", scan_path.display()))?;
+    if let Some(svg_path) = &args.svg {
+        let svg = figure(&localizer, &result, None, 100.0);
+        std::fs::write(svg_path, svg).with_context(|| format!("writing {}", svg_path.display()))?;
+    }
+    let top: Vec<Value> = result
+        .candidates
+        .iter()
+        .take(args.top)
+        .enumerate()
+        .map(|(i, c)| candidate_json(&map, i, c))
+        .collect();
+    let s = &result.seconds;
+    if args.json {
+        let v = json!({
+            "map": map_path.display().to_string(),
+            "scan": scan_path.display().to_string(),
+            "cost": result.rank_by.name(),
+            "candidates": top,
+            "candidate_count": result.candidates.len(),
+            "confidence": result.confidence,
+            "segments": result.segments.len(),
+            "vertical_cells": result.vertical_cells,
+            "raw_poses": result.raw_poses,
+            "after_suppression": result.after_suppression,
+            "filtered": result.filtered,
+            "search": result.search,
+            "message": result.message,
+            "seconds": {
+                "load_map": load_map_s,
+                "map_edges": localizer.seconds.edges,
+                "distance_transform": localizer.seconds.distance_transform,
+                "pyramid": localizer.seconds.pyramid,
+                "read_scan": read_scan_s,
+                "surfaces": s.surfaces,
+                "segments": s.segments,
+                "templates": s.templates,
+                "search": s.search,
+                "filter": s.filter,
+                "visibility_costs": s.visibility_costs,
+                "refine": s.refine,
+                "total": s.total,
+            },
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "{}: {} points, {} vertical cells, {} segments; {} raw poses → {} after suppression → {} candidates (ranked by {})",
+        scan_path.display(),
+        cloud.len(),
+        result.vertical_cells,
+        result.segments.len(),
+        result.raw_poses,
+        result.after_suppression,
+        result.candidates.len(),
+        result.rank_by.name()
+    );
+    if let Some(m) = &result.message {
+        println!("note: {m}");
+    }
+    println!(
+        "{:>4} {:>10} {:>10} {:>11} {:>11} {:>8} {:>7} {:>7} {:>7} {:>7}",
+        "rank", "x", "y", "lat", "lon", "yaw°", "dcm", "fwd", "rev", "sym"
+    );
+    for v in &top {
+        let f = |k: &str| v.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+        println!(
+            "{:>4} {:>10.2} {:>10.2} {:>11.6} {:>11.6} {:>8.2} {:>7.3} {:>7.3} {:>7.3} {:>7.3}",
+            f("rank"),
+            f("x"),
+            f("y"),
+            f("lat"),
+            f("lon"),
+            f("yaw").to_degrees(),
+            f("dcm"),
+            f("forward"),
+            f("reverse"),
+            f("symmetric")
+        );
+    }
+    println!("confidence {:.3}", result.confidence);
+    println!(
+        "seconds: map load {load_map_s:.2}, edges {:.3}, DT tensor {:.3}, pyramid {:.3}, scan read {read_scan_s:.3}, surfaces {:.3}, segments {:.3}, templates {:.3}, search {:.3}, filter {:.3}, visibility+costs {:.3}, refine {:.3}, total {:.3}",
+        localizer.seconds.edges,
+        localizer.seconds.distance_transform,
+        localizer.seconds.pyramid,
+        s.surfaces,
+        s.segments,
+        s.templates,
+        s.search,
+        s.filter,
+        s.visibility_costs,
+        s.refine,
+        s.total
+    );
+    Ok(())
+}
+
+/// A figure of one result: map outlines (grey), edges visible from the chosen pose (black),
+/// scan segments at the chosen pose (red), candidates (blue; the best larger), truth (green).
+fn figure(
+    localizer: &Localizer<'_>,
+    result: &Localization,
+    truth: Option<Pose2>,
+    half_m: f64,
+) -> String {
+    let centre = result
+        .candidates
+        .first()
+        .map(|c| [c.pose.x, c.pose.y])
+        .or(truth.map(|t| [t.x, t.y]))
+        .unwrap_or([0.0, 0.0]);
+    let (min, max) = (
+        [centre[0] - half_m, centre[1] - half_m],
+        [centre[0] + half_m, centre[1] + half_m],
+    );
+    let mut svg = Svg::new(600.0, min, max);
+    for b in &localizer.map.buildings {
+        if b.outer
+            .iter()
+            .any(|p| p[0] > min[0] && p[0] < max[0] && p[1] > min[1] && p[1] < max[1])
+        {
+            svg.polygon(&b.outer, "fill:#e6e0d4;stroke:#9a9a9a;stroke-width:1");
+        }
+    }
+    for s in &localizer.map.streets.segments {
+        svg.polyline(&[s.a, s.b], "stroke:#ffffff;stroke-width:2");
+    }
+    if let Some(best) = result.candidates.first() {
+        for v in localizer.visible_from([best.pose.x, best.pose.y]) {
+            svg.polyline(&[v.a, v.b], "stroke:#222;stroke-width:2");
+        }
+        for s in &result.segments {
+            let m: Segment = s.transformed(&best.pose);
+            svg.polyline(
+                &[m.a, m.b],
+                "stroke:#d62728;stroke-width:2.5;stroke-opacity:0.85",
+            );
+        }
+    }
+    for c in result.candidates.iter().skip(1).take(200) {
+        svg.circle([c.pose.x, c.pose.y], 3.0, "fill:#6baed6;fill-opacity:0.7");
+    }
+    if let Some(t) = truth {
+        svg.circle([t.x, t.y], 6.0, "fill:none;stroke:#2ca02c;stroke-width:2.5");
+    }
+    if let Some(best) = result.candidates.first() {
+        svg.circle([best.pose.x, best.pose.y], 5.0, "fill:#1f4e9c");
+        let tip = best.pose.apply([8.0, 0.0]);
+        svg.polyline(
+            &[[best.pose.x, best.pose.y], tip],
+            "stroke:#1f4e9c;stroke-width:2",
+        );
+    }
+    svg.scale_bar(20.0);
+    svg.finish()
+}
+
+/// Per-scan evaluation record.
+struct ScanRecord {
+    name: String,
+    truth: Pose2,
+    /// Candidate poses ranked by each cost (dcm, forward, reverse, symmetric).
+    ranked: [Vec<Pose2>; 4],
+    /// Best costs of the top candidate by reverse.
+    top_costs: Option<Costs>,
+    hashing: Vec<Pose2>,
+    result: Localization,
+    hashing_s: f64,
+}
+
+const RADII: [f64; 6] = [50.0, 100.0, 200.0, 500.0, 1000.0, f64::INFINITY];
+const KS: [usize; 3] = [1, 5, 10];
+
+fn radius_name(w: f64) -> String {
+    if w.is_finite() {
+        format!("{w:.0}")
+    } else {
+        "map".into()
+    }
+}
+
+fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    let methods: Vec<Method> = if args.method.contains(&Method::All) || args.method.is_empty() {
+        vec![
+            Method::Dcm,
+            Method::Forward,
+            Method::Reverse,
+            Method::Symmetric,
+            Method::Hashing,
+        ]
+    } else {
+        args.method.clone()
+    };
+    let mcd = is_mcd(&args.dataset);
+    let (map_path, sim) = if mcd {
+        let Some(m) = args.map.clone() else {
+            bail!(
+                "{} is an MCD sequence; give the map with --map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)",
+                args.dataset.display()
+            );
+        };
+        (m, None)
+    } else {
+        let d = SimDataset::open(&args.dataset)
+            .with_context(|| format!("opening the dataset {}", args.dataset.display()))?;
+        (
+            args.map.clone().unwrap_or_else(|| d.map_path.clone()),
+            Some(d),
+        )
+    };
+    let t = Instant::now();
+    let map = OsmMap::load(&map_path)
+        .with_context(|| format!("loading the map {}", map_path.display()))?;
+    let load_map_s = t.elapsed().as_secs_f64();
+    let localizer = Localizer::new(&map, options(CostKind::Reverse, args.grid_m))
+        .with_context(|| format!("preparing the map {}", map_path.display()))?;
+    let t = Instant::now();
+    let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
+    let hashing_index_s = t.elapsed().as_secs_f64();
+    let mut scans: Vec<EvalScan> = Vec::new();
+    let count = match &sim {
+        Some(d) => d.truth.len(),
+        None => {
+            scans = mcd_scans(&args.dataset, &map, 1)
+                .with_context(|| format!("reading the MCD scans in {}", args.dataset.display()))?;
+            scans.len()
+        }
+    };
+    let count = args.limit.map_or(count, |l| l.min(count));
+    if let Some(dir) = &args.figures {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut records: Vec<ScanRecord> = Vec::new();
+    for i in 0..count {
+        let scan = match &sim {
+            Some(d) => d
+                .load(i)
+                .with_context(|| format!("loading scan {i} of {}", args.dataset.display()))?,
+            None => scans
+                .get(i)
+                .cloned()
+                .with_context(|| format!("MCD scan {i} missing"))?,
+        };
+        let result = localizer
+            .localize_points(&scan.points)
+            .with_context(|| format!("localizing {}", scan.name))?;
+        let costs: Vec<Costs> = result.candidates.iter().map(|c| c.costs).collect();
+        let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
+        let ranked = CostKind::ALL.map(|k| {
+            rank_order(&costs, &poses, k)
+                .into_iter()
+                .map(|j| poses[j])
+                .collect()
+        });
+        let t = Instant::now();
+        let hashing: Vec<Pose2> = if methods.contains(&Method::Hashing) {
+            hashing_index
+                .localize(&result.segments)
+                .into_iter()
+                .map(|(p, _)| p)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let hashing_s = t.elapsed().as_secs_f64();
+        if let Some(dir) = &args.figures {
+            let path = dir.join(format!("{}.svg", scan.name.trim_end_matches(".ply")));
+            std::fs::write(&path, figure(&localizer, &result, Some(scan.truth), 90.0))
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        let rec = ScanRecord {
+            name: scan.name.clone(),
+            truth: scan.truth,
+            ranked,
+            top_costs: result.candidates.first().map(|c| c.costs),
+            hashing,
+            result,
+            hashing_s,
+        };
+        if !args.json {
+            print_scan_line(&rec);
+        }
+        records.push(rec);
+    }
+    summarize(
+        &args,
+        &methods,
+        &map_path,
+        load_map_s,
+        hashing_index_s,
+        &localizer,
+        &records,
+        mcd,
+    )
+}
+
+fn top1_error(ranked: &[Pose2], truth: &Pose2) -> (f64, f64) {
+    ranked.first().map_or((f64::NAN, f64::NAN), |p| {
+        (p.distance_to(truth), p.yaw_error_to(truth).to_degrees())
+    })
+}
+
+fn print_scan_line(r: &ScanRecord) {
+    let mut line = format!(
+        "{:<14} segs {:>3} cands {:>5}",
+        r.name,
+        r.result.segments.len(),
+        r.result.candidates.len()
+    );
+    for (k, name) in ["dcm", "fwd", "rev", "sym"].iter().enumerate() {
+        let (m, d) = top1_error(&r.ranked[k], &r.truth);
+        line += &format!(" | {name} {m:>7.2} m {d:>6.2}°");
+    }
+    let (m, d) = top1_error(&r.hashing, &r.truth);
+    line += &format!(" | hash {m:>7.2} m {d:>6.2}°");
+    line += &format!(
+        " | conf {:.2} | {:.2} s",
+        r.result.confidence, r.result.seconds.total
+    );
+    if let Some(msg) = &r.result.message {
+        line += &format!(" | {msg}");
+    }
+    println!("{line}");
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+#[allow(clippy::too_many_arguments)]
+fn summarize(
+    args: &EvalArgs,
+    methods: &[Method],
+    map_path: &Path,
+    load_map_s: f64,
+    hashing_index_s: f64,
+    localizer: &Localizer<'_>,
+    records: &[ScanRecord],
+    mcd: bool,
+) -> anyhow::Result<()> {
+    let n = records.len();
+    let method_rows: Vec<(&str, Method)> = methods
+        .iter()
+        .filter_map(|m| match m {
+            Method::Dcm => Some(("dcm", *m)),
+            Method::Forward => Some(("forward", *m)),
+            Method::Reverse => Some(("reverse", *m)),
+            Method::Symmetric => Some(("symmetric", *m)),
+            Method::Hashing => Some(("hashing", *m)),
+            Method::All => None,
+        })
+        .collect();
+    let ranked_for = |r: &ScanRecord, m: Method| -> Vec<Pose2> {
+        match m {
+            Method::Dcm => r.ranked[0].clone(),
+            Method::Forward => r.ranked[1].clone(),
+            Method::Reverse => r.ranked[2].clone(),
+            Method::Symmetric => r.ranked[3].clone(),
+            Method::Hashing => r.hashing.clone(),
+            Method::All => Vec::new(),
+        }
+    };
+    let mut table = serde_json::Map::new();
+    for (name, m) in &method_rows {
+        let acc = if *m == Method::Hashing {
+            Accuracy::HASHING
+        } else {
+            Accuracy::THESIS
+        };
+        let mut per_k = serde_json::Map::new();
+        for k in KS {
+            let mut per_w = serde_json::Map::new();
+            for w in RADII {
+                let c = records
+                    .iter()
+                    .filter(|r| accurate_within(&ranked_for(r, *m), &r.truth, k, w, acc))
+                    .count();
+                per_w.insert(radius_name(w), json!(c));
+            }
+            per_k.insert(k.to_string(), Value::Object(per_w));
+        }
+        table.insert(name.to_string(), Value::Object(per_k));
+    }
+    let in_set = records
+        .iter()
+        .filter(|r| {
+            accurate_within(
+                &r.ranked[2],
+                &r.truth,
+                usize::MAX,
+                f64::INFINITY,
+                Accuracy::THESIS,
+            )
+        })
+        .count();
+    let strict = Accuracy {
+        max_m: 2.0,
+        max_rad: 3f64.to_radians(),
+    };
+    let strict_top1: Vec<usize> = (0..4)
+        .map(|k| {
+            records
+                .iter()
+                .filter(|r| {
+                    r.ranked[k]
+                        .first()
+                        .is_some_and(|p| strict.accepts(p, &r.truth))
+                })
+                .count()
+        })
+        .collect();
+    let accurate_top1_err: Vec<f64> = records
+        .iter()
+        .filter_map(|r| {
+            r.ranked[2]
+                .first()
+                .filter(|p| Accuracy::THESIS.accepts(p, &r.truth))
+                .map(|p| p.distance_to(&r.truth))
+        })
+        .collect();
+    let median_err = median(accurate_top1_err);
+    let stage = |f: &dyn Fn(&ScanRecord) -> f64| -> (f64, f64, f64) {
+        let v: Vec<f64> = records.iter().map(f).collect();
+        let mean = if v.is_empty() {
+            0.0
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        };
+        let max = v.iter().copied().fold(0.0, f64::max);
+        (mean, median(v), max)
+    };
+    type StageFn = fn(&ScanRecord) -> f64;
+    let stages: [(&str, StageFn); 9] = [
+        ("surfaces", |r| r.result.seconds.surfaces),
+        ("segments", |r| r.result.seconds.segments),
+        ("templates", |r| r.result.seconds.templates),
+        ("search", |r| r.result.seconds.search),
+        ("filter", |r| r.result.seconds.filter),
+        ("visibility_costs", |r| r.result.seconds.visibility_costs),
+        ("refine", |r| r.result.seconds.refine),
+        ("total", |r| r.result.seconds.total),
+        ("hashing", |r| r.hashing_s),
+    ];
+    let timing: Vec<(&str, (f64, f64, f64))> = stages.iter().map(|(n, f)| (*n, stage(f))).collect();
+    let threads = rayon::current_num_threads();
+    if args.json {
+        let scans: Vec<Value> = records
+            .iter()
+            .map(|r| {
+                let errs: serde_json::Map<String, Value> =
+                    ["dcm", "forward", "reverse", "symmetric"]
+                        .iter()
+                        .enumerate()
+                        .map(|(k, name)| {
+                            let (m, d) = top1_error(&r.ranked[k], &r.truth);
+                            (name.to_string(), json!({"error_m": m, "error_deg": d}))
+                        })
+                        .chain(std::iter::once({
+                            let (m, d) = top1_error(&r.hashing, &r.truth);
+                            ("hashing".to_string(), json!({"error_m": m, "error_deg": d}))
+                        }))
+                        .collect();
+                json!({
+                    "scan": r.name,
+                    "truth": {"x": r.truth.x, "y": r.truth.y, "yaw_grid": r.truth.yaw_rad},
+                    "segments": r.result.segments.len(),
+                    "raw_poses": r.result.raw_poses,
+                    "candidates": r.result.candidates.len(),
+                    "confidence": r.result.confidence,
+                    "top1": errs,
+                    "top_costs": r.top_costs,
+                    "message": r.result.message,
+                    "seconds": r.result.seconds,
+                    "hashing_seconds": r.hashing_s,
+                })
+            })
+            .collect();
+        let v = json!({
+            "dataset": args.dataset.display().to_string(),
+            "map": map_path.display().to_string(),
+            "scans": n,
+            "thresholds": {"chamfer": {"m": 4.0, "rad": 0.2}, "hashing": {"m": 5.0, "rad": std::f64::consts::FRAC_PI_6}},
+            "n_accurate": table,
+            "accurate_in_candidate_set": in_set,
+            "top1_within_2m_3deg": {"dcm": strict_top1[0], "forward": strict_top1[1], "reverse": strict_top1[2], "symmetric": strict_top1[3]},
+            "median_error_accurate_top1_reverse_m": median_err,
+            "map_seconds": {
+                "load_map": load_map_s,
+                "map_edges": localizer.seconds.edges,
+                "distance_transform": localizer.seconds.distance_transform,
+                "pyramid": localizer.seconds.pyramid,
+                "hashing_index": hashing_index_s,
+            },
+            "tensor": {"width": localizer.dt.width, "height": localizer.dt.height, "channels": localizer.dt.channels, "grid_m": localizer.dt.grid_m, "bytes": localizer.dt.bytes()},
+            "stage_seconds": timing.iter().map(|(n, (mean, med, max))| (n.to_string(), json!({"mean": mean, "median": med, "max": max}))).collect::<serde_json::Map<String, Value>>(),
+            "threads": threads,
+            "per_scan": scans,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!();
+    println!(
+        "{} scans of {} on {} ({})",
+        n,
+        args.dataset.display(),
+        map_path.display(),
+        if mcd { "real MCD scans" } else { "simulated" }
+    );
+    println!("N_accurate (thresholds 4 m / 0.2 rad; hashing 5 m / π/6), k best candidates within radius w (m) of the truth:");
+    let mut header = format!("{:<10} {:>3}", "method", "k");
+    for w in RADII {
+        header += &format!(" {:>6}", radius_name(w));
+    }
+    println!("{header}");
+    for (name, _) in &method_rows {
+        for k in KS {
+            let mut line = format!("{name:<10} {k:>3}");
+            for w in RADII {
+                let c = table
+                    .get(*name)
+                    .and_then(|v| v.get(k.to_string()))
+                    .and_then(|v| v.get(radius_name(w)))
+                    .and_then(Value::as_u64)
+                    .unwrap_or(0);
+                line += &format!(" {c:>6}");
+            }
+            println!("{line}");
+        }
+    }
+    println!(
+        "accurate candidate in the candidate set: {in_set}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; median error of accurate top-1 (reverse, refined) {median_err:.2} m",
+        strict_top1[0], strict_top1[1], strict_top1[2], strict_top1[3]
+    );
+    println!(
+        "map: load {load_map_s:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, hashing index {hashing_index_s:.3} s ({threads} threads)",
+        localizer.seconds.edges,
+        localizer.dt.width,
+        localizer.dt.height,
+        localizer.dt.channels,
+        localizer.dt.grid_m,
+        localizer.seconds.distance_transform,
+        localizer.seconds.pyramid
+    );
+    println!(
+        "{:<18} {:>9} {:>9} {:>9}",
+        "stage (s/scan)", "mean", "median", "max"
+    );
+    for (name, (mean, med, max)) in &timing {
+        println!("{name:<18} {mean:>9.4} {med:>9.4} {max:>9.4}");
+    }
+    Ok(())
+}
+
+/// The demo stage: simulated scans of the embedded default city (with the OSM map-error
+/// model) localized on its map without a prior.
+#[allow(dead_code)] // until `urbansem demo` lists the stage (demo.rs is the lead's)
+pub(crate) fn demo_stage(
+    args: &crate::cmd::demo::DemoArgs,
+) -> anyhow::Result<crate::cmd::demo::StageOutput> {
+    use geodata::sim::scene::{MapErrorOptions, Scene, SceneOptions};
+    use geodata::sim::sensor::{scan_with, ScanFrame, SensorOptions};
+
+    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let scene = Scene::build(
+        &map,
+        &SceneOptions {
+            map_error: MapErrorOptions::osm_like(),
+            ..SceneOptions::default()
+        },
+        args.seed,
+    )
+    .context("building the simulated world")?;
+    let poses = scene
+        .sample_poses_with_height(3, 1.8, args.seed)
+        .context("placing scanner poses")?;
+    let localizer =
+        Localizer::new(&map, LocalizeOptions::default()).context("preparing the map")?;
+    let sensor = SensorOptions::default();
+    let mut rows = Vec::new();
+    let mut figures = Vec::new();
+    let mut files = Vec::new();
+    let mut accurate = 0;
+    for (i, pose) in poses.iter().enumerate() {
+        let (cloud, _) = scan_with(
+            &scene,
+            pose,
+            &sensor,
+            args.seed + i as u64,
+            ScanFrame::Sensor,
+        )
+        .context("scanning")?;
+        let truth = Pose2 {
+            x: pose.position[0],
+            y: pose.position[1],
+            yaw_rad: pose.yaw_rad,
+        };
+        let result = localizer
+            .localize_points(&cloud.positions)
+            .context("localizing")?;
+        let (e_m, e_deg) = result.candidates.first().map_or((f64::NAN, f64::NAN), |c| {
+            (
+                c.pose.distance_to(&truth),
+                c.pose.yaw_error_to(&truth).to_degrees(),
+            )
+        });
+        if result
+            .candidates
+            .first()
+            .is_some_and(|c| Accuracy::THESIS.accepts(&c.pose, &truth))
+        {
+            accurate += 1;
+        }
+        rows.push(json!({
+            "scan": i,
+            "points": cloud.len(),
+            "segments": result.segments.len(),
+            "candidates": result.candidates.len(),
+            "error_m": e_m,
+            "error_deg": e_deg,
+            "confidence": result.confidence,
+            "seconds": result.seconds.total,
+        }));
+        if i == 0 {
+            let svg = figure(&localizer, &result, Some(truth), 90.0);
+            files.push(("localize.svg", svg.clone().into_bytes()));
+            figures.push(svg);
+        }
+    }
+    let table_rows: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let f = |k: &str| r.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+            vec![
+                format!("{}", f("scan")),
+                format!("{}", f("segments")),
+                format!("{}", f("candidates")),
+                format!("{:.2}", f("error_m")),
+                format!("{:.2}", f("error_deg")),
+                format!("{:.2}", f("confidence")),
+                format!("{:.2}", f("seconds")),
+            ]
+        })
+        .collect();
+    let table = crate::report::Html::table(
+        &[
+            "scan",
+            "segments",
+            "candidates",
+            "top-1 error m",
+            "top-1 error °",
+            "confidence",
+            "s",
+        ],
+        &table_rows,
+    );
+    Ok(crate::cmd::demo::StageOutput {
+        key: "localize",
+        summary: json!({
+            "scans": rows.len(),
+            "top1_accurate_4m_0.2rad": accurate,
+            "tensor_seconds": localizer.seconds.distance_transform,
+            "per_scan": rows,
+        }),
+        title: "localize: global localization on building outlines (FDCM + visibility-aware reverse cost)",
+        text_html: format!(
+            "{} simulated scans of the default city (OSM map-error model on) localized on the whole map without a prior; \
+             {accurate} of them have an accurate top-1 pose (4 m, 0.2 rad). Figure: map outlines (grey), edges visible from \
+             the chosen pose (black), scan segments at the chosen pose (red), other candidates (light blue), truth (green ring).{table}",
+            rows.len()
+        ),
+        figures,
+        files,
+    })
 }
