@@ -1,4 +1,134 @@
 //! Street geometry (offset and width per OSM street segment) from point clouds and OSM (thesis ch. 4).
 //!
 //! Where it sits in the pipeline: reads the OSM street network and a registered point cloud
-//! through `geodata`, and returns per-segment width and offset estimates.
+//! through `geodata`, and returns per-segment width and offset estimates. Modules, in
+//! data-flow order:
+//!
+//! - [`grid`]: square bins with their points (a generic raster used by corridors and scans).
+//! - [`corridor`]: the 40 m corridor of a segment, masked near intersections, in 0.2 m bins.
+//! - [`features`]: the per-bin features of §4.4.2 (z, normal, intensity, RGB/HSV histograms).
+//! - [`svm`]: an RBF-kernel SVM trained by SMO with a kernel cache (libsvm's algorithm).
+//! - [`potentials`]: segment geometry potentials of eq. 4.2 by the column-count DP of eq. 4.4,
+//!   priors and the intersegment potentials.
+//! - [`inference`]: exact max-product on trees, loopy max-product, and parallel MCMC.
+//! - [`dataset`]: the simulator's `streets` dataset format.
+//! - [`eval`]: the 5-fold round robin evaluation of Table 4.1.
+//! - [`geojson`]: WGS84 polygons per segment.
+//! - [`kitti`]: the bin classifier on real KITTI-360 scans.
+//! - [`synthetic`]: labelled ground clouds with known geometry (test fixtures).
+
+pub mod corridor;
+pub mod dataset;
+pub mod eval;
+pub mod features;
+pub mod geojson;
+pub mod grid;
+pub mod inference;
+pub mod kitti;
+pub mod model;
+pub mod potentials;
+pub mod svm;
+pub mod synthetic;
+
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// Why a street-geometry step failed.
+#[derive(Debug, Error)]
+pub enum StreetsError {
+    /// The map has no street segments.
+    #[error("the map {path} has no street segments (no highway=* ways); check that the extract covers streets")]
+    NoStreets {
+        /// Map file.
+        path: String,
+    },
+    /// No point of the cloud lies in any segment corridor.
+    #[error("the cloud {cloud} does not overlap the map's streets: cloud x {cx0:.1}..{cx1:.1}, y {cy0:.1}..{cy1:.1} m, streets x {sx0:.1}..{sx1:.1}, y {sy0:.1}..{sy1:.1} m in the map's local frame; check that both are in the same frame")]
+    NoOverlap {
+        /// Cloud file.
+        cloud: String,
+        /// Cloud min x.
+        cx0: f64,
+        /// Cloud max x.
+        cx1: f64,
+        /// Cloud min y.
+        cy0: f64,
+        /// Cloud max y.
+        cy1: f64,
+        /// Streets min x.
+        sx0: f64,
+        /// Streets max x.
+        sx1: f64,
+        /// Streets min y.
+        sy0: f64,
+        /// Streets max y.
+        sy1: f64,
+    },
+    /// Every segment is shorter than one bin (or masked entirely).
+    #[error("all {segments} street segments are shorter than one {bin_m} m bin outside the intersection masks; nothing to estimate")]
+    SegmentsTooShort {
+        /// Number of segments.
+        segments: usize,
+        /// Bin size.
+        bin_m: f64,
+    },
+    /// The cloud has no label column where one is needed.
+    #[error("the cloud {path} has no label column; training and evaluation need labelled points")]
+    NoLabels {
+        /// Cloud file.
+        path: String,
+    },
+    /// Not enough labelled bins of both classes to train.
+    #[error(
+        "cannot train: {positives} street and {negatives} non-street bins (need both classes)"
+    )]
+    OneClass {
+        /// Positive bins.
+        positives: usize,
+        /// Negative bins.
+        negatives: usize,
+    },
+    /// A feature vector has the wrong length.
+    #[error("feature vectors have {got} values, the model expects {expected}")]
+    FeatureLength {
+        /// Values given.
+        got: usize,
+        /// Values expected.
+        expected: usize,
+    },
+    /// An option is out of range.
+    #[error("invalid option {name} = {value}: {expected}")]
+    InvalidOption {
+        /// Option name.
+        name: &'static str,
+        /// Value given.
+        value: f64,
+        /// What is accepted.
+        expected: &'static str,
+    },
+    /// A dataset file is malformed.
+    #[error("{path}: {message}")]
+    Dataset {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A cloud could not be read.
+    #[error(transparent)]
+    Cloud(#[from] geodata::cloud::CloudError),
+    /// A map could not be read.
+    #[error(transparent)]
+    Osm(#[from] geodata::osm::OsmError),
+}
+
+/// Shorthand for results of this crate.
+pub type Result<T> = std::result::Result<T, StreetsError>;

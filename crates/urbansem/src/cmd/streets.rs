@@ -1,16 +1,724 @@
-//! `urbansem streets …`: street offset and width per OSM segment (issue 5).
+//! `urbansem streets …`: street offset and width per OSM segment from a labelled or raw
+//! point cloud (issue 5, thesis ch. 4): evaluation, training, estimation, real-data
+//! classifier check on KITTI-360, and the SVM side of the libsvm comparison.
 
-use clap::Args;
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand, ValueEnum};
+use geodata::cloud::read_cloud;
+use geodata::osm::OsmMap;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use streets::dataset::StreetsDataset;
+use streets::eval::{evaluate, EvalOptions, EvalReport, Scores};
+use streets::features::FEATURE_DIMS;
+use streets::model::{
+    segment_bins, BinClassifier, ClassifierOptions, GeometryOptions, Scaler, StreetModel, Target,
+};
+use streets::potentials::GeometryPrior;
+use streets::svm::{Svm, SvmOptions};
 
 /// Arguments of `urbansem streets`.
 #[derive(Args)]
 pub struct StreetsArgs {
-    /// Arguments (the command is being built; see issue 5).
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
-    pub rest: Vec<String>,
+    /// What to do.
+    #[command(subcommand)]
+    pub command: StreetsCommand,
+}
+
+/// Which street area a model is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TargetArg {
+    /// Driving area only (road and parking).
+    DrivingArea,
+    /// Driving area and sidewalk.
+    WithSidewalk,
+}
+
+impl From<TargetArg> for Target {
+    fn from(t: TargetArg) -> Target {
+        match t {
+            TargetArg::DrivingArea => Target::DrivingArea,
+            TargetArg::WithSidewalk => Target::WithSidewalk,
+        }
+    }
+}
+
+/// Options shared by the commands that train.
+#[derive(Args, Clone)]
+pub struct TrainingArgs {
+    /// Largest number of training bins per SVM (a seeded subset).
+    #[arg(long, default_value_t = 3000)]
+    pub max_train_bins: usize,
+    /// SVM box constraint C.
+    #[arg(long, default_value_t = 4.0)]
+    pub svm_c: f64,
+    /// Seed of every random step.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl TrainingArgs {
+    fn classifier(&self) -> ClassifierOptions {
+        ClassifierOptions {
+            svm: SvmOptions {
+                c: self.svm_c,
+                ..SvmOptions::default()
+            },
+            max_train_bins: self.max_train_bins,
+            seed: self.seed,
+            ..ClassifierOptions::default()
+        }
+    }
+}
+
+/// Subcommands of `urbansem streets`.
+#[derive(Subcommand)]
+pub enum StreetsCommand {
+    /// Table 4.1 analogue on a simulated `streets` dataset (5-fold round robin over segments).
+    Eval {
+        /// Dataset folder (dataset.json, cloud.ply, segments.json).
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// MCMC chains.
+        #[arg(long, default_value_t = 50)]
+        chains: usize,
+        /// MCMC iterations per chain.
+        #[arg(long, default_value_t = 1_000_000)]
+        iterations: usize,
+        /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
+        #[arg(long, default_value_t = 45.0)]
+        max_turn_deg: f64,
+        /// Training options.
+        #[command(flatten)]
+        training: TrainingArgs,
+    },
+    /// Train a model (classifier, confusion matrix, prior) on a whole `streets` dataset.
+    Train {
+        /// Dataset folder.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Street area to model.
+        #[arg(long, value_enum, default_value = "driving-area")]
+        target: TargetArg,
+        /// Output model (JSON).
+        #[arg(long)]
+        out: PathBuf,
+        /// Training options.
+        #[command(flatten)]
+        training: TrainingArgs,
+    },
+    /// Estimate offset and width per segment and write a WGS84 GeoJSON.
+    Estimate {
+        /// OSM map (.osm or .osm.pbf).
+        #[arg(long)]
+        map: PathBuf,
+        /// Registered point cloud in the map's local frame.
+        #[arg(long)]
+        cloud: PathBuf,
+        /// Model from `urbansem streets train`.
+        #[arg(long)]
+        model: PathBuf,
+        /// Output GeoJSON.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Bin classifier on real KITTI-360 scans: train on some scans, test on the others.
+    Kitti {
+        /// KITTI-360 sequence folder.
+        #[arg(
+            long,
+            default_value = "../shared/data/lidar/kitti360_2013_05_28_drive_0009"
+        )]
+        data: PathBuf,
+        /// Scans used for training (the first ones; the rest are tested).
+        #[arg(long, default_value_t = 12)]
+        train_scans: usize,
+        /// Test scans (0: all the rest).
+        #[arg(long, default_value_t = 0)]
+        test_scans: usize,
+        /// Also train on this simulated `streets` dataset and test on the KITTI test scans.
+        #[arg(long)]
+        sim_dataset: Option<PathBuf>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Training options.
+        #[command(flatten)]
+        training: TrainingArgs,
+    },
+    /// Train our SVM on bins of a dataset and write the same bins in libsvm format
+    /// (used by scripts/bench_streets_svm.py for the side-by-side comparison).
+    BenchSvm {
+        /// Dataset folder.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Training bins.
+        #[arg(long, default_value_t = 20_000)]
+        train: usize,
+        /// Test bins.
+        #[arg(long, default_value_t = 20_000)]
+        test: usize,
+        /// Write `train.svm` and `test.svm` (scaled features) into this folder.
+        #[arg(long)]
+        export: Option<PathBuf>,
+        /// SVM box constraint C.
+        #[arg(long, default_value_t = 4.0)]
+        svm_c: f64,
+        /// Kernel cache, MiB.
+        #[arg(long, default_value_t = 100)]
+        cache_mb: usize,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// Runs `urbansem streets`.
-pub fn run(_args: StreetsArgs) -> anyhow::Result<()> {
-    anyhow::bail!("urbansem streets is not available in this build yet (issue 5)")
+pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
+    match args.command {
+        StreetsCommand::Eval {
+            dataset,
+            json,
+            chains,
+            iterations,
+            max_turn_deg,
+            training,
+        } => {
+            let t = Instant::now();
+            let ds = StreetsDataset::load(&dataset)
+                .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
+            let load_s = t.elapsed().as_secs_f64();
+            let mut options = EvalOptions {
+                classifier: training.classifier(),
+                ..EvalOptions::default()
+            };
+            options.geometry.max_turn_deg = max_turn_deg;
+            options.mcmc.chains = chains;
+            options.mcmc.iterations = iterations;
+            options.mcmc.seed = training.seed;
+            let mut report = evaluate(&ds, &options)
+                .with_context(|| format!("evaluating {}", dataset.display()))?;
+            report.seconds.insert("load".into(), load_s);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+                eprintln!("{}", details_text(&report));
+            } else {
+                println!("{}", table_text(&report));
+                println!("{}", details_text(&report));
+            }
+            Ok(())
+        }
+        StreetsCommand::Train {
+            dataset,
+            target,
+            out,
+            training,
+        } => {
+            let ds = StreetsDataset::load(&dataset)
+                .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
+            let model = train_model(&ds, target.into(), &training)?;
+            std::fs::write(&out, serde_json::to_vec(&model)?)
+                .with_context(|| format!("writing {}", out.display()))?;
+            println!(
+                "{}: {} support vectors, held-out confusion {:?}",
+                out.display(),
+                model.classifier.svm.support_count(),
+                model.classifier.confusion.counts
+            );
+            Ok(())
+        }
+        StreetsCommand::Estimate {
+            map,
+            cloud,
+            model,
+            out,
+        } => {
+            let text = std::fs::read_to_string(&model)
+                .with_context(|| format!("reading the model {}", model.display()))?;
+            let model: StreetModel = serde_json::from_str(&text)
+                .with_context(|| format!("parsing the model {}", model.display()))?;
+            let osm = OsmMap::load(&map).with_context(|| format!("loading {}", map.display()))?;
+            let pc = read_cloud(&cloud).with_context(|| format!("reading {}", cloud.display()))?;
+            let est = model.estimate(
+                &osm,
+                &pc,
+                &map.display().to_string(),
+                &cloud.display().to_string(),
+            )?;
+            let fc = streets::geojson::feature_collection(&osm, &est.segments);
+            streets::geojson::validate(&fc).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
+            std::fs::write(&out, serde_json::to_vec_pretty(&fc)?)
+                .with_context(|| format!("writing {}", out.display()))?;
+            println!(
+                "{}: {} segments estimated ({} exact inference), {} shorter than a bin, {} without observed bins",
+                out.display(),
+                est.segments.len(),
+                if est.exact { "tree," } else { "loopy," },
+                est.too_short,
+                est.unobserved
+            );
+            Ok(())
+        }
+        StreetsCommand::Kitti {
+            data,
+            train_scans,
+            test_scans,
+            sim_dataset,
+            json,
+            training,
+        } => kitti(
+            &data,
+            train_scans,
+            test_scans,
+            sim_dataset.as_deref(),
+            json,
+            &training,
+        ),
+        StreetsCommand::BenchSvm {
+            dataset,
+            train,
+            test,
+            export,
+            svm_c,
+            cache_mb,
+            seed,
+            json,
+        } => bench_svm(
+            &dataset,
+            train,
+            test,
+            export.as_deref(),
+            svm_c,
+            cache_mb,
+            seed,
+            json,
+        ),
+    }
+}
+
+/// Features and labels (for a target) of all usable labelled bins of a dataset.
+fn dataset_bins(
+    ds: &StreetsDataset,
+    geometry: &GeometryOptions,
+    target: Target,
+) -> (Vec<f32>, Vec<bool>, Vec<(f64, f64)>) {
+    let which: Vec<usize> = (0..ds.segments.len())
+        .filter(|&s| ds.segments[s].drivable && ds.segments[s].observed)
+        .collect();
+    let bins = segment_bins(&ds.map, &ds.cloud, &which, geometry);
+    let mut x = Vec::new();
+    let mut y = Vec::new();
+    let mut geoms = Vec::new();
+    for (&s, b) in which.iter().zip(&bins) {
+        let Some(b) = b else { continue };
+        let t = &ds.segments[s];
+        geoms.push(match target {
+            Target::DrivingArea => (t.offset_m, t.width_m),
+            Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
+        });
+        for k in b.usable() {
+            if let Some(c) = b.features.truth[k] {
+                x.extend_from_slice(b.features.row(k));
+                y.push(target.positive(c));
+            }
+        }
+    }
+    (x, y, geoms)
+}
+
+fn train_model(
+    ds: &StreetsDataset,
+    target: Target,
+    training: &TrainingArgs,
+) -> anyhow::Result<StreetModel> {
+    let geometry = GeometryOptions::default();
+    let (x, y, geoms) = dataset_bins(ds, &geometry, target);
+    let classifier = BinClassifier::train(&x, &y, &training.classifier())?;
+    Ok(StreetModel {
+        target,
+        geometry,
+        classifier,
+        prior: GeometryPrior::fit(&geoms),
+    })
+}
+
+fn scores_row(name: &str, s: &Scores) -> String {
+    format!(
+        "  {name:<16} {:>6.3} {:>6.3} {:>6.3} {:>8}",
+        s.precision,
+        s.recall,
+        s.f1,
+        s.rmse_w.map_or("n/a".to_string(), |r| format!("{r:.2}"))
+    )
+}
+
+fn table_text(r: &EvalReport) -> String {
+    let mut out = format!(
+        "{} segments, {:.0} m of street, {} usable bins\n",
+        r.segments, r.street_m, r.bins
+    );
+    for (name, t) in [
+        ("driving area & sidewalk", &r.with_sidewalk),
+        ("driving area only", &r.driving_area),
+    ] {
+        out += &format!(
+            "{name}\n  {:<16} {:>6} {:>6} {:>6} {:>8}\n",
+            "method", "P", "R", "F1", "RMSE_w"
+        );
+        out += &(scores_row("raw", &t.raw) + "\n");
+        out += &(scores_row("single segment", &t.single_segment) + "\n");
+        out += &(scores_row("full model", &t.full_model) + "\n");
+        out += &(scores_row("opt. on truth", &t.opt_on_truth) + "\n");
+        out += &(scores_row("true geometry", &t.true_geometry) + "\n");
+    }
+    out += "seconds:";
+    for (k, v) in &r.seconds {
+        out += &format!(" {k}={v:.4}");
+    }
+    out
+}
+
+fn details_text(r: &EvalReport) -> String {
+    let mut out = format!(
+        "cost per metre of street: {:.2} ms (thesis 7.6 s)",
+        1000.0 * r.seconds.get("per_metre").copied().unwrap_or(f64::NAN)
+    );
+    for (k, d) in &r.details {
+        out += &format!(
+            "\n{k}: max-product ({}) log P {:.3}, MCMC log P {:.3} (gap {:.3}); MCMC F1 {:.3} RMSE_w {}; {} coupled pairs; {:.0} SVs/fold; held-out confusion {:?}",
+            if d.exact { "exact, tree" } else { "loopy" },
+            d.max_product_log_p,
+            d.mcmc_log_p,
+            d.max_product_log_p - d.mcmc_log_p,
+            d.mcmc.f1,
+            d.mcmc.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
+            d.edges,
+            d.support_vectors,
+            d.confusion
+        );
+    }
+    out
+}
+
+/// KITTI-360: per-scan bins (0.2 m, 40 m × 40 m around the sensor, in the sensor's level frame).
+fn kitti(
+    data: &Path,
+    train_scans: usize,
+    test_scans: usize,
+    sim_dataset: Option<&Path>,
+    json: bool,
+    training: &TrainingArgs,
+) -> anyhow::Result<()> {
+    let t = Instant::now();
+    let (train, test) = streets::kitti::train_test_bins(data, train_scans, test_scans)
+        .with_context(|| format!("reading KITTI-360 scans from {}", data.display()))?;
+    let features_s = t.elapsed().as_secs_f64();
+    let mut results = serde_json::Map::new();
+    for target in [Target::DrivingArea, Target::WithSidewalk] {
+        let t = Instant::now();
+        let r = streets::kitti::train_and_test(&train, &test, target, &training.classifier())?;
+        let mut entry = json!({
+            "precision": r.precision, "recall": r.recall, "f1": r.f1,
+            "train_bins": train.len(), "test_bins": test.len(),
+            "seconds": t.elapsed().as_secs_f64(),
+        });
+        if let Some(dir) = sim_dataset {
+            let ds = StreetsDataset::load(dir)
+                .with_context(|| format!("loading the streets dataset {}", dir.display()))?;
+            let geometry = GeometryOptions {
+                features: streets::features::FeatureOptions {
+                    colour: false,
+                    ..Default::default()
+                },
+                ..GeometryOptions::default()
+            };
+            let (x, y, _) = dataset_bins(&ds, &geometry, target);
+            let r2 =
+                streets::kitti::train_xy_and_test(&x, &y, &test, target, &training.classifier())?;
+            entry["sim_to_kitti"] =
+                json!({"precision": r2.precision, "recall": r2.recall, "f1": r2.f1});
+        }
+        results.insert(target.key().into(), entry);
+    }
+    results.insert("features_seconds".into(), json!(features_s));
+    let v = serde_json::Value::Object(results);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "KITTI-360 {}: {} training bins, {} test bins (thesis raw F1: driving area 0.81, with sidewalk 0.85)",
+            data.display(),
+            train.len(),
+            test.len()
+        );
+        for key in ["driving_area", "with_sidewalk"] {
+            let e = &v[key];
+            println!(
+                "  {key:<14} P {:.3} R {:.3} F1 {:.3}{}",
+                e["precision"].as_f64().unwrap_or(f64::NAN),
+                e["recall"].as_f64().unwrap_or(f64::NAN),
+                e["f1"].as_f64().unwrap_or(f64::NAN),
+                if e["sim_to_kitti"].is_object() {
+                    format!(
+                        "   | trained on simulation: P {:.3} R {:.3} F1 {:.3}",
+                        e["sim_to_kitti"]["precision"].as_f64().unwrap_or(f64::NAN),
+                        e["sim_to_kitti"]["recall"].as_f64().unwrap_or(f64::NAN),
+                        e["sim_to_kitti"]["f1"].as_f64().unwrap_or(f64::NAN)
+                    )
+                } else {
+                    String::new()
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Peak resident memory of this process, bytes (Linux `VmHWM`).
+fn peak_rss_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn bench_svm(
+    dataset: &Path,
+    n_train: usize,
+    n_test: usize,
+    export: Option<&Path>,
+    c: f64,
+    cache_mb: usize,
+    seed: u64,
+    json: bool,
+) -> anyhow::Result<()> {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let ds = StreetsDataset::load(dataset)
+        .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
+    let (x, y, _) = dataset_bins(&ds, &GeometryOptions::default(), Target::DrivingArea);
+    let n = y.len();
+    if n < n_train + n_test {
+        bail!(
+            "{} has {n} labelled bins, fewer than --train {n_train} + --test {n_test}",
+            dataset.display()
+        );
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+    let gather = |ids: &[usize]| {
+        let mut xs = Vec::with_capacity(ids.len() * FEATURE_DIMS);
+        for &i in ids {
+            xs.extend_from_slice(&x[i * FEATURE_DIMS..(i + 1) * FEATURE_DIMS]);
+        }
+        (xs, ids.iter().map(|&i| y[i]).collect::<Vec<bool>>())
+    };
+    let (mut xtr, ytr) = gather(&order[..n_train]);
+    let (mut xte, yte) = gather(&order[n_train..n_train + n_test]);
+    let scaler = Scaler::fit(&xtr, FEATURE_DIMS);
+    scaler.apply(&mut xtr);
+    scaler.apply(&mut xte);
+    if let Some(dir) = export {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for (name, xs, ys) in [("train.svm", &xtr, &ytr), ("test.svm", &xte, &yte)] {
+            let mut s = String::new();
+            for (row, &l) in xs.chunks_exact(FEATURE_DIMS).zip(ys.iter()) {
+                s += if l { "+1" } else { "-1" };
+                for (k, v) in row.iter().enumerate() {
+                    if *v != 0.0 {
+                        s += &format!(" {}:{}", k + 1, v);
+                    }
+                }
+                s += "\n";
+            }
+            let p = dir.join(name);
+            std::fs::write(&p, s).with_context(|| format!("writing {}", p.display()))?;
+        }
+    }
+    let options = SvmOptions {
+        c,
+        cache_mb,
+        ..SvmOptions::default()
+    };
+    let t = Instant::now();
+    let svm = Svm::train_flat(&xtr, FEATURE_DIMS, &ytr, &options)?;
+    let train_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let pred = svm.predict_flat(&xte)?;
+    let predict_s = t.elapsed().as_secs_f64();
+    let acc =
+        pred.iter().zip(&yte).filter(|(a, b)| a == b).count() as f64 / yte.len().max(1) as f64;
+    let v = json!({
+        "train_bins": n_train, "test_bins": n_test, "features": FEATURE_DIMS,
+        "c": c, "gamma": svm.gamma, "eps": options.eps, "cache_mb": cache_mb,
+        "train_seconds": train_s, "predict_seconds": predict_s, "accuracy": acc,
+        "support_vectors": svm.support_count(), "iterations": svm.stats.iterations,
+        "objective": svm.stats.objective, "peak_rss_bytes": peak_rss_bytes(),
+        "threads": rayon::current_num_threads(),
+    });
+    if json {
+        println!("{}", serde_json::to_string(&v)?);
+    } else {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    }
+    Ok(())
+}
+
+/// The demo stage: a small simulated streets dataset on the embedded city, the evaluation
+/// and a Fig. 4.5-like figure (centre lines, buildings, estimated and true boundaries).
+#[allow(dead_code)] // The lead wires the stage into `urbansem demo`.
+pub(crate) fn demo_stage(
+    args: &crate::cmd::demo::DemoArgs,
+) -> anyhow::Result<crate::cmd::demo::StageOutput> {
+    use crate::report::{Html, Svg};
+    use geodata::sim::dataset::{write_streets, StreetsOptions};
+    use geodata::sim::sensor::SensorOptions;
+    use streets::corridor::SegmentFrame;
+    use streets::geojson::strip_ring;
+
+    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let dir = args.out.join("streets-dataset");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let map_path = dir.join("city.osm");
+    let xml = geodata::city::generate_city(&geodata::city::CityOptions::default(), 1)
+        .context("writing the embedded city as OSM XML")?;
+    std::fs::write(&map_path, xml).with_context(|| format!("writing {}", map_path.display()))?;
+    let defaults = StreetsOptions::default();
+    let options = StreetsOptions {
+        route_m: 700.0,
+        spacing_m: 20.0,
+        sensor: SensorOptions {
+            h_step_deg: 1.0,
+            v_step_deg: 1.0,
+            ..defaults.sensor.clone()
+        },
+        ..defaults
+    };
+    let t = Instant::now();
+    write_streets(
+        &map,
+        &map_path.display().to_string(),
+        &dir,
+        &options,
+        args.seed,
+        &|_, _| {},
+    )
+    .context("simulating the streets dataset")?;
+    let sim_s = t.elapsed().as_secs_f64();
+    let ds = StreetsDataset::load(&dir).with_context(|| format!("loading {}", dir.display()))?;
+    let mut eval_options = EvalOptions {
+        classifier: ClassifierOptions {
+            max_train_bins: 1500,
+            calibration_bins: 1500,
+            seed: args.seed,
+            ..ClassifierOptions::default()
+        },
+        ..EvalOptions::default()
+    };
+    eval_options.mcmc.chains = 8;
+    eval_options.mcmc.iterations = 50_000;
+    eval_options.mcmc.seed = args.seed;
+    let report = evaluate(&ds, &eval_options).context("evaluating the demo streets dataset")?;
+
+    // Figure: the area of the evaluated segments.
+    let geoms = report
+        .geometries
+        .get("driving_area")
+        .cloned()
+        .unwrap_or_default();
+    let segs = &ds.map.streets.segments;
+    let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for g in &geoms {
+        if let Some(s) = segs.get(g.segment) {
+            for p in [s.a, s.b] {
+                for k in 0..2 {
+                    min[k] = min[k].min(p[k] - 25.0);
+                    max[k] = max[k].max(p[k] + 25.0);
+                }
+            }
+        }
+    }
+    if !min[0].is_finite() {
+        bail!("the demo evaluation returned no segments");
+    }
+    let mut svg = Svg::new(800.0, min, max);
+    for b in &ds.map.buildings {
+        svg.polygon(&b.outer, "fill:none;stroke:#2a9d3a;stroke-width:1");
+    }
+    for g in &geoms {
+        let Some(frame) = segs.get(g.segment).and_then(SegmentFrame::of) else {
+            continue;
+        };
+        svg.polygon(
+            &strip_ring(&frame, g.truth.0, g.truth.1),
+            "fill:#bbbbbb;fill-opacity:0.6;stroke:#888888;stroke-width:1",
+        );
+    }
+    for g in &geoms {
+        let Some(frame) = segs.get(g.segment).and_then(SegmentFrame::of) else {
+            continue;
+        };
+        svg.polygon(
+            &strip_ring(&frame, g.estimate.0, g.estimate.1),
+            "fill:none;stroke:#000000;stroke-width:1.5",
+        );
+        let s = &segs[g.segment];
+        svg.polyline(
+            &[s.a, s.b],
+            "stroke:#1f5fd0;stroke-width:1.5;stroke-dasharray:6,4;fill:none",
+        );
+    }
+    svg.scale_bar(50.0);
+    let figure = svg.finish();
+    let row = |name: &str, s: &Scores| {
+        vec![
+            name.to_string(),
+            format!("{:.3}", s.precision),
+            format!("{:.3}", s.recall),
+            format!("{:.3}", s.f1),
+            s.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
+        ]
+    };
+    let mut rows = Vec::new();
+    for (target, t) in [
+        ("driving area", &report.driving_area),
+        ("with sidewalk", &report.with_sidewalk),
+    ] {
+        rows.push(row(&format!("{target}: raw"), &t.raw));
+        rows.push(row(&format!("{target}: single segment"), &t.single_segment));
+        rows.push(row(&format!("{target}: full model"), &t.full_model));
+        rows.push(row(&format!("{target}: opt. on truth"), &t.opt_on_truth));
+        rows.push(row(&format!("{target}: true geometry"), &t.true_geometry));
+    }
+    let text_html = format!(
+        "<p>A {:.0} m route simulated on the embedded city ({} points, simulated in {:.1} s), {} evaluated segments, \
+         5-fold round robin over segments (Table 4.1 analogue). Figure: OSM centre lines dashed blue, \
+         buildings green, estimated driving area black, true driving area grey (cf. Fig. 4.5).</p>{}",
+        report.street_m,
+        ds.cloud.len(),
+        sim_s,
+        report.segments,
+        Html::table(&["method", "P", "R", "F1", "RMSE_w [m]"], &rows)
+    );
+    Ok(crate::cmd::demo::StageOutput {
+        key: "streets",
+        summary: json!({
+            "segments": report.segments,
+            "street_m": report.street_m,
+            "simulate_seconds": sim_s,
+            "eval": report,
+        }),
+        title: "streets: street width and offset per OSM segment",
+        text_html,
+        figures: vec![figure.clone()],
+        files: vec![("streets.svg", figure.into_bytes())],
+    })
 }

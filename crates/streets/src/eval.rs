@@ -1,0 +1,448 @@
+//! The evaluation of thesis §4.5.3 (Table 4.1) on a `streets` dataset: 5-fold round robin
+//! over segments, per-bin precision/recall/F1 and the length-weighted width RMSE for the raw
+//! classifier, single segment, full model, the optimum on true labels and the true geometry,
+//! for both targets; and the time per stage (Tables 4.2/4.3).
+
+use crate::dataset::StreetsDataset;
+use crate::inference::{McmcOptions, Network};
+use crate::model::{
+    network_edges, segment_bins, BinClassifier, ClassifierOptions, GeometryOptions, SegmentBins,
+    Target,
+};
+use crate::potentials::{segment_potential, Confusion, GeometryPrior, SegmentPotential};
+use crate::{Result, StreetsError};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Options of the evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalOptions {
+    /// Geometry model.
+    pub geometry: GeometryOptions,
+    /// Bin classifier.
+    pub classifier: ClassifierOptions,
+    /// Folds of the round robin (thesis: 5).
+    pub folds: usize,
+    /// MCMC beside max-product.
+    pub mcmc: McmcOptions,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            geometry: GeometryOptions::default(),
+            classifier: ClassifierOptions::default(),
+            folds: 5,
+            mcmc: McmcOptions::default(),
+        }
+    }
+}
+
+/// Precision, recall, F1 and width RMSE of one method.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Scores {
+    /// Per-bin precision.
+    pub precision: f64,
+    /// Per-bin recall.
+    pub recall: f64,
+    /// Per-bin F1.
+    pub f1: f64,
+    /// Length-weighted RMSE of the widths, metres (`None` for the raw classifier).
+    pub rmse_w: Option<f64>,
+}
+
+/// Table 4.1 rows of one target.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TargetScores {
+    /// The classifier alone.
+    pub raw: Scores,
+    /// Each segment's own optimum (no intersegment potentials).
+    pub single_segment: Scores,
+    /// The full model (max-product: exact on trees, loopy otherwise).
+    pub full_model: Scores,
+    /// The geometry fitted to the true bin labels.
+    pub opt_on_truth: Scores,
+    /// The true geometry.
+    pub true_geometry: Scores,
+}
+
+/// Diagnostics not in Table 4.1.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TargetDetails {
+    /// Full model by MCMC.
+    pub mcmc: Scores,
+    /// log P of the max-product solution.
+    pub max_product_log_p: f64,
+    /// log P of the MCMC solution.
+    pub mcmc_log_p: f64,
+    /// Whether max-product was exact (tree-shaped network).
+    pub exact: bool,
+    /// Coupled pairs.
+    pub edges: usize,
+    /// Mean SVM support vectors per fold.
+    pub support_vectors: f64,
+    /// Held-out confusion counts summed over folds.
+    pub confusion: [[u64; 2]; 2],
+}
+
+/// The evaluation result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalReport {
+    /// Driving area only.
+    pub driving_area: TargetScores,
+    /// Driving area and sidewalk.
+    pub with_sidewalk: TargetScores,
+    /// Seconds per stage, plus `per_metre` (incremental seconds per metre of street).
+    pub seconds: BTreeMap<String, f64>,
+    /// Extra diagnostics (not part of the JSON interface).
+    #[serde(skip)]
+    pub details: BTreeMap<&'static str, TargetDetails>,
+    /// Segments evaluated.
+    #[serde(skip)]
+    pub segments: usize,
+    /// Their total length, metres.
+    #[serde(skip)]
+    pub street_m: f64,
+    /// Usable bins.
+    #[serde(skip)]
+    pub bins: usize,
+    /// Full-model and true geometry per evaluated segment, per target.
+    #[serde(skip)]
+    pub geometries: BTreeMap<&'static str, Vec<SegmentGeometry>>,
+}
+
+/// Estimated and true geometry of one evaluated segment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SegmentGeometry {
+    /// Segment index in the map.
+    pub segment: usize,
+    /// Full-model (offset, width), metres.
+    pub estimate: (f64, f64),
+    /// Single-segment (offset, width), metres.
+    pub single: (f64, f64),
+    /// True (offset, width), metres.
+    pub truth: (f64, f64),
+}
+
+#[derive(Default, Clone, Copy)]
+struct Counts {
+    tp: u64,
+    fp: u64,
+    fn_: u64,
+    w_err2: f64,
+    w_len: f64,
+    with_width: bool,
+}
+
+impl Counts {
+    fn scores(&self) -> Scores {
+        let p = self.tp as f64 / (self.tp + self.fp).max(1) as f64;
+        let r = self.tp as f64 / (self.tp + self.fn_).max(1) as f64;
+        Scores {
+            precision: p,
+            recall: r,
+            f1: if p + r > 0.0 {
+                2.0 * p * r / (p + r)
+            } else {
+                0.0
+            },
+            rmse_w: self
+                .with_width
+                .then(|| (self.w_err2 / self.w_len.max(1e-12)).sqrt()),
+        }
+    }
+
+    fn add_bin(&mut self, predicted: bool, truth: bool) {
+        match (predicted, truth) {
+            (true, true) => self.tp += 1,
+            (true, false) => self.fp += 1,
+            (false, true) => self.fn_ += 1,
+            _ => {}
+        }
+    }
+}
+
+/// True geometry (offset, width) of a segment for a target.
+fn true_geometry(ds: &StreetsDataset, s: usize, target: Target) -> (f64, f64) {
+    let t = &ds.segments[s];
+    match target {
+        Target::DrivingArea => (t.offset_m, t.width_m),
+        Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
+    }
+}
+
+/// Runs the evaluation.
+pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport> {
+    let mut seconds = BTreeMap::new();
+    let segs = &ds.map.streets.segments;
+    if segs.is_empty() {
+        return Err(StreetsError::NoStreets {
+            path: ds.map_path.display().to_string(),
+        });
+    }
+    let candidates: Vec<usize> = (0..segs.len())
+        .filter(|&s| ds.segments[s].drivable && ds.segments[s].observed)
+        .collect();
+    let t = Instant::now();
+    let bins = segment_bins(&ds.map, &ds.cloud, &candidates, &options.geometry);
+    seconds.insert(
+        "corridors_and_features".to_string(),
+        t.elapsed().as_secs_f64(),
+    );
+    let mut eval_ids = Vec::new();
+    let mut eval_bins: Vec<SegmentBins> = Vec::new();
+    for (&s, b) in candidates.iter().zip(bins) {
+        if let Some(b) = b {
+            if b.usable().next().is_some() {
+                eval_ids.push(s);
+                eval_bins.push(b);
+            }
+        }
+    }
+    if eval_ids.len() < options.folds.max(2) {
+        return Err(StreetsError::Dataset {
+            path: ds.dir.clone(),
+            message: format!(
+                "only {} observed drivable segments with usable bins; the {}-fold evaluation needs at least {}",
+                eval_ids.len(),
+                options.folds,
+                options.folds.max(2)
+            ),
+        });
+    }
+    let folds = options.folds.max(2);
+    let fold_of = |k: usize| k % folds;
+    // Raw feature rows and true classes of the usable bins, per segment.
+    let rows: Vec<Vec<f32>> = eval_bins.iter().map(SegmentBins::usable_rows).collect();
+    let classes: Vec<Vec<Option<geodata::classes::Class>>> = eval_bins
+        .iter()
+        .map(|b| b.usable().map(|k| b.features.truth[k]).collect())
+        .collect();
+    let n_bins: usize = classes.iter().map(Vec::len).sum();
+    let street_m: f64 = eval_ids.iter().map(|&s| segs[s].length_m).sum();
+    let grid = options.geometry.theta_grid();
+    let lambda = (options.geometry.corridor.bin_m / options.geometry.sigma_m).powi(2) / 2.0;
+    let edges = network_edges(&ds.map, &eval_ids, options.geometry.max_turn_deg);
+    let mut per_target = BTreeMap::new();
+    let mut details = BTreeMap::new();
+    let mut geometries = BTreeMap::new();
+    let (mut train_s, mut predict_s, mut potentials_s, mut inference_s, mut mcmc_s) =
+        (0.0, 0.0, 0.0, 0.0, 0.0);
+    for target in [Target::DrivingArea, Target::WithSidewalk] {
+        let mut predicted: Vec<Vec<bool>> = vec![Vec::new(); eval_ids.len()];
+        let mut potentials: Vec<Option<SegmentPotential>> = vec![None; eval_ids.len()];
+        let mut conf_sum = [[0u64; 2]; 2];
+        let mut sv_sum = 0usize;
+        for fold in 0..folds {
+            // Train on the other folds' labelled bins.
+            let t = Instant::now();
+            let mut x = Vec::new();
+            let mut y = Vec::new();
+            let mut train_geom = Vec::new();
+            for k in 0..eval_ids.len() {
+                if fold_of(k) == fold {
+                    continue;
+                }
+                train_geom.push(true_geometry(ds, eval_ids[k], target));
+                for (j, c) in classes[k].iter().enumerate() {
+                    if let Some(c) = c {
+                        x.extend_from_slice(
+                            &rows[k][j * crate::features::FEATURE_DIMS
+                                ..(j + 1) * crate::features::FEATURE_DIMS],
+                        );
+                        y.push(target.positive(*c));
+                    }
+                }
+            }
+            let clf = BinClassifier::train(
+                &x,
+                &y,
+                &ClassifierOptions {
+                    seed: options.classifier.seed ^ fold as u64,
+                    ..options.classifier.clone()
+                },
+            )?;
+            let prior = GeometryPrior::fit(&train_geom);
+            sv_sum += clf.svm.support_count();
+            for (sum_row, row) in conf_sum.iter_mut().zip(&clf.confusion.counts) {
+                for (s, c) in sum_row.iter_mut().zip(row) {
+                    *s += c;
+                }
+            }
+            train_s += t.elapsed().as_secs_f64();
+            // Predict the test segments' bins.
+            let t = Instant::now();
+            let test: Vec<usize> = (0..eval_ids.len())
+                .filter(|&k| fold_of(k) == fold)
+                .collect();
+            let mut flat = Vec::new();
+            for &k in &test {
+                flat.extend_from_slice(&rows[k]);
+            }
+            let labels = clf.predict(&flat)?;
+            let mut off = 0;
+            for &k in &test {
+                let n = classes[k].len();
+                predicted[k] = labels[off..off + n].to_vec();
+                off += n;
+            }
+            predict_s += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let clog = clf.confusion.log_likelihood();
+            for &k in &test {
+                potentials[k] = Some(segment_potential(
+                    &eval_bins[k].counts(&predicted[k]),
+                    &clog,
+                    &prior,
+                    &grid,
+                ));
+            }
+            potentials_s += t.elapsed().as_secs_f64();
+        }
+        let net = Network {
+            potentials: potentials
+                .into_iter()
+                .map(|p| {
+                    p.unwrap_or(SegmentPotential {
+                        cols: grid.cols,
+                        log: vec![0.0; grid.cols * grid.cols],
+                    })
+                })
+                .collect(),
+            edges: edges.clone(),
+            lambda,
+        };
+        let single = net.single_segment();
+        let t = Instant::now();
+        let full = net.max_product(50);
+        inference_s += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let mcmc = net.mcmc(&options.mcmc);
+        mcmc_s += t.elapsed().as_secs_f64();
+        // The optimum on true labels: the model with an almost perfect classifier, flat prior.
+        let perfect = Confusion {
+            counts: [[999, 1], [1, 999]],
+        }
+        .log_likelihood();
+        let truth_states: Vec<(usize, usize)> = (0..eval_ids.len())
+            .map(|k| {
+                let truth: Vec<bool> = classes[k]
+                    .iter()
+                    .map(|c| c.is_some_and(|c| target.positive(c)))
+                    .collect();
+                // Unlabelled bins are left out of the fit.
+                let mut counts = eval_bins[k].counts(&truth);
+                for (j, (kk, c)) in eval_bins[k].usable().zip(&classes[k]).enumerate() {
+                    let _ = j;
+                    if c.is_none() {
+                        counts.zeros[kk % grid.cols] -= 1;
+                    }
+                }
+                segment_potential(&counts, &perfect, &GeometryPrior::flat(), &grid).argmax()
+            })
+            .collect();
+        let true_states: Vec<(usize, usize)> = eval_ids
+            .iter()
+            .map(|&s| {
+                let (d, w) = true_geometry(ds, s, target);
+                grid.columns_of(d, w)
+            })
+            .collect();
+        let score = |states: Option<&[(usize, usize)]>| -> Scores {
+            let mut c = Counts {
+                with_width: states.is_some(),
+                ..Counts::default()
+            };
+            for k in 0..eval_ids.len() {
+                let cols = grid.cols;
+                for (j, (bin, cls)) in eval_bins[k].usable().zip(&classes[k]).enumerate() {
+                    let Some(cls) = cls else { continue };
+                    let truth = target.positive(*cls);
+                    let pred = match states {
+                        None => predicted[k][j],
+                        Some(st) => (st[k].0..=st[k].1).contains(&(bin % cols)),
+                    };
+                    c.add_bin(pred, truth);
+                }
+                if let Some(st) = states {
+                    let (_, w) = grid.geometry(st[k].0, st[k].1);
+                    let (_, w_true) = true_geometry(ds, eval_ids[k], target);
+                    let l = segs[eval_ids[k]].length_m;
+                    c.w_err2 += l * (w - w_true).powi(2);
+                    c.w_len += l;
+                }
+            }
+            c.scores()
+        };
+        let scores = TargetScores {
+            raw: score(None),
+            single_segment: score(Some(&single.states)),
+            full_model: score(Some(&full.states)),
+            opt_on_truth: score(Some(&truth_states)),
+            true_geometry: score(Some(&true_states)),
+        };
+        details.insert(
+            target.key(),
+            TargetDetails {
+                mcmc: score(Some(&mcmc.states)),
+                max_product_log_p: full.log_probability,
+                mcmc_log_p: mcmc.log_probability,
+                exact: full.exact,
+                edges: net.edges.len(),
+                support_vectors: sv_sum as f64 / folds as f64,
+                confusion: conf_sum,
+            },
+        );
+        geometries.insert(
+            target.key(),
+            (0..eval_ids.len())
+                .map(|k| SegmentGeometry {
+                    segment: eval_ids[k],
+                    estimate: grid.geometry(full.states[k].0, full.states[k].1),
+                    single: grid.geometry(single.states[k].0, single.states[k].1),
+                    truth: true_geometry(ds, eval_ids[k], target),
+                })
+                .collect(),
+        );
+        per_target.insert(target, scores);
+    }
+    seconds.insert("svm_training".into(), train_s);
+    seconds.insert("svm_prediction".into(), predict_s);
+    seconds.insert("potentials".into(), potentials_s);
+    seconds.insert("max_product".into(), inference_s);
+    seconds.insert("mcmc".into(), mcmc_s);
+    // Incremental cost per metre of street for one target: corridors and features, then
+    // prediction and potentials of that target.
+    let per_metre =
+        (seconds["corridors_and_features"] + 0.5 * (predict_s + potentials_s)) / street_m.max(1e-9);
+    seconds.insert("per_metre".into(), per_metre);
+    let total: f64 = [
+        "corridors_and_features",
+        "svm_training",
+        "svm_prediction",
+        "potentials",
+        "max_product",
+        "mcmc",
+    ]
+    .iter()
+    .map(|k| seconds[*k])
+    .sum();
+    seconds.insert("total".into(), total);
+    let take = |m: &mut BTreeMap<Target, TargetScores>, t: Target| {
+        m.remove(&t).ok_or_else(|| StreetsError::Dataset {
+            path: ds.dir.clone(),
+            message: "internal: target missing".into(),
+        })
+    };
+    Ok(EvalReport {
+        driving_area: take(&mut per_target, Target::DrivingArea)?,
+        with_sidewalk: take(&mut per_target, Target::WithSidewalk)?,
+        seconds,
+        details,
+        segments: eval_ids.len(),
+        street_m,
+        bins: n_bins,
+        geometries,
+    })
+}

@@ -1,0 +1,175 @@
+//! The bin classifier on real data: KITTI-360 scans with per-point labels, rasterised into
+//! the same 0.2 m bins and features as the corridors (40 m × 40 m around the sensor, the
+//! scan levelled by its pose's rotation), trained on some scans and tested on others.
+
+use crate::features::{bin_features, FeatureOptions, FEATURE_DIMS};
+use crate::grid::BinGrid;
+use crate::model::{BinClassifier, ClassifierOptions, Target};
+use crate::{Result, StreetsError};
+use geodata::classes::Class;
+use geodata::datasets::kitti360::Kitti360Sequence;
+use geodata::datasets::Scan;
+use nalgebra::{Isometry3, Translation3};
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Feature rows of labelled bins with their true classes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LabelledBins {
+    /// Row-major features (`len × FEATURE_DIMS`).
+    pub x: Vec<f32>,
+    /// True class per bin.
+    pub truth: Vec<Class>,
+}
+
+impl LabelledBins {
+    /// Number of bins.
+    pub fn len(&self) -> usize {
+        self.truth.len()
+    }
+
+    /// Whether there are no bins.
+    pub fn is_empty(&self) -> bool {
+        self.truth.is_empty()
+    }
+
+    fn extend(&mut self, other: LabelledBins) {
+        self.x.extend(other.x);
+        self.truth.extend(other.truth);
+    }
+}
+
+/// Per-bin precision, recall and F1.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Prf {
+    /// Precision.
+    pub precision: f64,
+    /// Recall.
+    pub recall: f64,
+    /// F1.
+    pub f1: f64,
+}
+
+/// Precision/recall/F1 of predictions against truths.
+pub fn prf(predicted: &[bool], truth: &[bool]) -> Prf {
+    let (mut tp, mut fp, mut fn_) = (0u64, 0u64, 0u64);
+    for (&p, &t) in predicted.iter().zip(truth) {
+        match (p, t) {
+            (true, true) => tp += 1,
+            (true, false) => fp += 1,
+            (false, true) => fn_ += 1,
+            _ => {}
+        }
+    }
+    let precision = tp as f64 / (tp + fp).max(1) as f64;
+    let recall = tp as f64 / (tp + fn_).max(1) as f64;
+    let f1 = if precision + recall > 0.0 {
+        2.0 * precision * recall / (precision + recall)
+    } else {
+        0.0
+    };
+    Prf {
+        precision,
+        recall,
+        f1,
+    }
+}
+
+/// Labelled bins of one scan: 200 × 200 bins of 0.2 m centred on the sensor.
+pub fn scan_bins(scan: &Scan, options: &FeatureOptions) -> LabelledBins {
+    let mut cloud = scan.cloud.clone();
+    let level = Isometry3::from_parts(Translation3::identity(), scan.world_from_sensor.rotation);
+    cloud.transform(&level);
+    let (n, bin) = (200usize, 0.2);
+    let half = 0.5 * n as f64 * bin;
+    let pairs: Vec<(u32, u32)> = cloud
+        .positions
+        .iter()
+        .enumerate()
+        .filter_map(|(i, p)| {
+            let (cx, cy) = ((p[0] + half) / bin, (p[1] + half) / bin);
+            (cx >= 0.0 && cy >= 0.0 && cx < n as f64 && cy < n as f64)
+                .then(|| ((cy as usize * n + cx as usize) as u32, i as u32))
+        })
+        .collect();
+    let grid = BinGrid::from_pairs(n, n, bin, &pairs);
+    let f = bin_features(&grid, &cloud, [0.0; 3], options);
+    let mut out = LabelledBins::default();
+    for k in 0..grid.len() {
+        if let (true, Some(c)) = (f.observed[k], f.truth[k]) {
+            out.x.extend_from_slice(f.row(k));
+            out.truth.push(c);
+        }
+    }
+    out
+}
+
+/// Training bins from the first `train_scans` scans and test bins from the next
+/// `test_scans` (0: all the rest) of a KITTI-360 sequence folder.
+pub fn train_test_bins(
+    dir: &Path,
+    train_scans: usize,
+    test_scans: usize,
+) -> Result<(LabelledBins, LabelledBins)> {
+    let err = |e: geodata::datasets::DatasetError| StreetsError::Dataset {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    };
+    let seq = Kitti360Sequence::open(dir).map_err(err)?;
+    let frames = seq.frames().map_err(err)?;
+    if frames.len() < train_scans + 1 {
+        return Err(StreetsError::Dataset {
+            path: dir.to_path_buf(),
+            message: format!(
+                "{} scans, need more than the {train_scans} training scans",
+                frames.len()
+            ),
+        });
+    }
+    let end = if test_scans == 0 {
+        frames.len()
+    } else {
+        (train_scans + test_scans).min(frames.len())
+    };
+    let options = FeatureOptions::default();
+    let per_scan: Vec<Result<LabelledBins>> = frames[..end]
+        .par_iter()
+        .map(|&f| Ok(scan_bins(&seq.load_scan(f).map_err(err)?, &options)))
+        .collect();
+    let mut train = LabelledBins::default();
+    let mut test = LabelledBins::default();
+    for (k, b) in per_scan.into_iter().enumerate() {
+        if k < train_scans {
+            train.extend(b?);
+        } else {
+            test.extend(b?);
+        }
+    }
+    Ok((train, test))
+}
+
+/// Trains on `x`/`y` and scores on the test bins for a target.
+pub fn train_xy_and_test(
+    x: &[f32],
+    y: &[bool],
+    test: &LabelledBins,
+    target: Target,
+    options: &ClassifierOptions,
+) -> Result<Prf> {
+    let clf = BinClassifier::train(x, y, options)?;
+    let pred = clf.predict(&test.x)?;
+    let truth: Vec<bool> = test.truth.iter().map(|&c| target.positive(c)).collect();
+    Ok(prf(&pred, &truth))
+}
+
+/// Trains on labelled bins and scores on the test bins for a target.
+pub fn train_and_test(
+    train: &LabelledBins,
+    test: &LabelledBins,
+    target: Target,
+    options: &ClassifierOptions,
+) -> Result<Prf> {
+    debug_assert_eq!(train.x.len(), train.len() * FEATURE_DIMS);
+    let y: Vec<bool> = train.truth.iter().map(|&c| target.positive(c)).collect();
+    train_xy_and_test(&train.x, &y, test, target, options)
+}

@@ -1,0 +1,472 @@
+//! The trained street model: bin classifier (standardised features + RBF SVM), its confusion
+//! matrix on held-out bins, and the geometry prior; plus the per-segment estimate from a cloud.
+
+use crate::corridor::{corridors, Corridor, CorridorOptions};
+use crate::features::{bin_features, BinFeatures, FeatureOptions, FEATURE_DIMS};
+use crate::inference::{Edge, McmcOptions, Network};
+use crate::potentials::{
+    segment_potential, ColumnCounts, Confusion, GeometryPrior, SegmentPotential, ThetaGrid,
+};
+use crate::svm::{Svm, SvmOptions};
+use crate::{Result, StreetsError};
+use geodata::classes::Class;
+use geodata::cloud::PointCloud;
+use geodata::osm::OsmMap;
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// What counts as street.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Target {
+    /// The driving area (road and parking).
+    DrivingArea,
+    /// Driving area and sidewalk.
+    WithSidewalk,
+}
+
+impl Target {
+    /// Whether a class is street for this target.
+    pub fn positive(self, class: Class) -> bool {
+        match self {
+            Target::DrivingArea => class == Class::Street,
+            Target::WithSidewalk => class == Class::Street || class == Class::Sidewalk,
+        }
+    }
+
+    /// The JSON key.
+    pub fn key(self) -> &'static str {
+        match self {
+            Target::DrivingArea => "driving_area",
+            Target::WithSidewalk => "with_sidewalk",
+        }
+    }
+}
+
+/// Per-feature standardisation (z-scores).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scaler {
+    /// Means.
+    pub mean: Vec<f32>,
+    /// Standard deviations (1 where constant).
+    pub std: Vec<f32>,
+}
+
+impl Scaler {
+    /// Fitted on a row-major matrix with `dims` columns.
+    pub fn fit(x: &[f32], dims: usize) -> Scaler {
+        let n = (x.len() / dims.max(1)).max(1) as f64;
+        let mut mean = vec![0f64; dims];
+        let mut sq = vec![0f64; dims];
+        for row in x.chunks_exact(dims) {
+            for (k, &v) in row.iter().enumerate() {
+                mean[k] += f64::from(v);
+                sq[k] += f64::from(v) * f64::from(v);
+            }
+        }
+        let mean: Vec<f64> = mean.iter().map(|m| m / n).collect();
+        let std = sq
+            .iter()
+            .zip(&mean)
+            .map(|(s, m)| {
+                let v = (s / n - m * m).max(0.0).sqrt();
+                if v > 1e-6 {
+                    v as f32
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Scaler {
+            mean: mean.iter().map(|&m| m as f32).collect(),
+            std,
+        }
+    }
+
+    /// Standardises a row-major matrix in place.
+    pub fn apply(&self, x: &mut [f32]) {
+        let d = self.mean.len();
+        for row in x.chunks_exact_mut(d) {
+            for ((v, m), sd) in row.iter_mut().zip(&self.mean).zip(&self.std) {
+                *v = (*v - m) / sd;
+            }
+        }
+    }
+}
+
+/// Options of the bin classifier.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ClassifierOptions {
+    /// SVM options.
+    pub svm: SvmOptions,
+    /// Largest number of training bins (a seeded random subset).
+    pub max_train_bins: usize,
+    /// Held-out bins for the confusion matrix.
+    pub calibration_bins: usize,
+    /// Seed of the subsets.
+    pub seed: u64,
+}
+
+impl Default for ClassifierOptions {
+    fn default() -> Self {
+        ClassifierOptions {
+            svm: SvmOptions {
+                c: 4.0,
+                ..SvmOptions::default()
+            },
+            max_train_bins: 3000,
+            calibration_bins: 3000,
+            seed: 1,
+        }
+    }
+}
+
+/// A trained bin classifier with its held-out confusion matrix.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BinClassifier {
+    /// Feature standardisation.
+    pub scaler: Scaler,
+    /// The SVM.
+    pub svm: Svm,
+    /// Confusion matrix on held-out bins.
+    pub confusion: Confusion,
+}
+
+impl BinClassifier {
+    /// Trains on rows of `x` (row-major, [`FEATURE_DIMS`] wide) with labels `y`: a seeded
+    /// subset of at most `max_train_bins` for the SVM and disjoint held-out bins for C.
+    pub fn train(x: &[f32], y: &[bool], options: &ClassifierOptions) -> Result<BinClassifier> {
+        let n = y.len();
+        if x.len() != n * FEATURE_DIMS {
+            return Err(StreetsError::FeatureLength {
+                got: x.len(),
+                expected: n * FEATURE_DIMS,
+            });
+        }
+        let mut order: Vec<usize> = (0..n).collect();
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(options.seed));
+        let n_train = options.max_train_bins.min(n);
+        let (train, rest) = order.split_at(n_train);
+        let calib = &rest[..options.calibration_bins.min(rest.len())];
+        let gather = |ids: &[usize]| -> (Vec<f32>, Vec<bool>) {
+            let mut xs = Vec::with_capacity(ids.len() * FEATURE_DIMS);
+            for &i in ids {
+                xs.extend_from_slice(&x[i * FEATURE_DIMS..(i + 1) * FEATURE_DIMS]);
+            }
+            (xs, ids.iter().map(|&i| y[i]).collect())
+        };
+        let (mut xt, yt) = gather(train);
+        let scaler = Scaler::fit(&xt, FEATURE_DIMS);
+        scaler.apply(&mut xt);
+        let svm = Svm::train_flat(&xt, FEATURE_DIMS, &yt, &options.svm)?;
+        let mut clf = BinClassifier {
+            scaler,
+            svm,
+            confusion: Confusion {
+                counts: [[0; 2]; 2],
+            },
+        };
+        // Held-out bins when there are any, else (tiny data) the training bins.
+        let (xc, yc) = if calib.is_empty() {
+            gather(train)
+        } else {
+            gather(calib)
+        };
+        let pred = clf.predict(&xc)?;
+        clf.confusion = Confusion::from_pairs(&yc, &pred);
+        Ok(clf)
+    }
+
+    /// Predicted labels of raw (unscaled) feature rows.
+    pub fn predict(&self, x: &[f32]) -> Result<Vec<bool>> {
+        let mut xs = x.to_vec();
+        self.scaler.apply(&mut xs);
+        self.svm.predict_flat(&xs)
+    }
+}
+
+/// Options of the geometry model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GeometryOptions {
+    /// Corridors.
+    pub corridor: CorridorOptions,
+    /// Features.
+    pub features: FeatureOptions,
+    /// Widest street considered, metres.
+    pub max_width_m: f64,
+    /// σ of the intersegment potential, metres (thesis: 0.5).
+    pub sigma_m: f64,
+    /// Couple neighbours only when their directions differ by less than this, degrees
+    /// (180: every pair of N, as the thesis).
+    pub max_turn_deg: f64,
+}
+
+impl Default for GeometryOptions {
+    fn default() -> Self {
+        GeometryOptions {
+            corridor: CorridorOptions::default(),
+            features: FeatureOptions::default(),
+            max_width_m: 30.0,
+            sigma_m: 0.5,
+            max_turn_deg: 45.0,
+        }
+    }
+}
+
+impl GeometryOptions {
+    /// The θ grid.
+    pub fn theta_grid(&self) -> ThetaGrid {
+        ThetaGrid {
+            cols: self.corridor.cols(),
+            bin_m: self.corridor.bin_m,
+            max_width_cols: (self.max_width_m / self.corridor.bin_m).round().max(1.0) as usize,
+        }
+    }
+}
+
+/// A segment's corridor with its bin features.
+pub struct SegmentBins {
+    /// The corridor.
+    pub corridor: Corridor,
+    /// Its features.
+    pub features: BinFeatures,
+}
+
+impl SegmentBins {
+    /// Bins used for estimation: unmasked and observed.
+    pub fn usable(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.corridor.grid.len())
+            .filter(move |&k| !self.corridor.masked[k] && self.features.observed[k])
+    }
+
+    /// Raw feature rows of the usable bins.
+    pub fn usable_rows(&self) -> Vec<f32> {
+        let mut out = Vec::new();
+        for k in self.usable() {
+            out.extend_from_slice(self.features.row(k));
+        }
+        out
+    }
+
+    /// Column counts of a labelling of the usable bins (in [`SegmentBins::usable`] order).
+    pub fn counts(&self, labels: &[bool]) -> ColumnCounts {
+        let cols = self.corridor.grid.cols;
+        let mut c = ColumnCounts {
+            ones: vec![0; cols],
+            zeros: vec![0; cols],
+        };
+        for (k, &l) in self.usable().zip(labels) {
+            if l {
+                c.ones[k % cols] += 1;
+            } else {
+                c.zeros[k % cols] += 1;
+            }
+        }
+        c
+    }
+}
+
+/// Corridors and features of the segments `which` (parallel over segments); `None` where
+/// a segment is shorter than a bin.
+pub fn segment_bins(
+    map: &OsmMap,
+    cloud: &PointCloud,
+    which: &[usize],
+    options: &GeometryOptions,
+) -> Vec<Option<SegmentBins>> {
+    let cs = corridors(
+        &map.streets.segments,
+        which,
+        &map.streets.intersections,
+        &cloud.positions,
+        &options.corridor,
+    );
+    cs.into_par_iter()
+        .map(|c| {
+            c.map(|corridor| {
+                let o = corridor.frame.origin;
+                let features =
+                    bin_features(&corridor.grid, cloud, [o[0], o[1], 0.0], &options.features);
+                SegmentBins { corridor, features }
+            })
+        })
+        .collect()
+}
+
+/// Coupled pairs among `which` (indices into `which` in the result), with orientation.
+pub fn network_edges(map: &OsmMap, which: &[usize], max_turn_deg: f64) -> Vec<Edge> {
+    let pos: std::collections::HashMap<usize, usize> =
+        which.iter().enumerate().map(|(k, &s)| (s, k)).collect();
+    let segs = &map.streets.segments;
+    let cos_max = max_turn_deg.to_radians().cos();
+    let mut edges = Vec::new();
+    for &[s1, s2] in &map.streets.neighbour_pairs {
+        let (Some(&k1), Some(&k2)) = (pos.get(&s1), pos.get(&s2)) else {
+            continue;
+        };
+        let (a, b) = (&segs[s1], &segs[s2]);
+        // Same direction when one ends where the other starts.
+        let flipped = !(a.to_node == b.from_node || a.from_node == b.to_node);
+        let da = [a.b[0] - a.a[0], a.b[1] - a.a[1]];
+        let db = [b.b[0] - b.a[0], b.b[1] - b.a[1]];
+        let cos = (da[0] * db[0] + da[1] * db[1]) / (a.length_m * b.length_m).max(1e-12);
+        let cos = if flipped { -cos } else { cos };
+        if max_turn_deg < 180.0 && cos < cos_max {
+            continue;
+        }
+        edges.push(Edge {
+            s1: k1,
+            s2: k2,
+            flipped,
+        });
+    }
+    edges
+}
+
+/// A trained model for `urbansem streets estimate`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StreetModel {
+    /// What the model calls street.
+    pub target: Target,
+    /// Geometry options.
+    pub geometry: GeometryOptions,
+    /// The bin classifier.
+    pub classifier: BinClassifier,
+    /// The geometry prior.
+    pub prior: GeometryPrior,
+}
+
+/// One segment's estimate.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SegmentEstimate {
+    /// Segment index in the map.
+    pub segment: usize,
+    /// Offset of the street centre, left of a→b positive, metres.
+    pub offset_m: f64,
+    /// Width, metres.
+    pub width_m: f64,
+    /// Usable bins in the corridor.
+    pub bins: usize,
+}
+
+/// Estimates of all segments with usable bins; the counts of segments skipped as shorter than a bin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Estimates {
+    /// One per estimated segment.
+    pub segments: Vec<SegmentEstimate>,
+    /// Segments shorter than a bin.
+    pub too_short: usize,
+    /// Segments without usable bins (not observed or masked entirely).
+    pub unobserved: usize,
+    /// Whether inference was exact (tree-shaped network).
+    pub exact: bool,
+}
+
+impl StreetModel {
+    /// Estimates offset and width of every segment of `map` that `cloud` covers.
+    pub fn estimate(
+        &self,
+        map: &OsmMap,
+        cloud: &PointCloud,
+        map_name: &str,
+        cloud_name: &str,
+    ) -> Result<Estimates> {
+        let segs = &map.streets.segments;
+        if segs.is_empty() {
+            return Err(StreetsError::NoStreets {
+                path: map_name.to_string(),
+            });
+        }
+        let which: Vec<usize> = (0..segs.len()).collect();
+        let bins = segment_bins(map, cloud, &which, &self.geometry);
+        let too_short = bins.iter().filter(|b| b.is_none()).count();
+        if too_short == segs.len() {
+            return Err(StreetsError::SegmentsTooShort {
+                segments: segs.len(),
+                bin_m: self.geometry.corridor.bin_m,
+            });
+        }
+        let grid = self.geometry.theta_grid();
+        let clog = self.classifier.confusion.log_likelihood();
+        let mut used = Vec::new();
+        let mut potentials: Vec<SegmentPotential> = Vec::new();
+        let mut unobserved = 0;
+        for (s, b) in bins.iter().enumerate() {
+            let Some(b) = b else { continue };
+            let rows = b.usable_rows();
+            if rows.is_empty() {
+                unobserved += 1;
+                continue;
+            }
+            let labels = self.classifier.predict(&rows)?;
+            potentials.push(segment_potential(
+                &b.counts(&labels),
+                &clog,
+                &self.prior,
+                &grid,
+            ));
+            used.push((s, labels.len()));
+        }
+        if used.is_empty() {
+            let cb = cloud.bounds();
+            let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for s in segs {
+                for p in [s.a, s.b] {
+                    for k in 0..2 {
+                        min[k] = min[k].min(p[k]);
+                        max[k] = max[k].max(p[k]);
+                    }
+                }
+            }
+            let (c0, c1) = cb.map_or(([f64::NAN; 3], [f64::NAN; 3]), |b| (b.min, b.max));
+            return Err(StreetsError::NoOverlap {
+                cloud: cloud_name.to_string(),
+                cx0: c0[0],
+                cx1: c1[0],
+                cy0: c0[1],
+                cy1: c1[1],
+                sx0: min[0],
+                sx1: max[0],
+                sy0: min[1],
+                sy1: max[1],
+            });
+        }
+        let ids: Vec<usize> = used.iter().map(|u| u.0).collect();
+        let net = Network {
+            potentials,
+            edges: network_edges(map, &ids, self.geometry.max_turn_deg),
+            lambda: (self.geometry.corridor.bin_m / self.geometry.sigma_m).powi(2) / 2.0,
+        };
+        let sol = net.max_product(50);
+        let segments = used
+            .iter()
+            .zip(&sol.states)
+            .map(|(&(s, n), &(a, b))| {
+                let (offset_m, width_m) = grid.geometry(a, b);
+                SegmentEstimate {
+                    segment: s,
+                    offset_m,
+                    width_m,
+                    bins: n,
+                }
+            })
+            .collect();
+        Ok(Estimates {
+            segments,
+            too_short,
+            unobserved,
+            exact: sol.exact,
+        })
+    }
+}
+
+/// Default MCMC settings of the evaluation (thesis: 50 chains × 10⁶ iterations).
+pub fn default_mcmc(seed: u64) -> McmcOptions {
+    McmcOptions {
+        seed,
+        ..McmcOptions::default()
+    }
+}

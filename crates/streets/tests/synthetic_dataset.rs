@@ -1,0 +1,244 @@
+//! The whole pipeline on a synthetic `streets` dataset with known offsets and widths:
+//! evaluation, estimation, GeoJSON output and the bad-input messages.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use geodata::cloud::write_cloud;
+use geodata::osm::OsmMap;
+use std::path::PathBuf;
+use streets::dataset::{SegmentTruth, StreetsDataset};
+use streets::eval::{evaluate, EvalOptions};
+use streets::model::{BinClassifier, ClassifierOptions, GeometryOptions, StreetModel, Target};
+use streets::potentials::GeometryPrior;
+use streets::StreetsError;
+
+const LAT0: f64 = 48.0;
+const LON0: f64 = 11.0;
+
+fn node(id: i64, x: f64, y: f64) -> String {
+    let lat = LAT0 + y / 111_320.0;
+    let lon = LON0 + x / (111_320.0 * LAT0.to_radians().cos());
+    format!(r#"<node id="{id}" lat="{lat:.8}" lon="{lon:.8}"/>"#)
+}
+
+/// A T-free cross: way 1 along x (6 segments of 40 m), way 2 along y through node 4.
+fn cross_xml() -> String {
+    let mut s = String::from(r#"<?xml version="1.0"?><osm version="0.6">"#);
+    for k in 0..7 {
+        s += &node(1 + k, 40.0 * k as f64, 0.0);
+    }
+    for (id, y) in [
+        (11, -120.0),
+        (12, -80.0),
+        (13, -40.0),
+        (14, 40.0),
+        (15, 80.0),
+    ] {
+        s += &node(id, 120.0, y);
+    }
+    s += r#"<way id="100"><nd ref="1"/><nd ref="2"/><nd ref="3"/><nd ref="4"/><nd ref="5"/><nd ref="6"/><nd ref="7"/><tag k="highway" v="residential"/></way>"#;
+    s += r#"<way id="200"><nd ref="11"/><nd ref="12"/><nd ref="13"/><nd ref="4"/><nd ref="14"/><nd ref="15"/><tag k="highway" v="residential"/></way>"#;
+    s += "</osm>";
+    s
+}
+
+fn truths(map: &OsmMap) -> Vec<SegmentTruth> {
+    map.streets
+        .segments
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let horizontal = (s.b[1] - s.a[1]).abs() < 1.0;
+            let k = s.index_in_way as f64;
+            SegmentTruth {
+                segment: i,
+                offset_m: if horizontal {
+                    0.6 - 0.1 * k
+                } else {
+                    -0.8 + 0.1 * k
+                },
+                width_m: if horizontal {
+                    7.0 + 0.2 * k
+                } else {
+                    5.4 + 0.2 * k
+                },
+                sidewalk_m: 2.0,
+                drivable: true,
+                observed: true,
+                points: 1000,
+            }
+        })
+        .collect()
+}
+
+/// Writes the fixture into a fresh folder under the target dir.
+fn fixture(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    let xml = cross_xml();
+    std::fs::write(dir.join("map.osm"), &xml).unwrap();
+    let map = OsmMap::from_xml_str(&xml).unwrap();
+    let truth = truths(&map);
+    let cloud = streets::synthetic::ground_cloud(&map, &truth, 0.3, 20.0, 5);
+    write_cloud(dir.join("cloud.ply"), &cloud).unwrap();
+    std::fs::write(
+        dir.join("segments.json"),
+        serde_json::to_string(&truth).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("dataset.json"),
+        r#"{"kind": "streets", "map": "map.osm", "seed": 5, "poses": []}"#,
+    )
+    .unwrap();
+    dir
+}
+
+fn small_options() -> EvalOptions {
+    let mut o = EvalOptions {
+        classifier: ClassifierOptions {
+            max_train_bins: 800,
+            calibration_bins: 800,
+            ..ClassifierOptions::default()
+        },
+        ..EvalOptions::default()
+    };
+    o.mcmc.chains = 4;
+    o.mcmc.iterations = 20_000;
+    o
+}
+
+#[test]
+fn evaluation_recovers_known_widths() {
+    let ds = StreetsDataset::load(fixture("eval")).unwrap();
+    assert_eq!(ds.map.streets.segments.len(), 11);
+    let r = evaluate(&ds, &small_options()).unwrap();
+    assert_eq!(r.segments, 11);
+    for (name, t) in [("driving", &r.driving_area), ("sidewalk", &r.with_sidewalk)] {
+        let full = t.full_model.rmse_w.unwrap();
+        assert!(full < 1.0, "{name}: full-model RMSE_w {full}");
+        assert!(t.true_geometry.rmse_w.unwrap() < 0.15);
+        assert!(
+            t.opt_on_truth.rmse_w.unwrap() < 0.5,
+            "{name}: {:?}",
+            t.opt_on_truth
+        );
+        assert!(t.raw.rmse_w.is_none());
+        assert!(t.true_geometry.f1 > 0.9, "{name}: {:?}", t.true_geometry);
+        assert!(t.full_model.f1 > 0.8, "{name}: {:?}", t.full_model);
+    }
+    // The interface keys of issue 5.
+    let v = serde_json::to_value(&r).unwrap();
+    for target in ["driving_area", "with_sidewalk"] {
+        for m in [
+            "raw",
+            "single_segment",
+            "full_model",
+            "opt_on_truth",
+            "true_geometry",
+        ] {
+            for k in ["precision", "recall", "f1", "rmse_w"] {
+                assert!(v[target][m].get(k).is_some(), "{target}.{m}.{k}");
+            }
+        }
+    }
+    assert!(v["seconds"]["per_metre"].as_f64().unwrap() > 0.0);
+    // MCMC ends no worse than its start and max-product is exact on this tree-shaped network.
+    let d = &r.details["driving_area"];
+    assert!(d.exact);
+    assert!(d.mcmc_log_p <= d.max_product_log_p + 1e-6);
+}
+
+fn model_for(ds: &StreetsDataset) -> StreetModel {
+    let geometry = GeometryOptions::default();
+    let which: Vec<usize> = (0..ds.segments.len()).collect();
+    let bins = streets::model::segment_bins(&ds.map, &ds.cloud, &which, &geometry);
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    for b in bins.iter().flatten() {
+        for k in b.usable() {
+            if let Some(c) = b.features.truth[k] {
+                x.extend_from_slice(b.features.row(k));
+                y.push(Target::DrivingArea.positive(c));
+            }
+        }
+    }
+    let classifier = BinClassifier::train(
+        &x,
+        &y,
+        &ClassifierOptions {
+            max_train_bins: 800,
+            ..ClassifierOptions::default()
+        },
+    )
+    .unwrap();
+    let prior = GeometryPrior::fit(
+        &ds.segments
+            .iter()
+            .map(|s| (s.offset_m, s.width_m))
+            .collect::<Vec<_>>(),
+    );
+    StreetModel {
+        target: Target::DrivingArea,
+        geometry,
+        classifier,
+        prior,
+    }
+}
+
+#[test]
+fn estimate_writes_valid_geojson_and_bad_inputs_are_named() {
+    let ds = StreetsDataset::load(fixture("estimate")).unwrap();
+    let model = model_for(&ds);
+    let est = model
+        .estimate(&ds.map, &ds.cloud, "map.osm", "cloud.ply")
+        .unwrap();
+    assert_eq!(est.segments.len(), 11);
+    for e in &est.segments {
+        let t = &ds.segments[e.segment];
+        assert!((e.width_m - t.width_m).abs() < 1.0, "{e:?} vs {t:?}");
+    }
+    let fc = streets::geojson::feature_collection(&ds.map, &est.segments);
+    streets::geojson::validate(&fc).unwrap();
+    let text = serde_json::to_string(&fc).unwrap();
+    let back: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(back["features"].as_array().unwrap().len(), 11);
+    let lonlat = &back["features"][0]["geometry"]["coordinates"][0][0];
+    assert!((lonlat[0].as_f64().unwrap() - LON0).abs() < 0.01);
+    assert!((lonlat[1].as_f64().unwrap() - LAT0).abs() < 0.01);
+    assert!(back["features"][0]["properties"]["width"].as_f64().unwrap() > 4.0);
+
+    // A cloud far away from the streets.
+    let mut far = ds.cloud.clone();
+    for p in &mut far.positions {
+        p[0] += 5000.0;
+    }
+    let err = model
+        .estimate(&ds.map, &far, "map.osm", "far.ply")
+        .unwrap_err();
+    assert!(matches!(err, StreetsError::NoOverlap { .. }), "{err}");
+    assert!(err.to_string().contains("far.ply"));
+
+    // A map without streets.
+    let no_streets = OsmMap::from_xml_str(
+        r#"<osm version="0.6"><node id="1" lat="48.0" lon="11.0"/><node id="2" lat="48.0001" lon="11.0"/><node id="3" lat="48.0001" lon="11.0001"/><way id="5"><nd ref="1"/><nd ref="2"/><nd ref="3"/><nd ref="1"/><tag k="building" v="yes"/></way></osm>"#,
+    )
+    .unwrap();
+    let err = model
+        .estimate(&no_streets, &ds.cloud, "buildings.osm", "cloud.ply")
+        .unwrap_err();
+    assert!(matches!(err, StreetsError::NoStreets { .. }), "{err}");
+    assert!(err.to_string().contains("buildings.osm"));
+
+    // Segments shorter than a bin.
+    let tiny = OsmMap::from_xml_str(
+        r#"<osm version="0.6"><node id="1" lat="48.0" lon="11.0"/><node id="2" lat="48.0000001" lon="11.0"/><way id="5"><nd ref="1"/><nd ref="2"/><tag k="highway" v="residential"/></way></osm>"#,
+    )
+    .unwrap();
+    let err = model
+        .estimate(&tiny, &ds.cloud, "tiny.osm", "cloud.ply")
+        .unwrap_err();
+    assert!(
+        matches!(err, StreetsError::SegmentsTooShort { .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("shorter than one"));
+}
