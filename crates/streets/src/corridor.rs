@@ -9,6 +9,7 @@
 //! corridors are built in parallel over segments.
 
 use crate::grid::BinGrid;
+use geodata::osm::geometry::point_segment_distance;
 use geodata::osm::model::{Intersection, StreetSegment};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -22,6 +23,10 @@ pub struct CorridorOptions {
     pub bin_m: f64,
     /// Bins closer than this to an intersection centre are masked, metres (thesis: 10).
     pub intersection_radius_m: f64,
+    /// Also mask bins nearer to another drivable segment's centre line than to this one
+    /// (an extension of the thesis' intersection mask: parallel carriageways and crossing
+    /// streets beyond 10 m then do not enter this segment's potentials).
+    pub mask_nearer_segments: bool,
 }
 
 impl Default for CorridorOptions {
@@ -30,6 +35,7 @@ impl Default for CorridorOptions {
             width_m: 40.0,
             bin_m: 0.2,
             intersection_radius_m: 10.0,
+            mask_nearer_segments: true,
         }
     }
 }
@@ -158,11 +164,14 @@ impl PointIndex {
     }
 }
 
-/// The corridor of one segment (`None` for a segment shorter than one bin).
+/// The corridor of one segment (`None` for a segment shorter than one bin); `competitors`
+/// are the centre lines that claim bins nearer to them (see [`CorridorOptions::mask_nearer_segments`]).
+#[allow(clippy::too_many_arguments)]
 pub fn corridor(
     segment_id: usize,
     segment: &StreetSegment,
     intersections: &[Intersection],
+    competitors: &[[[f64; 2]; 2]],
     positions: &[[f64; 3]],
     index: &PointIndex,
     options: &CorridorOptions,
@@ -216,12 +225,40 @@ pub fn corridor(
         })
         .collect();
     let mut masked = vec![false; rows * cols];
+    let rivals: Vec<[[f64; 2]; 2]> = competitors
+        .iter()
+        .filter(|l| {
+            let (lo, hi) = (
+                [l[0][0].min(l[1][0]), l[0][1].min(l[1][1])],
+                [l[0][0].max(l[1][0]), l[0][1].max(l[1][1])],
+            );
+            (l[0] != segment.a || l[1] != segment.b)
+                && hi[0] >= min[0] - half
+                && lo[0] <= max[0] + half
+                && hi[1] >= min[1] - half
+                && lo[1] <= max[1] + half
+        })
+        .copied()
+        .collect();
+    if !rivals.is_empty() {
+        for row in 0..rows {
+            let t = (row as f64 + 0.5) * bin;
+            for col in 0..cols {
+                let u = -half + (col as f64 + 0.5) * bin;
+                let p = frame.world(t, u);
+                let own = u.abs();
+                masked[row * cols + col] = rivals
+                    .iter()
+                    .any(|l| point_segment_distance(p, l[0], l[1]) < own);
+            }
+        }
+    }
     if !near.is_empty() {
         for row in 0..rows {
             let t = (row as f64 + 0.5) * bin;
             for col in 0..cols {
                 let u = -half + (col as f64 + 0.5) * bin;
-                masked[row * cols + col] = near
+                masked[row * cols + col] |= near
                     .iter()
                     .any(|c| (c[0] - t).powi(2) + (c[1] - u).powi(2) <= r * r);
             }
@@ -244,12 +281,29 @@ pub fn corridors(
     options: &CorridorOptions,
 ) -> Vec<Option<Corridor>> {
     let index = PointIndex::new(positions, 10.0);
+    let competitors: Vec<[[f64; 2]; 2]> = if options.mask_nearer_segments {
+        segments
+            .iter()
+            .filter(|s| geodata::sim::truth::is_drivable(&s.highway))
+            .map(|s| [s.a, s.b])
+            .collect()
+    } else {
+        Vec::new()
+    };
     which
         .par_iter()
         .map(|&s| {
-            segments
-                .get(s)
-                .and_then(|seg| corridor(s, seg, intersections, positions, &index, options))
+            segments.get(s).and_then(|seg| {
+                corridor(
+                    s,
+                    seg,
+                    intersections,
+                    &competitors,
+                    positions,
+                    &index,
+                    options,
+                )
+            })
         })
         .collect()
 }
@@ -288,7 +342,7 @@ mod tests {
         }];
         let opts = CorridorOptions::default();
         let index = PointIndex::new(&positions, 10.0);
-        let c = corridor(0, &s, &inter, &positions, &index, &opts).unwrap();
+        let c = corridor(0, &s, &inter, &[], &positions, &index, &opts).unwrap();
         assert_eq!((c.grid.rows, c.grid.cols), (150, 200));
         assert_eq!(c.grid.points(25 * 200 + 105), &[0]);
         assert_eq!(c.grid.points(149 * 200 + 94), &[1]);
@@ -301,9 +355,31 @@ mod tests {
     }
 
     #[test]
+    fn bins_nearer_to_a_parallel_street_are_masked() {
+        let s = seg([0.0, 0.0], [0.0, 30.0]);
+        // A parallel street 10 m to the left (west).
+        let rival = [[-10.0, 0.0], [-10.0, 30.0]];
+        let index = PointIndex::new(&[], 10.0);
+        let c = corridor(
+            0,
+            &s,
+            &[],
+            &[rival, [s.a, s.b]],
+            &[],
+            &index,
+            &CorridorOptions::default(),
+        )
+        .unwrap();
+        // Column of u = 4.9 (kept) and u = 5.1 (masked).
+        assert!(!c.masked[10 * 200 + 124]);
+        assert!(c.masked[10 * 200 + 125]);
+        assert!(!c.masked[10 * 200 + 10]);
+    }
+
+    #[test]
     fn segment_shorter_than_a_bin_has_no_corridor() {
         let s = seg([0.0, 0.0], [0.1, 0.0]);
         let index = PointIndex::new(&[], 10.0);
-        assert!(corridor(0, &s, &[], &[], &index, &CorridorOptions::default()).is_none());
+        assert!(corridor(0, &s, &[], &[], &[], &index, &CorridorOptions::default()).is_none());
     }
 }

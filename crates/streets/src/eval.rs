@@ -232,6 +232,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
     for target in [Target::DrivingArea, Target::WithSidewalk] {
         let mut predicted: Vec<Vec<bool>> = vec![Vec::new(); eval_ids.len()];
         let mut potentials: Vec<Option<SegmentPotential>> = vec![None; eval_ids.len()];
+        let mut priors = vec![GeometryPrior::flat(); eval_ids.len()];
         let mut conf_sum = [[0u64; 2]; 2];
         let mut sv_sum = 0usize;
         for fold in 0..folds {
@@ -291,6 +292,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             let t = Instant::now();
             let clog = clf.confusion.log_likelihood();
             for &k in &test {
+                priors[k] = prior;
                 potentials[k] = Some(segment_potential(
                     &eval_bins[k].counts(&predicted[k]),
                     &clog,
@@ -320,7 +322,8 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
         let t = Instant::now();
         let mcmc = net.mcmc(&options.mcmc);
         mcmc_s += t.elapsed().as_secs_f64();
-        // The optimum on true labels: the model with an almost perfect classifier, flat prior.
+        // The optimum on true labels: the segment model (with its fold's prior) and an almost
+        // perfect classifier.
         let perfect = Confusion {
             counts: [[999, 1], [1, 999]],
         }
@@ -339,7 +342,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                         counts.zeros[kk % grid.cols] -= 1;
                     }
                 }
-                segment_potential(&counts, &perfect, &GeometryPrior::flat(), &grid).argmax()
+                segment_potential(&counts, &perfect, &priors[k], &grid).argmax()
             })
             .collect();
         let true_states: Vec<(usize, usize)> = eval_ids

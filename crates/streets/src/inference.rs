@@ -373,7 +373,12 @@ impl Network {
                     let temp = options.t_start * (ratio * it as f64 / iters as f64).exp();
                     let s = rng.gen_range(0..n_seg);
                     let (a, b) = states[s];
-                    let step = rng.gen_range(1..=options.max_step as i64);
+                    // Mostly small steps; one in ten a long jump (up to a quarter of the corridor).
+                    let step = if rng.gen_range(0..10) == 0 {
+                        rng.gen_range(1..=(n as i64 / 4).max(1))
+                    } else {
+                        rng.gen_range(1..=options.max_step.max(1) as i64)
+                    };
                     let sign = if rng.gen::<bool>() { 1 } else { -1 };
                     let delta = sign * step;
                     let (na, nb) = match rng.gen_range(0..3) {
@@ -432,7 +437,7 @@ pub struct McmcOptions {
     pub t_start: f64,
     /// Final temperature (geometric schedule).
     pub t_end: f64,
-    /// Largest boundary move in columns.
+    /// Largest boundary move of the frequent small steps, columns.
     pub max_step: usize,
     /// Seed.
     pub seed: u64,

@@ -92,6 +92,12 @@ pub enum StreetsCommand {
         /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
         #[arg(long, default_value_t = 45.0)]
         max_turn_deg: f64,
+        /// Mask only near intersections, as the thesis (not bins nearer to another street).
+        #[arg(long)]
+        thesis_mask: bool,
+        /// Write per-segment estimated and true geometry (JSON) here.
+        #[arg(long)]
+        segments_out: Option<PathBuf>,
         /// Training options.
         #[command(flatten)]
         training: TrainingArgs,
@@ -189,6 +195,8 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             chains,
             iterations,
             max_turn_deg,
+            thesis_mask,
+            segments_out,
             training,
         } => {
             let t = Instant::now();
@@ -200,12 +208,17 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
                 ..EvalOptions::default()
             };
             options.geometry.max_turn_deg = max_turn_deg;
+            options.geometry.corridor.mask_nearer_segments = !thesis_mask;
             options.mcmc.chains = chains;
             options.mcmc.iterations = iterations;
             options.mcmc.seed = training.seed;
             let mut report = evaluate(&ds, &options)
                 .with_context(|| format!("evaluating {}", dataset.display()))?;
             report.seconds.insert("load".into(), load_s);
+            if let Some(p) = segments_out {
+                std::fs::write(&p, serde_json::to_vec_pretty(&report.geometries)?)
+                    .with_context(|| format!("writing {}", p.display()))?;
+            }
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
                 eprintln!("{}", details_text(&report));
