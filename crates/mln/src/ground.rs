@@ -852,6 +852,14 @@ fn ground_formula(
             }
         }
     }
+    if matches!(wf.weight, Weight::Soft(w) if w == 0.0) {
+        // Contributes to neither cost nor violated weight, and creates no atoms.
+        return Ok(FormulaGroundings {
+            factors: Vec::new(),
+            decided_false: 0,
+            decided_true: 0.0,
+        });
+    }
     let mut scope = Scope {
         world,
         var_index: names

@@ -42,10 +42,10 @@ pub struct TabuOptions {
     /// Independent chains, run in parallel; chain 0 starts from the given assignment, the
     /// others from it with `perturb_fraction` of the variables flipped at random.
     pub chains: usize,
-    /// Moves a flipped variable stays tabu (0: n/100 + 10, varied per chain).
+    /// Moves a flipped variable stays tabu (0: n/10 + 10, varied per chain).
     pub tenure: usize,
-    /// Moves without a new best before restarting from a perturbed best (0: 20·n, at
-    /// least 10 000).
+    /// Moves without a new best before restarting from a perturbed best (0: 5·n, at
+    /// least 2 000).
     pub stall_moves: usize,
     /// Share of the variables flipped at random by a restart.
     pub perturb_fraction: f64,
@@ -367,7 +367,7 @@ fn tabu_chain(
         perturb(&mut s, &mut rng);
     }
     let base_tenure = if options.tenure == 0 {
-        n / 100 + 10
+        n / 10 + 10
     } else {
         options.tenure
     };
@@ -376,11 +376,13 @@ fn tabu_chain(
         .min(n.saturating_sub(1))
         .max(1);
     let stall = if options.stall_moves == 0 {
-        (20 * n).max(10_000)
+        (5 * n).max(2_000)
     } else {
         options.stall_moves
     };
     let mut tabu_until = vec![0usize; n];
+    let mut dirty: Vec<usize> = Vec::new();
+    let mut dirty_mark = vec![false; n];
     let mut tree = MinTree::new(&(0..n).map(|v| s.gain(v)).collect::<Vec<_>>());
     let mut tabu_list: std::collections::VecDeque<(usize, usize)> = Default::default();
     let mut best = (s.energy(), s.values().to_vec());
@@ -414,14 +416,20 @@ fn tabu_chain(
                 None => break,
             },
         };
-        {
-            let tabu_until = &tabu_until;
-            s.flip(v, |u, gain| {
-                if tabu_until[u] <= it {
-                    tree.update(u, gain);
-                }
-            });
+        // Gains change in bursts (one per term of v); update the tree once per variable.
+        s.flip(v, |u, _| {
+            if !dirty_mark[u] {
+                dirty_mark[u] = true;
+                dirty.push(u);
+            }
+        });
+        for &u in &dirty {
+            dirty_mark[u] = false;
+            if tabu_until[u] <= it {
+                tree.update(u, s.gain(u));
+            }
         }
+        dirty.clear();
         tabu_until[v] = it + tenure;
         tree.update(v, f64::INFINITY);
         tabu_list.push_back((it + tenure, v));

@@ -106,8 +106,8 @@ pub struct InferArgs {
     /// Shorthand for --representation multinomial.
     #[arg(long)]
     pub multinomial: bool,
-    /// QPBO-I rounds on the residue (qpbo method).
-    #[arg(long, default_value_t = 50)]
+    /// QPBO-I rounds on the residue before tabu search (qpbo method).
+    #[arg(long, default_value_t = 0)]
     pub improve: usize,
     /// Tabu-search flips per chain on each residue component of the qpbo method that is too
     /// large to enumerate (0: none).
