@@ -493,14 +493,19 @@ pub fn ground(
                 .map(|c| {
                     c.into_iter()
                         .map(|(pred, args, positive)| {
-                            let next = atoms.len() as u32;
-                            let id = *atom_ids.entry((pred, args.clone())).or_insert_with(|| {
-                                atoms.push(GroundAtom {
-                                    predicate: pred,
-                                    args,
-                                });
-                                next
-                            });
+                            let key = (pred, args);
+                            let id = match atom_ids.get(&key) {
+                                Some(&id) => id,
+                                None => {
+                                    let id = atoms.len() as u32;
+                                    atoms.push(GroundAtom {
+                                        predicate: pred,
+                                        args: key.1.clone(),
+                                    });
+                                    atom_ids.insert(key, id);
+                                    id
+                                }
+                            };
                             Literal::new(id, positive)
                         })
                         .collect()
@@ -531,6 +536,13 @@ pub fn ground(
 
 /// Adds −w·Π_C (1 − Π_{l∈C} l̄) to the cost.
 fn add_factor_polynomial(cost: &mut Polynomial, f: &GroundFactor) {
+    if let [clause] = f.clauses.as_slice() {
+        // −w·(1 − Π l̄) = −w + w·Π l̄ (most factors are single clauses).
+        let negs: Vec<Literal> = clause.iter().map(|l| l.complement()).collect();
+        cost.add_constant(-f.weight);
+        cost.add_term(f.weight, &negs);
+        return;
+    }
     // Expand the product over clauses: each clause contributes 1 or −Π l̄.
     let mut terms: Vec<(f64, Vec<Literal>)> = vec![(1.0, Vec::new())];
     for clause in &f.clauses {

@@ -60,7 +60,8 @@ pub enum Representation {
     /// negated literals, so opposite-polarity terms merge (this makes the thesis' ID problem
     /// submodular); longer terms stay in literal form.
     Multinomial,
-    /// Both, in parallel; the lower cost wins (ties: more persistencies).
+    /// The multinomial form: on LP, RC, ER, F&S and −F&S it labels exactly the atoms the
+    /// literal form labels, and it solves ID, which the literal form leaves unlabelled.
     #[default]
     Auto,
 }
@@ -187,16 +188,9 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
             let r = match options.representation {
                 Representation::Literal => run(false),
                 Representation::Multinomial => run(true),
-                Representation::Auto => {
-                    let (a, b) = rayon::join(|| run(false), || run(true));
-                    let bound = a.lower_bound.max(b.lower_bound);
-                    let better_b = b.energy < a.energy - 1e-9
-                        || ((b.energy - a.energy).abs() <= 1e-9
-                            && b.labelled_fraction > a.labelled_fraction);
-                    let mut r = if better_b { b } else { a };
-                    r.lower_bound = bound.min(r.energy);
-                    r
-                }
+                // Measured on LP, RC, ER, F&S and −F&S: both forms give the same persistencies,
+                // bound and (after tabu search) cost; only the multinomial form solves ID.
+                Representation::Auto => run(true),
             };
             let mut assignment = r.assignment;
             if options.tabu_moves > 0 && !r.exact {

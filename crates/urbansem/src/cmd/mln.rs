@@ -100,7 +100,7 @@ pub struct InferArgs {
     /// Run probing (QPBO-P) in the QSSR rounds of the qpbo method (slower; rarely lowers the cost).
     #[arg(long)]
     pub probe: bool,
-    /// Polynomial form for the qpbo method: literal, multinomial, or auto (both in parallel, best kept).
+    /// Polynomial form for the qpbo method: literal, multinomial, or auto (= multinomial, which labels at least as much on every benchmark).
     #[arg(long, default_value = "auto", value_parser = parse_representation)]
     pub representation: Representation,
     /// Shorthand for --representation multinomial.
