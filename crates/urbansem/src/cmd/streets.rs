@@ -740,3 +740,32 @@ pub(crate) fn demo_stage(
         files: vec![("streets.svg", figure.into_bytes())],
     })
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn demo_stage_draws_the_figure_and_table() {
+        let out =
+            std::env::temp_dir().join(format!("urbansem-streets-demo-{}", std::process::id()));
+        let args = crate::cmd::demo::DemoArgs {
+            out: out.clone(),
+            seed: 1,
+        };
+        let t = Instant::now();
+        let stage = demo_stage(&args).unwrap();
+        eprintln!("demo stage: {:.1} s", t.elapsed().as_secs_f64());
+        assert_eq!(stage.key, "streets");
+        assert!(stage.figures[0].contains("<polygon"));
+        assert!(stage.text_html.contains("full model"));
+        assert!(
+            stage.summary["eval"]["driving_area"]["full_model"]["f1"]
+                .as_f64()
+                .unwrap()
+                > 0.5
+        );
+        let _ = std::fs::remove_dir_all(out);
+    }
+}
