@@ -5,6 +5,12 @@
 //! `scripts/bench_pbo_peers.py` (Kolmogorov's QPBO via `thinqpbo`, BK max-flow via
 //! `PyMaxflow`, installed with pip if missing) on the same files, prints both timings with
 //! the ratio urbansem/peer, and fails if energies, bounds or labelled counts differ.
+//!
+//! `urbansem bench mln` runs MAP inference (default QSSR + tabu) on the real MLN sets of
+//! `../shared/data/mln` (LP, RC, KB, ER) and on the generated F&S, −F&S and ID, reports
+//! sizes, persistencies, cost, bound and seconds per phase (fastest of `--repeat` runs),
+//! re-scores Tuffy's shipped MAP answers with the same evaluator, and quotes Tuffy's logged
+//! run time (another machine) and the issue's time target (thesis Table 3.5 / 10).
 
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
@@ -20,6 +26,9 @@ use std::time::Instant;
 pub enum BenchCommand {
     /// QPBO and max-flow against Kolmogorov's QPBO (thinqpbo) and BK max-flow (PyMaxflow).
     Pbo(PboBenchArgs),
+    /// MLN MAP inference on the benchmark sets: our cost and time against Tuffy's shipped
+    /// answers (re-scored by our evaluator) and the thesis' time targets.
+    Mln(MlnBenchArgs),
 }
 
 /// Options of `urbansem bench pbo`.
@@ -49,6 +58,7 @@ pub struct PboBenchArgs {
 pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
         BenchCommand::Pbo(args) => bench_pbo(&args),
+        BenchCommand::Mln(args) => bench_mln(&args),
     }
 }
 
@@ -403,4 +413,292 @@ fn print_table(rows: &[Row]) {
          nodes. The peers' build runs a Python loop (thinqpbo has no array API), so 'tot' \
          favours urbansem there; 'slv' is the like-for-like number."
     );
+}
+
+/// Options of `urbansem bench mln`.
+#[derive(Args)]
+pub struct MlnBenchArgs {
+    /// Folder of the MLN benchmark sets (see its SOURCES.md).
+    #[arg(long, default_value = "../shared/data/mln")]
+    data: PathBuf,
+    /// Folder for the generated F&S, −F&S and ID problems.
+    #[arg(long, default_value = "target/bench-data/mln")]
+    data_dir: PathBuf,
+    /// Runs per set; the fastest is reported (the answer is the same for a seed).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Only these sets (comma-separated): lp, rc, kb, er, fs, neg-fs, id.
+    #[arg(long, value_delimiter = ',')]
+    sets: Vec<String>,
+    /// Seed of the generated problems and of inference.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One MLN benchmark set: files relative to the data folder (or the generated folder).
+struct MlnSet {
+    name: &'static str,
+    dir: &'static str,
+    program: &'static str,
+    generated: Option<mln_cmd::Problem>,
+    /// Tuffy's MAP answer (true atoms), relative to the data folder.
+    reference: Option<&'static str>,
+    /// Tuffy's run log, relative to the data folder.
+    tuffy_log: Option<&'static str>,
+    /// The issue's time target in seconds (thesis Table 3.5 / 10).
+    target_s: f64,
+}
+
+use super::mln as mln_cmd;
+
+const MLN_SETS: [MlnSet; 7] = [
+    MlnSet {
+        name: "lp",
+        dir: "lp/rockit",
+        program: "prog.mln",
+        generated: None,
+        reference: Some("lp/reference_outputs/tuffy_map_output_from_xeggora.db"),
+        tuffy_log: Some("lp/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 0.9,
+    },
+    MlnSet {
+        name: "rc",
+        dir: "rc/rockit",
+        program: "prog.mln",
+        generated: None,
+        reference: None,
+        tuffy_log: Some("rc/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 0.9,
+    },
+    MlnSet {
+        name: "kb",
+        dir: "kb/mlcnn",
+        program: "prog.mln",
+        generated: None,
+        reference: Some("kb/reference_outputs/tuffy_map_output_from_mlcnn.txt"),
+        tuffy_log: None,
+        target_s: 0.6,
+    },
+    MlnSet {
+        name: "er",
+        dir: "er/rockit",
+        program: "prog.mln",
+        generated: None,
+        reference: Some("er/reference_outputs/tuffy_map_output_from_xeggora.db"),
+        tuffy_log: Some("er/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 10.0,
+    },
+    MlnSet {
+        name: "fs",
+        dir: "fs",
+        program: "prog.mln",
+        generated: Some(mln_cmd::Problem::Fs),
+        reference: None,
+        tuffy_log: None,
+        target_s: 0.6,
+    },
+    MlnSet {
+        name: "neg-fs",
+        dir: "neg-fs",
+        program: "prog.mln",
+        generated: Some(mln_cmd::Problem::NegFs),
+        reference: None,
+        tuffy_log: None,
+        target_s: 1.2,
+    },
+    MlnSet {
+        name: "id",
+        dir: "id",
+        program: "prog.mln",
+        generated: Some(mln_cmd::Problem::Id),
+        reference: None,
+        tuffy_log: None,
+        target_s: 0.5,
+    },
+];
+
+/// Tuffy's total run time from its log line `… after running for [3 min, 50.630 sec]`.
+fn tuffy_logged_seconds(text: &str) -> Option<f64> {
+    let start = text.find("after running for [")? + "after running for [".len();
+    let inner = &text[start..start + text[start..].find(']')?];
+    let mut total = 0.0;
+    for part in inner.split(',') {
+        let mut words = part.split_whitespace();
+        let value: f64 = words.next()?.parse().ok()?;
+        total += value
+            * match words.next()? {
+                "hr" | "hour" | "hours" => 3600.0,
+                "min" => 60.0,
+                "sec" => 1.0,
+                _ => return None,
+            };
+    }
+    Some(total)
+}
+
+fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
+    use mln::infer::{map_inference, InferOptions};
+    if !args.data.exists() {
+        bail!(
+            "MLN data folder {} not found (give --data ../shared/data/mln)",
+            args.data.display()
+        );
+    }
+    let unknown: Vec<&String> = args
+        .sets
+        .iter()
+        .filter(|s| !MLN_SETS.iter().any(|m| m.name == s.as_str()))
+        .collect();
+    if !unknown.is_empty() {
+        bail!("unknown MLN set(s) {unknown:?}: expected lp, rc, kb, er, fs, neg-fs, id");
+    }
+    let mut rows = Vec::new();
+    for set in MLN_SETS
+        .iter()
+        .filter(|m| args.sets.is_empty() || args.sets.iter().any(|s| s == m.name))
+    {
+        let dir = match set.generated {
+            Some(problem) => {
+                let out = args.data_dir.join(set.dir);
+                mln_cmd::write_generated(problem, None, args.seed, &out)?;
+                out
+            }
+            None => args.data.join(set.dir),
+        };
+        let problem_args = mln_cmd::ProblemArgs {
+            program: dir.join(set.program),
+            evidence: vec![dir.join("evidence.db")],
+            queries: None,
+            query_file: Some(dir.join("query.db")),
+        };
+        let mut options = InferOptions::default();
+        options.walksat.seed = args.seed;
+        let mut best: Option<serde_json::Value> = None;
+        let mut best_total = f64::INFINITY;
+        let mut reference = serde_json::Value::Null;
+        for run in 0..args.repeat.max(1) {
+            let t0 = Instant::now();
+            let (program, problem, _query, parse_s, ground_s) =
+                mln_cmd::load_and_ground(&problem_args)
+                    .with_context(|| format!("set {}", set.name))?;
+            let r = map_inference(&problem, &options);
+            let total_s = t0.elapsed().as_secs_f64();
+            if run == 0 {
+                if let Some(rel) = set.reference {
+                    let path = args.data.join(rel);
+                    let (x, lines, not_unknown) = mln_cmd::read_answer(&program, &problem, &path)?;
+                    let s = problem.score(&x);
+                    reference = serde_json::json!({
+                        "answer": path.display().to_string(),
+                        "answer_atoms": lines,
+                        "answer_atoms_not_unknown": not_unknown,
+                        "cost": s.cost,
+                        "hard_violations": s.hard_violations,
+                    });
+                }
+            }
+            if total_s < best_total {
+                best_total = total_s;
+                best = Some(serde_json::json!({
+                    "set": set.name,
+                    "program": problem_args.program.display().to_string(),
+                    "ground_atoms": problem.atoms.len(),
+                    "ground_factors": problem.factors.len(),
+                    "higher_order_factors": problem.higher_order_factors(),
+                    "cost": r.scores.cost,
+                    "hard_violations": r.scores.hard_violations,
+                    "lower_bound": r.lower_bound,
+                    "persistent_fraction": r.persistent_fraction,
+                    "seconds": {
+                        "parse": parse_s,
+                        "ground": ground_s,
+                        "quadratize": r.seconds_quadratize,
+                        "solve": r.seconds_solve,
+                        "total": total_s,
+                    },
+                }));
+            }
+        }
+        let Some(mut row) = best else { continue };
+        let tuffy_s = match set.tuffy_log {
+            Some(rel) => {
+                let path = args.data.join(rel);
+                let text = std::fs::read_to_string(&path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                tuffy_logged_seconds(&text)
+            }
+            None => None,
+        };
+        let ref_cost = reference.get("cost").and_then(Value::as_f64);
+        let our_cost = row["cost"].as_f64();
+        row["reference"] = reference;
+        row["cost_minus_reference"] = serde_json::json!(our_cost.zip(ref_cost).map(|(a, b)| a - b));
+        row["tuffy_logged_seconds"] = serde_json::json!(tuffy_s);
+        row["seconds_over_tuffy"] = serde_json::json!(tuffy_s.map(|t| best_total / t));
+        row["target_seconds"] = serde_json::json!(set.target_s);
+        row["seconds_over_target"] = serde_json::json!(best_total / set.target_s);
+        if !args.json {
+            eprintln!("{}: done", set.name);
+        }
+        rows.push(row);
+    }
+    if args.json {
+        let out = serde_json::json!({
+            "repeat": args.repeat.max(1),
+            "seed": args.seed,
+            "sets": rows,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "{:<7} {:>7} {:>8} {:>6} {:>7} | {:>13} {:>13} {:>10} {:>13} | {:>7} {:>7} {:>6} {:>8} {:>7}",
+        "set", "atoms", "factors", "h.o.", "pers %", "cost", "Tuffy cost", "diff", "bound",
+        "ground", "total", "target", "/target", "Tuffy s"
+    );
+    for r in &rows {
+        let f = |v: &Value| v.as_f64();
+        let secs = &r["seconds"];
+        println!(
+            "{:<7} {:>7} {:>8} {:>6} {:>7.2} | {:>13.2} {:>13} {:>10} {:>13} | {:>7.3} {:>7.3} {:>6.1} {:>8.2} {:>7}",
+            r["set"].as_str().unwrap_or("?"),
+            r["ground_atoms"].as_u64().unwrap_or(0),
+            r["ground_factors"].as_u64().unwrap_or(0),
+            r["higher_order_factors"].as_u64().unwrap_or(0),
+            100.0 * f(&r["persistent_fraction"]).unwrap_or(0.0),
+            f(&r["cost"]).unwrap_or(f64::NAN),
+            fmt_opt(f(&r["reference"]["cost"]), 2),
+            fmt_opt(f(&r["cost_minus_reference"]), 2),
+            fmt_opt(f(&r["lower_bound"]), 2),
+            f(&secs["ground"]).unwrap_or(f64::NAN),
+            f(&secs["total"]).unwrap_or(f64::NAN),
+            f(&r["target_seconds"]).unwrap_or(f64::NAN),
+            f(&r["seconds_over_target"]).unwrap_or(f64::NAN),
+            fmt_opt(f(&r["tuffy_logged_seconds"]), 1),
+        );
+    }
+    println!(
+        "cost = −Σ w·[ground formula true] over soft groundings with unknown atoms (lower is \
+         better); Tuffy cost = Tuffy's shipped MAP answer scored by the same evaluator; diff = \
+         ours − Tuffy (< 0: ours better); bound = QPBO/QSSR lower bound (= cost: proven optimal); \
+         seconds are the fastest of the runs, parse + ground + solve; target = thesis Table 3.5 \
+         time / 10; Tuffy s = Tuffy's logged run time on its authors' machine (PostgreSQL \
+         grounding included), not measured here."
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tuffy_log_time_is_parsed() {
+        let log = "*** Tuffy exited at 17:03:11 12/9/18 after running for [3 min, 50.630 sec]\n";
+        assert_eq!(tuffy_logged_seconds(log), Some(230.63));
+        assert_eq!(tuffy_logged_seconds("no time here"), None);
+    }
 }

@@ -55,7 +55,7 @@ pub struct ScoreArgs {
 }
 
 /// Which synthetic problem to generate.
-#[derive(Clone, Copy, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum Problem {
     /// Friends & Smokers (Table 3.1).
     Fs,
@@ -151,8 +151,9 @@ pub fn run(command: MlnCommand) -> anyhow::Result<()> {
     }
 }
 
-/// Reads program, evidence and query and grounds them (shared by infer and score).
-fn load_and_ground(
+/// Reads program, evidence and query and grounds them (shared by infer, score and
+/// `bench mln`); also returns the seconds parsing and grounding.
+pub(crate) fn load_and_ground(
     args: &ProblemArgs,
 ) -> anyhow::Result<(
     mln::parse::Program,
@@ -191,9 +192,43 @@ fn load_and_ground(
 
 fn score(args: &ScoreArgs) -> anyhow::Result<()> {
     let (program, problem, _query, _, _) = load_and_ground(&args.problem)?;
-    let answer = read_evidence(&args.answer, &program).context("reading the answer")?;
+    let (x, answer_atoms, not_unknown) = read_answer(&program, &problem, &args.answer)?;
+    let s = problem.score(&x);
+    if args.json {
+        let out = json!({
+            "answer": args.answer.display().to_string(),
+            "answer_atoms": answer_atoms,
+            "answer_atoms_not_unknown": not_unknown,
+            "cost": s.cost,
+            "violated_weight": s.violated_weight,
+            "hard_violations": s.hard_violations,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "{}: {} atoms ({} are not unknown atoms of this ground problem)",
+            args.answer.display(),
+            answer_atoms,
+            not_unknown
+        );
+        println!("cost              {}", s.cost);
+        println!("violated weight   {}", s.violated_weight);
+        println!("hard violations   {}", s.hard_violations);
+    }
+    Ok(())
+}
+
+/// Reads another engine's MAP answer (true atoms, `!` lines false) as an assignment of
+/// the unknown atoms; also returns the number of answer lines and how many of them are not
+/// unknown atoms of `problem`.
+pub(crate) fn read_answer(
+    program: &mln::parse::Program,
+    problem: &mln::ground::GroundProblem,
+    path: &std::path::Path,
+) -> anyhow::Result<(Vec<bool>, usize, usize)> {
+    let answer = read_evidence(path, program).context("reading the answer")?;
     let index: std::collections::HashMap<String, usize> = (0..problem.atoms.len())
-        .map(|i| (problem.atom_name(&program, i), i))
+        .map(|i| (problem.atom_name(program, i), i))
         .collect();
     let mut x = vec![false; problem.atoms.len()];
     let mut not_unknown = 0usize;
@@ -208,58 +243,46 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
             None => not_unknown += 1,
         }
     }
-    let s = problem.score(&x);
-    if args.json {
-        let out = json!({
-            "answer": args.answer.display().to_string(),
-            "answer_atoms": answer.len(),
-            "answer_atoms_not_unknown": not_unknown,
-            "cost": s.cost,
-            "violated_weight": s.violated_weight,
-            "hard_violations": s.hard_violations,
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-    } else {
-        println!(
-            "{}: {} atoms ({} are not unknown atoms of this ground problem)",
-            args.answer.display(),
-            answer.len(),
-            not_unknown
-        );
-        println!("cost              {}", s.cost);
-        println!("violated weight   {}", s.violated_weight);
-        println!("hard violations   {}", s.hard_violations);
-    }
-    Ok(())
+    Ok((x, answer.len(), not_unknown))
 }
 
 fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
+    write_generated(args.problem, args.size, args.seed, &args.out)?;
+    println!(
+        "wrote prog.mln, evidence.db and query.db to {}",
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Generates a synthetic problem (default size: the thesis') into `out`.
+pub(crate) fn write_generated(
+    problem: Problem,
+    size: Option<usize>,
+    seed: u64,
+    out: &std::path::Path,
+) -> anyhow::Result<()> {
     use mln::generate::{friends_smokers, image_denoising, FriendsSmokersOptions};
-    let g = match args.problem {
+    let g = match problem {
         Problem::Fs | Problem::NegFs => friends_smokers(
             &FriendsSmokersOptions {
-                persons: args.size.unwrap_or(200),
-                negate: matches!(args.problem, Problem::NegFs),
+                persons: size.unwrap_or(200),
+                negate: matches!(problem, Problem::NegFs),
                 ..FriendsSmokersOptions::default()
             },
-            args.seed,
+            seed,
         ),
-        Problem::Id => image_denoising(args.size.unwrap_or(90), args.seed),
+        Problem::Id => image_denoising(size.unwrap_or(90), seed),
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     for (name, text) in [
         ("prog.mln", &g.program),
         ("evidence.db", &g.evidence),
         ("query.db", &g.query),
     ] {
-        let path = args.out.join(name);
+        let path = out.join(name);
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }
-    println!(
-        "wrote prog.mln, evidence.db and query.db to {}",
-        args.out.display()
-    );
     Ok(())
 }
 
