@@ -280,6 +280,19 @@ pub fn corridors(
     positions: &[[f64; 3]],
     options: &CorridorOptions,
 ) -> Vec<Option<Corridor>> {
+    map_corridors(segments, which, intersections, positions, options, |c| c)
+}
+
+/// Builds each corridor of `which` in parallel and maps it through `f` right away, so that
+/// only `f`'s results are held (`None` where a segment is shorter than a bin).
+pub fn map_corridors<T: Send>(
+    segments: &[StreetSegment],
+    which: &[usize],
+    intersections: &[Intersection],
+    positions: &[[f64; 3]],
+    options: &CorridorOptions,
+    f: impl Fn(Corridor) -> T + Sync,
+) -> Vec<Option<T>> {
     let index = PointIndex::new(positions, 10.0);
     let competitors: Vec<[[f64; 2]; 2]> = if options.mask_nearer_segments {
         segments
@@ -293,17 +306,20 @@ pub fn corridors(
     which
         .par_iter()
         .map(|&s| {
-            segments.get(s).and_then(|seg| {
-                corridor(
-                    s,
-                    seg,
-                    intersections,
-                    &competitors,
-                    positions,
-                    &index,
-                    options,
-                )
-            })
+            segments
+                .get(s)
+                .and_then(|seg| {
+                    corridor(
+                        s,
+                        seg,
+                        intersections,
+                        &competitors,
+                        positions,
+                        &index,
+                        options,
+                    )
+                })
+                .map(&f)
         })
         .collect()
 }

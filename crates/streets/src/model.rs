@@ -1,7 +1,7 @@
 //! The trained street model: bin classifier (standardised features + RBF SVM), its confusion
 //! matrix on held-out bins, and the geometry prior; plus the per-segment estimate from a cloud.
 
-use crate::corridor::{corridors, Corridor, CorridorOptions};
+use crate::corridor::{map_corridors, Corridor, CorridorOptions};
 use crate::features::{bin_features, BinFeatures, FeatureOptions, FEATURE_DIMS};
 use crate::inference::{Edge, McmcOptions, Network};
 use crate::potentials::{
@@ -15,7 +15,6 @@ use geodata::osm::OsmMap;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// What counts as street.
@@ -277,23 +276,19 @@ pub fn segment_bins(
     which: &[usize],
     options: &GeometryOptions,
 ) -> Vec<Option<SegmentBins>> {
-    let cs = corridors(
+    map_corridors(
         &map.streets.segments,
         which,
         &map.streets.intersections,
         &cloud.positions,
         &options.corridor,
-    );
-    cs.into_par_iter()
-        .map(|c| {
-            c.map(|corridor| {
-                let o = corridor.frame.origin;
-                let features =
-                    bin_features(&corridor.grid, cloud, [o[0], o[1], 0.0], &options.features);
-                SegmentBins { corridor, features }
-            })
-        })
-        .collect()
+        |corridor| {
+            let o = corridor.frame.origin;
+            let features =
+                bin_features(&corridor.grid, cloud, [o[0], o[1], 0.0], &options.features);
+            SegmentBins { corridor, features }
+        },
+    )
 }
 
 /// Coupled pairs among `which` (indices into `which` in the result), with orientation.
@@ -380,35 +375,68 @@ impl StreetModel {
                 path: map_name.to_string(),
             });
         }
-        let which: Vec<usize> = (0..segs.len()).collect();
-        let bins = segment_bins(map, cloud, &which, &self.geometry);
-        let too_short = bins.iter().filter(|b| b.is_none()).count();
-        if too_short == segs.len() {
-            return Err(StreetsError::SegmentsTooShort {
-                segments: segs.len(),
-                bin_m: self.geometry.corridor.bin_m,
+        // Streets for cars only (footways have no driving area).
+        let which: Vec<usize> = (0..segs.len())
+            .filter(|&s| geodata::sim::truth::is_drivable(&segs[s].highway))
+            .collect();
+        if which.is_empty() {
+            return Err(StreetsError::NoStreets {
+                path: map_name.to_string(),
             });
         }
         let grid = self.geometry.theta_grid();
         let clog = self.classifier.confusion.log_likelihood();
+        // Per segment: corridor → features → labels → potential, keeping only the potential.
+        let results = map_corridors(
+            segs,
+            &which,
+            &map.streets.intersections,
+            &cloud.positions,
+            &self.geometry.corridor,
+            |corridor| -> Result<Option<(SegmentPotential, usize)>> {
+                if corridor.grid.point_ids.is_empty() {
+                    return Ok(None);
+                }
+                let o = corridor.frame.origin;
+                let features = bin_features(
+                    &corridor.grid,
+                    cloud,
+                    [o[0], o[1], 0.0],
+                    &self.geometry.features,
+                );
+                let b = SegmentBins { corridor, features };
+                let rows = b.usable_rows();
+                if rows.is_empty() {
+                    return Ok(None);
+                }
+                let labels = self.classifier.predict(&rows)?;
+                Ok(Some((
+                    segment_potential(&b.counts(&labels), &clog, &self.prior, &grid),
+                    labels.len(),
+                )))
+            },
+        );
+        let too_short = results.iter().filter(|r| r.is_none()).count();
+        if too_short == which.len() {
+            return Err(StreetsError::SegmentsTooShort {
+                segments: which.len(),
+                bin_m: self.geometry.corridor.bin_m,
+            });
+        }
         let mut used = Vec::new();
         let mut potentials: Vec<SegmentPotential> = Vec::new();
         let mut unobserved = 0;
-        for (s, b) in bins.iter().enumerate() {
-            let Some(b) = b else { continue };
-            let rows = b.usable_rows();
-            if rows.is_empty() {
-                unobserved += 1;
-                continue;
+        for (&s, r) in which.iter().zip(results) {
+            match r {
+                None => {}
+                Some(r) => match r? {
+                    None => unobserved += 1,
+                    Some((p, n)) => {
+                        potentials.push(p);
+                        used.push((s, n));
+                    }
+                },
             }
-            let labels = self.classifier.predict(&rows)?;
-            potentials.push(segment_potential(
-                &b.counts(&labels),
-                &clog,
-                &self.prior,
-                &grid,
-            ));
-            used.push((s, labels.len()));
         }
         if used.is_empty() {
             let cb = cloud.bounds();
