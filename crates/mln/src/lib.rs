@@ -8,6 +8,7 @@
 //! - [`ground`]: join-based grounding with evidence simplification → the cost polynomial.
 //! - [`infer`]: MAP inference (QPBO/QSSR, MaxWalkSAT on formulas or monomials).
 //! - [`walksat`]: MaxWalkSAT over weighted conjunctive factors.
+//! - [`wcnf`]: the ground problem as weighted partial MaxSAT for exact solvers.
 //! - [`generate`]: seeded generators of the thesis' F&S, −F&S and ID problems.
 
 pub mod generate;
@@ -15,3 +16,4 @@ pub mod ground;
 pub mod infer;
 pub mod parse;
 pub mod walksat;
+pub mod wcnf;

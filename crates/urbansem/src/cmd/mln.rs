@@ -125,6 +125,12 @@ pub struct InferArgs {
     /// Seed of every random step.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Also write the ground problem as weighted partial MaxSAT (`p wcnf`) to this file.
+    #[arg(long, value_name = "FILE")]
+    pub export_wcnf: Option<PathBuf>,
+    /// Soft weights in the WCNF are round(|w| · scale).
+    #[arg(long, default_value_t = 1e6)]
+    pub wcnf_scale: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -289,6 +295,24 @@ pub(crate) fn write_generated(
 fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let (program, problem, query, parse_s, ground_s) = load_and_ground(&args.problem)?;
+    if let Some(path) = &args.export_wcnf {
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("creating the WCNF file {}", path.display()))?;
+        let mut w = std::io::BufWriter::new(file);
+        let summary = mln::wcnf::write_wcnf(&problem, args.wcnf_scale, &mut w)
+            .and_then(|s| w.flush().map(|()| s))
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!(
+            "wrote {}: {} variables ({} auxiliary), {} hard and {} soft clauses; cost = optimum / {} {:+}",
+            path.display(),
+            summary.variables,
+            summary.auxiliaries,
+            summary.hard_clauses,
+            summary.soft_clauses,
+            args.wcnf_scale,
+            summary.offset
+        );
+    }
     let mut options = InferOptions {
         method: args.method,
         quadratizer: args.quadratize,
