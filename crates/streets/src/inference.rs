@@ -278,7 +278,18 @@ impl Network {
                     msg
                 })
                 .collect();
+            // Stop once no message moves (a fixed point of the damped updates).
+            let change = new
+                .iter()
+                .zip(&messages)
+                .flat_map(|(a, b)| a.iter().zip(b))
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
             messages = new;
+            if change < 1e-6 {
+                break;
+            }
         }
         let mut states: Labelling = (0..n_seg)
             .map(|s| {
