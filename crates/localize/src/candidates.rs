@@ -177,23 +177,54 @@ pub fn pose_cost(dt: &DtTensor, t: &Template, i: i64, j: i64) -> u64 {
         .sum()
 }
 
+/// The bound of a box at level h (the exact cost at level 0); the sum stops as soon as it
+/// exceeds `limit` (the returned value is then some partial sum > `limit`).
 #[inline]
-fn box_bound(dt: &DtTensor, pyr: &BoundPyramid, t: &Template, h: u32, bx: i64, by: i64) -> u64 {
-    if h == 0 {
-        return pose_cost(dt, t, bx, by);
+fn box_bound(
+    dt: &DtTensor,
+    pyr: &BoundPyramid,
+    t: &Template,
+    h: u32,
+    bx: i64,
+    by: i64,
+    limit: u64,
+) -> u64 {
+    let mut sum = 0u64;
+    match h {
+        0 => {
+            for &(x, y, c, n) in &t.levels[0] {
+                sum += dt.get(c, bx + x, by + y) as u64 * n;
+                if sum > limit {
+                    break;
+                }
+            }
+        }
+        1 => {
+            // Exact 2 × 2 window minima at full resolution.
+            let (x0, y0) = (bx << 1, by << 1);
+            for &(x, y, c, n) in &t.levels[0] {
+                sum += pyr.get_fine(dt.channels, c, x0 + x, y0 + y) as u64 * n;
+                if sum > limit {
+                    break;
+                }
+            }
+        }
+        _ => {
+            for &(x, y, c, n) in &t.levels[h as usize] {
+                sum += pyr.get(dt.channels, h, c, bx + x, by + y) as u64 * n;
+                if sum > limit {
+                    break;
+                }
+            }
+        }
     }
-    if h == 1 {
-        // Exact 2 × 2 window minima at full resolution.
-        let (x0, y0) = (bx << 1, by << 1);
-        return t.levels[0]
-            .iter()
-            .map(|&(x, y, c, n)| pyr.get_fine(dt.channels, c, x0 + x, y0 + y) as u64 * n)
-            .sum();
-    }
-    t.levels[h as usize]
-        .iter()
-        .map(|&(x, y, c, n)| pyr.get(dt.channels, h, c, bx + x, by + y) as u64 * n)
-        .sum()
+    sum
+}
+
+/// Largest cost within `factor` of `best`.
+fn limit_of(best: u64, factor: (u64, u64)) -> u64 {
+    let l = (best as u128) * (factor.0 as u128) / (factor.1.max(1) as u128);
+    l.min(u64::MAX as u128) as u64
 }
 
 fn within(cost: u64, best: u64, factor: (u64, u64)) -> bool {
@@ -235,7 +266,12 @@ pub fn search(
     for (k, t) in templates.iter().enumerate() {
         for bj in bj0..=bj1 {
             for bi in bi0..=bi1 {
-                roots.push((box_bound(dt, pyr, t, top, bi, bj), k, bi * s, bj * s));
+                roots.push((
+                    box_bound(dt, pyr, t, top, bi, bj, u64::MAX),
+                    k,
+                    bi * s,
+                    bj * s,
+                ));
             }
         }
     }
@@ -276,7 +312,8 @@ pub fn search(
                         continue;
                     }
                     let ch = h - 1;
-                    let b = box_bound(dt, pyr, t, ch, cx >> ch, cy >> ch);
+                    let limit = limit_of(best.load(Ordering::Relaxed), factor);
+                    let b = box_bound(dt, pyr, t, ch, cx >> ch, cy >> ch, limit);
                     if ch == 0 {
                         nl += 1;
                     } else {

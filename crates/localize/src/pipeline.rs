@@ -53,6 +53,9 @@ pub struct LocalizeOptions {
     pub distinct_m: f64,
     /// Poses turned more than this are distinct (confidence), radians.
     pub distinct_rad: f64,
+    /// The result is empty when the best candidate's symmetric cost exceeds this, metres
+    /// (no pose explains the scan: it is probably outside the map).
+    pub max_accept_cost_m: f64,
 }
 
 impl Default for LocalizeOptions {
@@ -69,6 +72,7 @@ impl Default for LocalizeOptions {
             refine_top: 5,
             distinct_m: 4.0,
             distinct_rad: 0.2,
+            max_accept_cost_m: 1.8,
         }
     }
 }
@@ -334,9 +338,20 @@ impl<'m> Localizer<'m> {
         if let Some(first) = cands.first_mut() {
             first.confidence = out.confidence;
         }
-        if cands.is_empty() {
+        if let Some(best) = cands.first() {
+            if best.costs.symmetric > o.max_accept_cost_m {
+                out.message = Some(format!(
+                    "no pose explains the scan: the best candidate's symmetric cost is {:.2} m > {:.2} m ({} candidates dropped); the scan is probably outside the map",
+                    best.costs.symmetric,
+                    o.max_accept_cost_m,
+                    cands.len()
+                ));
+                cands.clear();
+                out.confidence = 0.0;
+            }
+        } else {
             out.message = Some(format!(
-                "no candidate pose survived ({} raw poses, {} after suppression, {} inside buildings, {} farther than {} m from streets); is the scan inside the map?",
+                "no candidate pose survived ({} raw poses, {} after suppression, {} inside buildings, {} farther than {} m from streets); the scan is probably outside the map",
                 out.raw_poses,
                 out.after_suppression,
                 counts.inside_building,
@@ -372,5 +387,193 @@ impl<'m> Localizer<'m> {
         let order = rank_order(&costs, &poses, self.options.rank_by);
         let sorted: Vec<Candidate> = order.iter().map(|&i| cands[i]).collect();
         *cands = sorted;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use geodata::osm::model::{Building, ElementKind, OsmStats, StreetNetwork};
+    use geodata::projection::LocalFrame;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn rect(c: [f64; 2], hw: f64, hh: f64, ang: f64) -> Vec<[f64; 2]> {
+        let (s, co) = ang.sin_cos();
+        [(-hw, -hh), (hw, -hh), (hw, hh), (-hw, hh)]
+            .iter()
+            .map(|&(x, y)| [c[0] + co * x - s * y, c[1] + s * x + co * y])
+            .collect()
+    }
+
+    fn map_of(rings: Vec<Vec<[f64; 2]>>) -> OsmMap {
+        OsmMap {
+            frame: LocalFrame::new(48.15, 11.57).unwrap(),
+            bbox_lonlat: [11.5, 48.1, 11.6, 48.2],
+            buildings: rings
+                .into_iter()
+                .enumerate()
+                .map(|(i, outer)| Building {
+                    osm_id: i as i64,
+                    kind: ElementKind::Way,
+                    building: "yes".into(),
+                    outer,
+                    inners: Vec::new(),
+                    height_m: None,
+                    levels: None,
+                    name: None,
+                })
+                .collect(),
+            highways: Vec::new(),
+            streets: StreetNetwork::default(),
+            stats: OsmStats::default(),
+        }
+    }
+
+    /// A random block of rectangular buildings, 200 m × 200 m.
+    fn random_city(seed: u64) -> OsmMap {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut rings = Vec::new();
+        for gx in 0..5 {
+            for gy in 0..5 {
+                let c = [
+                    gx as f64 * 40.0 + rng.gen_range(-4.0..4.0),
+                    gy as f64 * 40.0 + rng.gen_range(-4.0..4.0),
+                ];
+                let (hw, hh) = (rng.gen_range(5.0..13.0), rng.gen_range(5.0..13.0));
+                rings.push(rect(c, hw, hh, rng.gen_range(-0.3..0.3)));
+            }
+        }
+        map_of(rings)
+    }
+
+    /// Points on vertical walls over segments given in the sensor frame.
+    fn wall_points(segments: &[Segment]) -> Vec<[f64; 3]> {
+        let mut pts = Vec::new();
+        for s in segments {
+            let n = (s.length() / 0.1) as usize;
+            for i in 0..=n {
+                let t = i as f64 / n.max(1) as f64;
+                let p = [
+                    s.a[0] + t * (s.b[0] - s.a[0]),
+                    s.a[1] + t * (s.b[1] - s.a[1]),
+                ];
+                for k in 0..40 {
+                    pts.push([p[0], p[1], -0.4 + k as f64 * 0.2]);
+                }
+            }
+        }
+        pts
+    }
+
+    fn scan_from(localizer: &Localizer<'_>, truth: Pose2) -> Vec<[f64; 3]> {
+        let visible = localizer.visible_from([truth.x, truth.y]);
+        let (s, c) = truth.yaw_rad.sin_cos();
+        let to_scan = |p: [f64; 2]| {
+            let (dx, dy) = (p[0] - truth.x, p[1] - truth.y);
+            [c * dx + s * dy, -s * dx + c * dy]
+        };
+        let in_sensor: Vec<Segment> = visible
+            .iter()
+            .map(|v| Segment::new(to_scan(v.a), to_scan(v.b)))
+            .collect();
+        wall_points(&in_sensor)
+    }
+
+    #[test]
+    fn localizes_a_synthetic_scan_without_prior() {
+        let map = random_city(4);
+        let localizer = Localizer::new(&map, LocalizeOptions::default()).unwrap();
+        let truth = Pose2 {
+            x: 61.0,
+            y: 79.0,
+            yaw_rad: 2.0,
+        };
+        assert!(localizer.index.building_at([truth.x, truth.y]).is_none());
+        let r = localizer
+            .localize_points(&scan_from(&localizer, truth))
+            .unwrap();
+        let best = r.candidates.first().expect("a candidate");
+        assert!(best.pose.distance_to(&truth) < 0.3, "{best:?}");
+        assert!(best.pose.yaw_error_to(&truth) < 0.01, "{best:?}");
+        assert!(r.message.is_none());
+    }
+
+    #[test]
+    fn map_without_buildings_gives_an_empty_result_with_a_message() {
+        let map = map_of(Vec::new());
+        let localizer = Localizer::new(&map, LocalizeOptions::default()).unwrap();
+        let pts = wall_points(&[Segment::new([5.0, -5.0], [5.0, 5.0])]);
+        let r = localizer.localize_points(&pts).unwrap();
+        assert!(r.candidates.is_empty());
+        assert!(
+            r.message
+                .as_deref()
+                .unwrap_or("")
+                .contains("no building outlines"),
+            "{:?}",
+            r.message
+        );
+        assert!(serde_json::to_string(&r).is_ok());
+    }
+
+    #[test]
+    fn scan_without_vertical_structure_gives_an_empty_result_with_a_message() {
+        let map = random_city(1);
+        let localizer = Localizer::new(&map, LocalizeOptions::default()).unwrap();
+        let ground: Vec<[f64; 3]> = (0..200)
+            .flat_map(|i| {
+                (0..200).map(move |j| [i as f64 * 0.2 - 20.0, j as f64 * 0.2 - 20.0, -1.8])
+            })
+            .collect();
+        let r = localizer.localize_points(&ground).unwrap();
+        assert!(r.candidates.is_empty());
+        assert!(
+            r.message
+                .as_deref()
+                .unwrap_or("")
+                .contains("no vertical structure"),
+            "{:?}",
+            r.message
+        );
+        let r = localizer.localize_points(&[]).unwrap();
+        assert!(r.candidates.is_empty() && r.message.is_some());
+    }
+
+    #[test]
+    fn scan_of_a_place_outside_the_map_gives_an_empty_result_with_a_message() {
+        let map = random_city(2);
+        let mut options = LocalizeOptions::default();
+        options.search.yaw_step_deg = 5.0;
+        let localizer = Localizer::new(&map, options).unwrap();
+        // A round courtyard of 12 walls: nothing like it is in the map.
+        let ring: Vec<[f64; 2]> = (0..12)
+            .map(|k| {
+                let a = k as f64 * std::f64::consts::TAU / 12.0;
+                [12.0 * a.cos(), 12.0 * a.sin()]
+            })
+            .collect();
+        let walls: Vec<Segment> = (0..12)
+            .map(|k| Segment::new(ring[k], ring[(k + 1) % 12]))
+            .collect();
+        let r = localizer.localize_points(&wall_points(&walls)).unwrap();
+        assert!(r.candidates.is_empty(), "{:?}", r.candidates.first());
+        assert!(
+            r.message
+                .as_deref()
+                .unwrap_or("")
+                .contains("outside the map"),
+            "{:?}",
+            r.message
+        );
+    }
+
+    #[test]
+    fn nan_point_is_an_error() {
+        let map = random_city(3);
+        let localizer = Localizer::new(&map, LocalizeOptions::default()).unwrap();
+        let mut pts = wall_points(&[Segment::new([5.0, -5.0], [5.0, 5.0])]);
+        pts[3][2] = f64::NAN;
+        assert!(localizer.localize_points(&pts).is_err());
     }
 }
