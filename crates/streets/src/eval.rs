@@ -317,7 +317,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
         };
         let single = net.single_segment();
         let t = Instant::now();
-        let full = net.max_product(50);
+        let full = net.max_product(20);
         inference_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let mcmc = net.mcmc(&options.mcmc);

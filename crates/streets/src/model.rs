@@ -468,7 +468,7 @@ impl StreetModel {
             edges: network_edges(map, &ids, self.geometry.max_turn_deg),
             lambda: (self.geometry.corridor.bin_m / self.geometry.sigma_m).powi(2) / 2.0,
         };
-        let sol = net.max_product(50);
+        let sol = net.max_product(20);
         let segments = used
             .iter()
             .zip(&sol.states)
