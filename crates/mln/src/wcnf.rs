@@ -116,9 +116,7 @@ pub fn write_wcnf(
     )?;
     writeln!(
         out,
-        "c atoms 1..{n}, auxiliaries {}..{}; soft weights = round(|w| * {scale})",
-        n + 1,
-        n + aux
+        "c atoms 1..{n}, {aux} auxiliaries after them; soft weights = round(|w| * {scale})"
     )?;
     writeln!(out, "c cost = optimum / {scale} {offset:+}")?;
     writeln!(out, "p wcnf {variables} {} {top}", hard.len() + soft.len())?;
