@@ -888,7 +888,10 @@ fn ground_formula(
     // Bindings that leave at least one clause unsatisfied by evidence: union over clauses.
     // A single clause enumerates each binding once, in a deterministic order, so it needs
     // neither the union set nor the sort.
-    let mut sorted: Vec<Box<[u32]>> = Vec::new();
+    // Bindings flat, `stride` values each (one allocation for all of them).
+    let stride = names.len();
+    let mut sorted: Vec<u32> = Vec::new();
+    let mut num_sorted = 0usize;
     let mut bindings: FxHashSet<Box<[u32]>> = FxHashSet::default();
     let single = clauses.len() == 1;
     for clause in &clauses {
@@ -921,20 +924,21 @@ fn ground_formula(
         let others: Vec<usize> = (0..names.len())
             .filter(|v| !clause_vars.contains(v))
             .collect();
-        let stride = clause_vars.len();
+        let clause_stride = clause_vars.len();
         let mut full = vec![0u32; names.len()];
         for k in 0..count {
             for (j, &v) in clause_vars.iter().enumerate() {
-                full[v] = found[k * stride + j];
+                full[v] = found[k * clause_stride + j];
             }
             extend_product(&others, &domains, &mut full, 0, &mut |b| {
                 if single {
-                    sorted.push(b.into());
+                    sorted.extend_from_slice(b);
+                    num_sorted += 1;
                 } else {
                     bindings.insert(b.into());
                 }
             });
-            if sorted.len().max(bindings.len()) > options.max_groundings {
+            if num_sorted.max(bindings.len()) > options.max_groundings {
                 return Err(GroundError::TooLarge {
                     path: program.path.clone(),
                     line: wf.line,
@@ -944,16 +948,24 @@ fn ground_formula(
         }
     }
     if !single {
-        sorted = bindings.into_iter().collect();
-        sorted.sort_unstable();
+        let mut set: Vec<Box<[u32]>> = bindings.into_iter().collect();
+        set.sort_unstable();
+        num_sorted = set.len();
+        sorted = set.concat();
     }
-    let enumerated = sorted.len();
+    let enumerated = num_sorted;
     let mut out = FormulaGroundings {
         factors: Vec::new(),
         decided_false: 0,
         decided_true: total - enumerated as f64,
     };
-    for b in sorted {
+    // A formula without free variables has one empty binding.
+    let bindings_iter: Box<dyn Iterator<Item = &[u32]>> = if stride == 0 {
+        Box::new(std::iter::repeat_n(&[][..], num_sorted))
+    } else {
+        Box::new(sorted.chunks_exact(stride))
+    };
+    for b in bindings_iter {
         let mut ground_clauses: Vec<Vec<GroundLit>> = Vec::new();
         let mut formula_false = false;
         let mut formula_has_unknown = false;

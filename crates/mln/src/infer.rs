@@ -1,5 +1,5 @@
-//! MAP inference on a ground MLN: QPBO/QSSR with probing and improve (thesis §3.2.4), or
-//! MaxWalkSAT on ground formulas or on monomials.
+//! MAP inference on a ground MLN: QPBO/QSSR (thesis §3.2.4) followed by exact enumeration or
+//! tabu search on each component of the residue, or MaxWalkSAT on ground formulas or monomials.
 
 use crate::ground::{GroundProblem, Scores};
 use crate::walksat::{max_walk_sat, max_walk_sat_frozen, monomial_factors, Factor, WalkSatOptions};
