@@ -973,7 +973,7 @@ fn ground_formula(
             let mut lits = Vec::new();
             let mut satisfied = false;
             for l in clause {
-                match eval_lit(world, l, &b) {
+                match eval_lit(world, l, b) {
                     LitValue::True => {
                         satisfied = true;
                         break;
