@@ -866,3 +866,37 @@ pub(crate) fn demo_stage(
         files,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn demo_stage_localizes_simulated_scans() {
+        use clap::{Args, FromArgMatches};
+        let out = std::env::temp_dir().join("urbansem-localize-demo-test");
+        let matches = crate::cmd::demo::DemoArgs::augment_args(clap::Command::new("demo"))
+            .get_matches_from(["demo", "--out", &out.display().to_string()]);
+        let args = crate::cmd::demo::DemoArgs::from_arg_matches(&matches).unwrap();
+        let stage = demo_stage(&args).unwrap();
+        assert_eq!(stage.key, "localize");
+        assert_eq!(stage.summary["scans"], 3);
+        assert_eq!(stage.files.len(), 1);
+        assert!(stage.figures[0].starts_with("<svg"));
+    }
+
+    #[test]
+    fn localize_without_map_or_scan_is_a_clear_error() {
+        let err = run_one(RunArgs {
+            map: None,
+            scan: None,
+            cost: CostArg::Reverse,
+            top: 10,
+            json: false,
+            svg: None,
+            grid_m: 0.5,
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("--map"), "{err}");
+    }
+}
