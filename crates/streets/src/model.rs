@@ -226,6 +226,9 @@ impl GeometryOptions {
     }
 }
 
+/// Height above the local ground below which a bin's lowest point counts as ground, metres.
+pub const GROUND_SEEN_M: f32 = 0.5;
+
 /// A segment's corridor with its bin features.
 pub struct SegmentBins {
     /// The corridor.
@@ -235,10 +238,15 @@ pub struct SegmentBins {
 }
 
 impl SegmentBins {
-    /// Bins used for estimation: unmasked and observed.
+    /// Bins used for estimation: unmasked, observed, and with ground seen (the lowest point
+    /// less than [`GROUND_SEEN_M`] above the local ground; a bin holding only a car roof or
+    /// a canopy says nothing about the surface under it).
     pub fn usable(&self) -> impl Iterator<Item = usize> + '_ {
-        (0..self.corridor.grid.len())
-            .filter(move |&k| !self.corridor.masked[k] && self.features.observed[k])
+        (0..self.corridor.grid.len()).filter(move |&k| {
+            !self.corridor.masked[k]
+                && self.features.observed[k]
+                && self.features.row(k)[10] < GROUND_SEEN_M
+        })
     }
 
     /// Raw feature rows of the usable bins.
