@@ -62,9 +62,9 @@ pub struct StreetsDataset {
 }
 
 fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|source| StreetsError::Io {
+    let text = std::fs::read_to_string(path).map_err(|cause| StreetsError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     serde_json::from_str(&text).map_err(|e| StreetsError::Dataset {
         path: path.to_path_buf(),

@@ -242,3 +242,24 @@ fn estimate_writes_valid_geojson_and_bad_inputs_are_named() {
     );
     assert!(err.to_string().contains("shorter than one"));
 }
+
+#[test]
+fn malformed_dataset_files_are_named_with_their_line() {
+    let dir = fixture("malformed");
+    std::fs::write(dir.join("segments.json"), "[\n{\"segment\": 0,\n").unwrap();
+    let err = StreetsDataset::load(&dir).err().unwrap().to_string();
+    assert!(
+        err.contains("segments.json") && err.contains("line"),
+        "{err}"
+    );
+    std::fs::write(dir.join("segments.json"), "[]").unwrap();
+    let err = StreetsDataset::load(&dir).err().unwrap().to_string();
+    assert!(err.contains("0 entries but the map"), "{err}");
+    std::fs::write(
+        dir.join("dataset.json"),
+        r#"{"kind": "relations", "map": "map.osm"}"#,
+    )
+    .unwrap();
+    let err = StreetsDataset::load(&dir).err().unwrap().to_string();
+    assert!(err.contains("expected \"streets\""), "{err}");
+}
