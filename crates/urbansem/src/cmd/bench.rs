@@ -430,12 +430,22 @@ pub struct MlnBenchArgs {
     /// Only these sets (comma-separated): lp, rc, kb, er, fs, neg-fs, id.
     #[arg(long, value_delimiter = ',')]
     sets: Vec<String>,
+    /// MAP methods to run per set (comma-separated): qpbo, maxwalksat, maxwalksat-monomials.
+    #[arg(long, value_delimiter = ',', default_value = "qpbo", value_parser = parse_mln_method)]
+    methods: Vec<mln::infer::Method>,
+    /// Flips per MaxWalkSAT chain (maxwalksat methods).
+    #[arg(long, default_value_t = 1_000_000)]
+    flips: usize,
     /// Seed of the generated problems and of inference.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
+}
+
+fn parse_mln_method(s: &str) -> Result<mln::infer::Method, String> {
+    s.parse()
 }
 
 /// One MLN benchmark set: files relative to the data folder (or the generated folder).
@@ -574,76 +584,85 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
             queries: None,
             query_file: Some(dir.join("query.db")),
         };
-        let mut options = InferOptions::default();
-        options.walksat.seed = args.seed;
-        let mut best: Option<serde_json::Value> = None;
-        let mut best_total = f64::INFINITY;
-        let mut reference = serde_json::Value::Null;
-        for run in 0..args.repeat.max(1) {
-            let t0 = Instant::now();
-            let (program, problem, _query, parse_s, ground_s) =
-                mln_cmd::load_and_ground(&problem_args)
-                    .with_context(|| format!("set {}", set.name))?;
-            let r = map_inference(&problem, &options);
-            let total_s = t0.elapsed().as_secs_f64();
-            if run == 0 {
-                if let Some(rel) = set.reference {
-                    let path = args.data.join(rel);
-                    let (x, lines, not_unknown) = mln_cmd::read_answer(&program, &problem, &path)?;
-                    let s = problem.score(&x);
-                    reference = serde_json::json!({
-                        "answer": path.display().to_string(),
-                        "answer_atoms": lines,
-                        "answer_atoms_not_unknown": not_unknown,
-                        "cost": s.cost,
-                        "hard_violations": s.hard_violations,
-                    });
+        for method in &args.methods {
+            let mut options = InferOptions {
+                method: *method,
+                ..InferOptions::default()
+            };
+            options.walksat.seed = args.seed;
+            options.walksat.max_flips = args.flips;
+            let mut best: Option<serde_json::Value> = None;
+            let mut best_total = f64::INFINITY;
+            let mut reference = serde_json::Value::Null;
+            for run in 0..args.repeat.max(1) {
+                let t0 = Instant::now();
+                let (program, problem, _query, parse_s, ground_s) =
+                    mln_cmd::load_and_ground(&problem_args)
+                        .with_context(|| format!("set {}", set.name))?;
+                let r = map_inference(&problem, &options);
+                let total_s = t0.elapsed().as_secs_f64();
+                if run == 0 {
+                    if let Some(rel) = set.reference {
+                        let path = args.data.join(rel);
+                        let (x, lines, not_unknown) =
+                            mln_cmd::read_answer(&program, &problem, &path)?;
+                        let s = problem.score(&x);
+                        reference = serde_json::json!({
+                            "answer": path.display().to_string(),
+                            "answer_atoms": lines,
+                            "answer_atoms_not_unknown": not_unknown,
+                            "cost": s.cost,
+                            "hard_violations": s.hard_violations,
+                        });
+                    }
+                }
+                if total_s < best_total {
+                    best_total = total_s;
+                    best = Some(serde_json::json!({
+                        "set": set.name,
+                        "method": method.name(),
+                        "program": problem_args.program.display().to_string(),
+                        "ground_atoms": problem.atoms.len(),
+                        "ground_factors": problem.factors.len(),
+                        "higher_order_factors": problem.higher_order_factors(),
+                        "cost": r.scores.cost,
+                        "hard_violations": r.scores.hard_violations,
+                        "lower_bound": r.lower_bound,
+                        "persistent_fraction": r.persistent_fraction,
+                        "seconds": {
+                            "parse": parse_s,
+                            "ground": ground_s,
+                            "quadratize": r.seconds_quadratize,
+                            "solve": r.seconds_solve,
+                            "total": total_s,
+                        },
+                    }));
                 }
             }
-            if total_s < best_total {
-                best_total = total_s;
-                best = Some(serde_json::json!({
-                    "set": set.name,
-                    "program": problem_args.program.display().to_string(),
-                    "ground_atoms": problem.atoms.len(),
-                    "ground_factors": problem.factors.len(),
-                    "higher_order_factors": problem.higher_order_factors(),
-                    "cost": r.scores.cost,
-                    "hard_violations": r.scores.hard_violations,
-                    "lower_bound": r.lower_bound,
-                    "persistent_fraction": r.persistent_fraction,
-                    "seconds": {
-                        "parse": parse_s,
-                        "ground": ground_s,
-                        "quadratize": r.seconds_quadratize,
-                        "solve": r.seconds_solve,
-                        "total": total_s,
-                    },
-                }));
+            let Some(mut row) = best else { continue };
+            let tuffy_s = match set.tuffy_log {
+                Some(rel) => {
+                    let path = args.data.join(rel);
+                    let text = std::fs::read_to_string(&path)
+                        .with_context(|| format!("reading {}", path.display()))?;
+                    tuffy_logged_seconds(&text)
+                }
+                None => None,
+            };
+            let ref_cost = reference.get("cost").and_then(Value::as_f64);
+            let our_cost = row["cost"].as_f64();
+            row["reference"] = reference;
+            row["cost_minus_reference"] =
+                serde_json::json!(our_cost.zip(ref_cost).map(|(a, b)| a - b));
+            row["tuffy_logged_seconds"] = serde_json::json!(tuffy_s);
+            row["seconds_over_tuffy"] = serde_json::json!(tuffy_s.map(|t| best_total / t));
+            row["target_seconds"] = serde_json::json!(set.target_s);
+            row["seconds_over_target"] = serde_json::json!(best_total / set.target_s);
+            if !args.json {
+                eprintln!("{} {}: done", set.name, method.name());
             }
+            rows.push(row);
         }
-        let Some(mut row) = best else { continue };
-        let tuffy_s = match set.tuffy_log {
-            Some(rel) => {
-                let path = args.data.join(rel);
-                let text = std::fs::read_to_string(&path)
-                    .with_context(|| format!("reading {}", path.display()))?;
-                tuffy_logged_seconds(&text)
-            }
-            None => None,
-        };
-        let ref_cost = reference.get("cost").and_then(Value::as_f64);
-        let our_cost = row["cost"].as_f64();
-        row["reference"] = reference;
-        row["cost_minus_reference"] = serde_json::json!(our_cost.zip(ref_cost).map(|(a, b)| a - b));
-        row["tuffy_logged_seconds"] = serde_json::json!(tuffy_s);
-        row["seconds_over_tuffy"] = serde_json::json!(tuffy_s.map(|t| best_total / t));
-        row["target_seconds"] = serde_json::json!(set.target_s);
-        row["seconds_over_target"] = serde_json::json!(best_total / set.target_s);
-        if !args.json {
-            eprintln!("{}: done", set.name);
-        }
-        rows.push(row);
     }
     if args.json {
         let out = serde_json::json!({
@@ -655,16 +674,17 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:<7} {:>7} {:>8} {:>6} {:>7} | {:>13} {:>13} {:>10} {:>13} | {:>7} {:>7} {:>6} {:>8} {:>7}",
-        "set", "atoms", "factors", "h.o.", "pers %", "cost", "Tuffy cost", "diff", "bound",
+        "{:<7} {:<20} {:>7} {:>8} {:>6} {:>7} | {:>13} {:>13} {:>10} {:>13} | {:>7} {:>7} {:>6} {:>8} {:>7}",
+        "set", "method", "atoms", "factors", "h.o.", "pers %", "cost", "Tuffy cost", "diff", "bound",
         "ground", "total", "target", "/target", "Tuffy s"
     );
     for r in &rows {
         let f = |v: &Value| v.as_f64();
         let secs = &r["seconds"];
         println!(
-            "{:<7} {:>7} {:>8} {:>6} {:>7.2} | {:>13.2} {:>13} {:>10} {:>13} | {:>7.3} {:>7.3} {:>6.1} {:>8.2} {:>7}",
+            "{:<7} {:<20} {:>7} {:>8} {:>6} {:>7.2} | {:>13.2} {:>13} {:>10} {:>13} | {:>7.3} {:>7.3} {:>6.1} {:>8.2} {:>7}",
             r["set"].as_str().unwrap_or("?"),
+            r["method"].as_str().unwrap_or("?"),
             r["ground_atoms"].as_u64().unwrap_or(0),
             r["ground_factors"].as_u64().unwrap_or(0),
             r["higher_order_factors"].as_u64().unwrap_or(0),
