@@ -765,11 +765,16 @@ pub(crate) fn demo_stage(
     )
     .context("building the simulated world")?;
     let poses = scene
-        .sample_poses_with_height(3, 1.8, args.seed)
+        .sample_poses_with_height(2, 1.8, args.seed)
         .context("placing scanner poses")?;
     let localizer =
         Localizer::new(&map, LocalizeOptions::default()).context("preparing the map")?;
-    let sensor = SensorOptions::default();
+    // A coarser scanner than the datasets' (0.8° × 1°) keeps the stage at a few seconds.
+    let sensor = SensorOptions {
+        h_step_deg: 0.8,
+        v_step_deg: 1.0,
+        ..SensorOptions::default()
+    };
     let mut rows = Vec::new();
     let mut figures = Vec::new();
     let mut files = Vec::new();
@@ -880,7 +885,7 @@ mod tests {
         let args = crate::cmd::demo::DemoArgs::from_arg_matches(&matches).unwrap();
         let stage = demo_stage(&args).unwrap();
         assert_eq!(stage.key, "localize");
-        assert_eq!(stage.summary["scans"], 3);
+        assert_eq!(stage.summary["scans"], 2);
         assert_eq!(stage.files.len(), 1);
         assert!(stage.figures[0].starts_with("<svg"));
     }
