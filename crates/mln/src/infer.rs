@@ -3,7 +3,7 @@
 
 use crate::ground::{GroundProblem, Scores};
 use crate::walksat::{max_walk_sat, max_walk_sat_frozen, monomial_factors, Factor, WalkSatOptions};
-use pbo::qssr::{search_residue, solve, QssrOptions};
+use pbo::qssr::{search_residue, solve, QssrOptions, QssrRound};
 use pbo::quadratize::Quadratizer;
 use pbo::tabu::TabuOptions;
 use std::time::Instant;
@@ -145,6 +145,8 @@ pub struct MapResult {
     pub lower_bound: Option<f64>,
     /// Atoms fixed by persistencies (QPBO method; 0 otherwise).
     pub persistent_fraction: f64,
+    /// What each QSSR round did (QPBO method; empty otherwise).
+    pub qssr_rounds: Vec<QssrRound>,
     /// Seconds quadratizing.
     pub seconds_quadratize: f64,
     /// Seconds solving (QPBO, probing, improve or WalkSAT).
@@ -167,6 +169,7 @@ fn formula_factors(problem: &GroundProblem) -> Vec<Factor> {
 pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResult {
     let n = problem.atoms.len();
     let t = Instant::now();
+    let mut qssr_rounds = Vec::new();
     let (assignment, lower_bound, persistent_fraction, seconds_quadratize) = match options.method {
         Method::Qpbo => {
             let qssr = QssrOptions {
@@ -193,6 +196,7 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
                 Representation::Auto => run(true),
             };
             let mut assignment = r.assignment;
+            qssr_rounds = r.rounds;
             if options.tabu_moves > 0 && !r.exact {
                 // On the literal form whichever representation won: the same function,
                 // and no 2^k expansion of long clauses.
@@ -254,6 +258,7 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
         assignment,
         lower_bound,
         persistent_fraction,
+        qssr_rounds,
         seconds_quadratize,
         seconds_solve: total - seconds_quadratize,
     }
