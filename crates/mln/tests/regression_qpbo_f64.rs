@@ -1,0 +1,53 @@
+//! Known bug (found in the issue 7 session, not fixed yet): on −F&S with 100 persons in the
+//! multinomial form, QPBO<f64> on the ISH quadratization labels every node, and QSSR then
+//! claims the optimum 79 190 with bound 79 190, while ASM + tabu search finds 39 850.5.
+//! The same function with the weights ×10 as integers (QPBO<i64>, or f64 holding integers)
+//! labels only 1 090 of 17 200 nodes with the same bound 35 705.8: the f64 labelling from
+//! the search trees is wrong when capacities carry round-off. Run with `--ignored`.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use mln::generate::{friends_smokers, FriendsSmokersOptions};
+use mln::ground::{ground, GroundOptions};
+use mln::infer::{map_inference, InferOptions, Representation};
+use mln::parse::{parse_evidence, parse_program, parse_query};
+use pbo::quadratize::Quadratizer;
+
+#[test]
+#[ignore = "pbo: QPBO<f64> mislabels the ISH quadratization of -F&S(100); see the module doc"]
+fn qssr_bound_never_exceeds_a_found_cost_on_neg_fs_100() {
+    let g = friends_smokers(
+        &FriendsSmokersOptions {
+            persons: 100,
+            negate: true,
+            ..FriendsSmokersOptions::default()
+        },
+        0,
+    );
+    let program = parse_program(&g.program, "neg-fs.mln").unwrap();
+    let evidence = parse_evidence(&g.evidence, "neg-fs.db", &program).unwrap();
+    let query = parse_query(&g.query, "query.db", &program).unwrap();
+    let p = ground(
+        &program,
+        &evidence,
+        "neg-fs.db",
+        &query,
+        &GroundOptions::default(),
+    )
+    .unwrap();
+    let asm = map_inference(&p, &InferOptions::default());
+    let ish = map_inference(
+        &p,
+        &InferOptions {
+            quadratizer: Quadratizer::Ish,
+            representation: Representation::Multinomial,
+            ..InferOptions::default()
+        },
+    );
+    let bound = ish.lower_bound.unwrap();
+    assert!(
+        bound <= asm.scores.cost + 1e-6,
+        "ISH bound {bound} above the cost {} found with ASM",
+        asm.scores.cost
+    );
+}
