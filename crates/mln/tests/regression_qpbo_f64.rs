@@ -1,9 +1,8 @@
-//! Known bug (found in the issue 7 session, not fixed yet): on −F&S with 100 persons in the
-//! multinomial form, QPBO<f64> on the ISH quadratization labels every node, and QSSR then
-//! claims the optimum 79 190 with bound 79 190, while ASM + tabu search finds 39 850.5.
-//! The same function with the weights ×10 as integers (QPBO<i64>, or f64 holding integers)
-//! labels only 1 090 of 17 200 nodes with the same bound 35 705.8: the f64 labelling from
-//! the search trees is wrong when capacities carry round-off. Run with `--ignored`.
+//! Issue 7 regression: on −F&S with 100 persons in the multinomial form, QPBO<f64> on the
+//! ISH quadratization labelled every node, and QSSR claimed the optimum 79 190 with bound
+//! 79 190 while ASM + tabu search finds 39 850.5. QPBO took x = 0 from "x in the source
+//! tree or x̄ in the sink tree", mixing two different minimum cuts of a non-symmetric flow;
+//! it now reads one cut (the sink tree against the rest) as Kolmogorov's QPBO does.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -14,8 +13,7 @@ use mln::parse::{parse_evidence, parse_program, parse_query};
 use pbo::quadratize::Quadratizer;
 
 #[test]
-#[ignore = "pbo: QPBO<f64> mislabels the ISH quadratization of -F&S(100); see the module doc"]
-fn qssr_bound_never_exceeds_a_found_cost_on_neg_fs_100() {
+fn issue_7_qssr_bound_never_exceeds_a_found_cost_on_neg_fs_100() {
     let g = friends_smokers(
         &FriendsSmokersOptions {
             persons: 100,

@@ -281,10 +281,16 @@ impl<T: Capacity> Qpbo<T> {
         }
         let flow2 = g2.maxflow(false);
         self.twice_bound = base + base + flow2;
+        // One minimum cut, the sink tree T against the rest (free nodes on the source side,
+        // as Kolmogorov's QPBO): x = 0 if x ∉ T and x̄ ∈ T, x = 1 if x ∈ T and x̄ ∉ T. BK's
+        // flow is not symmetric, so mixing the source tree of x with the sink tree of x̄
+        // labelled nodes whose x and x̄ sat on the same side (with float round-off, −F&S with
+        // 100 persons under ISH had every node labelled and a "bound" twice the minimum).
         for (i, l) in self.labels.iter_mut().enumerate() {
-            *l = match (g2.tree(2 * i), g2.tree(2 * i + 1)) {
-                (Some(Segment::Source), _) | (_, Some(Segment::Sink)) => Label::Zero,
-                (Some(Segment::Sink), _) | (_, Some(Segment::Source)) => Label::One,
+            let in_sink = |v: usize| g2.tree(v) == Some(Segment::Sink);
+            *l = match (in_sink(2 * i), in_sink(2 * i + 1)) {
+                (false, true) => Label::Zero,
+                (true, false) => Label::One,
                 _ => Label::Unlabelled,
             };
         }
