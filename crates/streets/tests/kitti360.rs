@@ -17,7 +17,12 @@ fn kitti360_drive_0009() -> PathBuf {
 #[test]
 fn kitti360_bin_classifier_generalises_to_other_scans() {
     let (train, test) = train_test_bins(&kitti360_drive_0009(), 3, 2).unwrap();
-    assert!(train.len() > 20_000 && test.len() > 10_000, "{} / {}", train.len(), test.len());
+    assert!(
+        train.len() > 20_000 && test.len() > 10_000,
+        "{} / {}",
+        train.len(),
+        test.len()
+    );
     let options = ClassifierOptions {
         max_train_bins: 1500,
         calibration_bins: 500,

@@ -48,7 +48,7 @@ type Stage = fn(&DemoArgs) -> anyhow::Result<StageOutput>;
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output folder {}", args.out.display()))?;
-    let stages: [(&str, Stage); 5] = [
+    let stages: [(&str, Stage); 7] = [
         ("geodata: embedded default city", stage_city),
         ("geodata: simulated scans", crate::cmd::sim::demo_stage),
         ("pbo: binary image denoising (QPBO)", stage_denoise),
@@ -57,6 +57,14 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             stage_higher_order,
         ),
         ("mln: MAP on the thesis' synthetic problems", stage_mln),
+        (
+            "streets: widths and offsets",
+            crate::cmd::streets::demo_stage,
+        ),
+        (
+            "localize: one scan on the map",
+            crate::cmd::localize::demo_stage,
+        ),
     ];
     let bar = ProgressBar::new(stages.len() as u64);
     bar.set_style(

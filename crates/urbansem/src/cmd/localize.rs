@@ -747,7 +747,6 @@ fn summarize(
 
 /// The demo stage: simulated scans of the embedded default city (with the OSM map-error
 /// model) localized on its map without a prior.
-#[allow(dead_code)] // until `urbansem demo` lists the stage (demo.rs is the lead's)
 pub(crate) fn demo_stage(
     args: &crate::cmd::demo::DemoArgs,
 ) -> anyhow::Result<crate::cmd::demo::StageOutput> {

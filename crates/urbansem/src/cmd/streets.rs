@@ -592,7 +592,6 @@ fn bench_svm(
 
 /// The demo stage: a small simulated streets dataset on the embedded city, the evaluation
 /// and a Fig. 4.5-like figure (centre lines, buildings, estimated and true boundaries).
-#[allow(dead_code)] // The lead wires the stage into `urbansem demo`.
 pub(crate) fn demo_stage(
     args: &crate::cmd::demo::DemoArgs,
 ) -> anyhow::Result<crate::cmd::demo::StageOutput> {
