@@ -1,0 +1,484 @@
+//! The `.srt` map file: a little-endian binary format with a checksum.
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 8 | magic `SRTREE\0\n` |
+//! | 8 | 4 | format version `u32` (= 1) |
+//! | 12 | 8 | resolution, metres `f64` |
+//! | 20 | 1 | ray casting flag `u8` (0 or 1) |
+//! | 21 | 16 | log-odds hit, miss, min, max `f32` ×4 |
+//! | 37 | 8 | maximum ray length, metres `f64` |
+//! | 45 | 8 | cell count n `u64` |
+//! | 53 | 68·n | cells: key `i32`×3, hits `u32`, log-odds `f32`, colour sum `u32`×3, colour count `u32`, class histogram `u16`×10, object `u32`, object votes `u32`, label `u8`, 3 zero bytes |
+//! | | 4 | Dirichlet classes K `u32` (0: no model) |
+//! | | 8 | smoothing `f64` (only if K > 0) |
+//! | | K·(1 + 8K) | per class: present `u8`, then K concentrations `f64` if present |
+//! | | 8 | relation-graph length L `u64` |
+//! | | L | relation graph, UTF-8 JSON ([`crate::graph::RelationGraph`]) |
+//! | | 8 | FNV-1a 64-bit checksum of every byte before it |
+//!
+//! The R-tree and the hash index are not stored: [`read_map`] rebuilds them (bulk load).
+//! Every read checks lengths, values (finite log-odds, known labels, unique keys, positive
+//! concentrations) and the checksum, and names the byte offset of what is wrong.
+
+use crate::dirichlet::{Dirichlet, DirichletModel};
+use crate::error::{io_err, Result, SrtreeError};
+use crate::graph::RelationGraph;
+use crate::map::{Cell, MapOptions, SrMap};
+use geodata::classes::Class;
+use rustc_hash::FxHashSet;
+use std::path::Path;
+
+/// The magic bytes at the start of every map file.
+pub const MAGIC: &[u8; 8] = b"SRTREE\0\n";
+/// The format version written and read.
+pub const VERSION: u32 = 1;
+/// Bytes of one cell record.
+pub const CELL_BYTES: usize = 68;
+
+fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// The map as file bytes.
+pub fn encode_map(map: &SrMap) -> Vec<u8> {
+    let o = map.options();
+    let mut out = Vec::with_capacity(64 + map.len() * CELL_BYTES);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&o.resolution_m.to_le_bytes());
+    out.push(u8::from(o.ray_casting));
+    for v in [
+        o.log_odds_hit,
+        o.log_odds_miss,
+        o.log_odds_min,
+        o.log_odds_max,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(&o.max_ray_m.to_le_bytes());
+    out.extend_from_slice(&(map.len() as u64).to_le_bytes());
+    for c in map.cells() {
+        for k in c.key {
+            out.extend_from_slice(&k.to_le_bytes());
+        }
+        out.extend_from_slice(&c.hits.to_le_bytes());
+        out.extend_from_slice(&c.log_odds.to_le_bytes());
+        for s in c.rgb_sum {
+            out.extend_from_slice(&s.to_le_bytes());
+        }
+        out.extend_from_slice(&c.rgb_count.to_le_bytes());
+        for h in c.histogram {
+            out.extend_from_slice(&h.to_le_bytes());
+        }
+        out.extend_from_slice(&c.object.to_le_bytes());
+        out.extend_from_slice(&c.object_votes.to_le_bytes());
+        out.extend_from_slice(&[c.label, 0, 0, 0]);
+    }
+    match map.dirichlet() {
+        None => out.extend_from_slice(&0u32.to_le_bytes()),
+        Some(m) => {
+            out.extend_from_slice(&(m.classes.len() as u32).to_le_bytes());
+            out.extend_from_slice(&m.smoothing.to_le_bytes());
+            for d in &m.classes {
+                match d {
+                    None => out.push(0),
+                    Some(d) => {
+                        out.push(1);
+                        for a in &d.alpha {
+                            out.extend_from_slice(&a.to_le_bytes());
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // Serialising plain data to JSON cannot fail (no maps with non-string keys).
+    let graph = serde_json::to_vec(&map.relations).unwrap_or_default();
+    out.extend_from_slice(&(graph.len() as u64).to_le_bytes());
+    out.extend_from_slice(&graph);
+    let sum = fnv1a(&out);
+    out.extend_from_slice(&sum.to_le_bytes());
+    out
+}
+
+/// Writes a map file.
+pub fn write_map(path: impl AsRef<Path>, map: &SrMap) -> Result<()> {
+    let path = path.as_ref();
+    std::fs::write(path, encode_map(map)).map_err(io_err(path))
+}
+
+/// A bounds-checked little-endian reader naming the file and offset in its errors.
+struct Reader<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &'static str) -> Result<&'a [u8]> {
+        if self.bytes.len() - self.pos < n {
+            return Err(SrtreeError::Truncated {
+                path: self.path.to_path_buf(),
+                offset: self.bytes.len(),
+                what,
+                len: self.bytes.len(),
+            });
+        }
+        let s = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn array<const N: usize>(&mut self, what: &'static str) -> Result<[u8; N]> {
+        let s = self.take(N, what)?;
+        let mut a = [0u8; N];
+        a.copy_from_slice(s);
+        Ok(a)
+    }
+    fn u8(&mut self, what: &'static str) -> Result<u8> {
+        Ok(self.array::<1>(what)?[0])
+    }
+    fn u16(&mut self, what: &'static str) -> Result<u16> {
+        Ok(u16::from_le_bytes(self.array(what)?))
+    }
+    fn u32(&mut self, what: &'static str) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array(what)?))
+    }
+    fn i32(&mut self, what: &'static str) -> Result<i32> {
+        Ok(i32::from_le_bytes(self.array(what)?))
+    }
+    fn u64(&mut self, what: &'static str) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.array(what)?))
+    }
+    fn f32(&mut self, what: &'static str) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.array(what)?))
+    }
+    fn f64(&mut self, what: &'static str) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.array(what)?))
+    }
+    fn malformed(&self, offset: usize, message: String) -> SrtreeError {
+        SrtreeError::Malformed {
+            path: self.path.to_path_buf(),
+            offset,
+            message,
+        }
+    }
+}
+
+/// Parses map file bytes (`path` only names the source in errors).
+pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
+    let mut r = Reader {
+        path,
+        bytes,
+        pos: 0,
+    };
+    let head = &bytes[..bytes.len().min(8)];
+    if head != MAGIC {
+        return Err(SrtreeError::BadMagic {
+            path: path.to_path_buf(),
+            found: head.to_vec(),
+            expected: MAGIC,
+        });
+    }
+    r.pos = 8;
+    let version = r.u32("version")?;
+    if version != VERSION {
+        return Err(SrtreeError::UnsupportedVersion {
+            path: path.to_path_buf(),
+            version,
+            supported: VERSION,
+        });
+    }
+    // The checksum first: a corrupted file is reported as such, not as a bad value.
+    if bytes.len() < r.pos + 8 {
+        return Err(SrtreeError::Truncated {
+            path: path.to_path_buf(),
+            offset: bytes.len(),
+            what: "header",
+            len: bytes.len(),
+        });
+    }
+    let at = r.pos;
+    let resolution_m = r.f64("resolution")?;
+    if !(resolution_m.is_finite() && resolution_m >= 1e-3) {
+        return Err(r.malformed(at, format!("resolution {resolution_m} m, expected ≥ 0.001")));
+    }
+    let at = r.pos;
+    let ray_casting = match r.u8("ray casting flag")? {
+        0 => false,
+        1 => true,
+        v => return Err(r.malformed(at, format!("ray casting flag {v}, expected 0 or 1"))),
+    };
+    let at = r.pos;
+    let lo = [
+        r.f32("log-odds hit")?,
+        r.f32("log-odds miss")?,
+        r.f32("log-odds min")?,
+        r.f32("log-odds max")?,
+    ];
+    let max_ray_m = r.f64("maximum ray length")?;
+    let options = MapOptions {
+        resolution_m,
+        ray_casting,
+        log_odds_hit: lo[0],
+        log_odds_miss: lo[1],
+        log_odds_min: lo[2],
+        log_odds_max: lo[3],
+        max_ray_m,
+    };
+    if !(lo[0] > 0.0 && lo[1] < 0.0 && lo[2] < 0.0 && lo[3] > 0.0) {
+        return Err(r.malformed(
+            at,
+            format!("log-odds hit/miss/min/max {lo:?}, expected hit > 0, miss < 0, min < 0 < max"),
+        ));
+    }
+    let at = r.pos;
+    let n = r.u64("cell count")?;
+    let remaining = bytes.len() - r.pos;
+    if n > (remaining / CELL_BYTES) as u64 {
+        return Err(SrtreeError::Truncated {
+            path: path.to_path_buf(),
+            offset: bytes.len(),
+            what: "cells",
+            len: bytes.len(),
+        });
+    }
+    let stored_sum = u64::from_le_bytes(
+        bytes[bytes.len() - 8..]
+            .try_into()
+            .map_err(|_| r.malformed(bytes.len() - 8, "checksum".into()))?,
+    );
+    let computed = fnv1a(&bytes[..bytes.len() - 8]);
+    if stored_sum != computed {
+        return Err(SrtreeError::Checksum {
+            path: path.to_path_buf(),
+            stored: stored_sum,
+            computed,
+        });
+    }
+    let _ = at;
+    let mut cells = Vec::with_capacity(n as usize);
+    let mut seen = FxHashSet::default();
+    for _ in 0..n {
+        let at = r.pos;
+        let key = [r.i32("cell key")?, r.i32("cell key")?, r.i32("cell key")?];
+        let hits = r.u32("hits")?;
+        let log_odds = r.f32("log-odds")?;
+        let rgb_sum = [r.u32("colour")?, r.u32("colour")?, r.u32("colour")?];
+        let rgb_count = r.u32("colour count")?;
+        let mut histogram = [0u16; Class::COUNT];
+        for h in &mut histogram {
+            *h = r.u16("histogram")?;
+        }
+        let object = r.u32("object")?;
+        let object_votes = r.u32("object votes")?;
+        let tail = r.array::<4>("label")?;
+        let label = tail[0];
+        if !log_odds.is_finite() {
+            return Err(r.malformed(at, format!("cell {key:?} has log-odds {log_odds}")));
+        }
+        if Class::from_id(label).is_none() {
+            return Err(r.malformed(
+                at + 64,
+                format!(
+                    "cell {key:?} has label {label}, expected < {}",
+                    Class::COUNT
+                ),
+            ));
+        }
+        if !seen.insert(key) {
+            return Err(r.malformed(at, format!("cell key {key:?} appears twice")));
+        }
+        cells.push(Cell {
+            key,
+            hits,
+            log_odds,
+            rgb_sum,
+            rgb_count,
+            histogram,
+            object,
+            object_votes,
+            label,
+        });
+    }
+    let at = r.pos;
+    let k = r.u32("Dirichlet class count")? as usize;
+    let dirichlet = if k == 0 {
+        None
+    } else {
+        if k != Class::COUNT {
+            return Err(r.malformed(
+                at,
+                format!("{k} Dirichlet classes, expected {}", Class::COUNT),
+            ));
+        }
+        let at = r.pos;
+        let smoothing = r.f64("smoothing")?;
+        if !(smoothing > 0.0 && smoothing.is_finite()) {
+            return Err(r.malformed(at, format!("smoothing {smoothing}, expected > 0")));
+        }
+        let mut classes = Vec::with_capacity(k);
+        for _ in 0..k {
+            let at = r.pos;
+            match r.u8("Dirichlet presence flag")? {
+                0 => classes.push(None),
+                1 => {
+                    let mut alpha = Vec::with_capacity(k);
+                    for _ in 0..k {
+                        let at = r.pos;
+                        let a = r.f64("concentration")?;
+                        if !(a > 0.0 && a.is_finite()) {
+                            return Err(r.malformed(at, format!("concentration {a}, expected > 0")));
+                        }
+                        alpha.push(a);
+                    }
+                    classes.push(Some(Dirichlet::new(alpha)));
+                }
+                v => return Err(r.malformed(at, format!("presence flag {v}, expected 0 or 1"))),
+            }
+        }
+        Some(DirichletModel { smoothing, classes })
+    };
+    let len = r.u64("relation graph length")?;
+    let at = r.pos;
+    if len > (bytes.len() - r.pos) as u64 {
+        return Err(SrtreeError::Truncated {
+            path: path.to_path_buf(),
+            offset: bytes.len(),
+            what: "relation graph",
+            len: bytes.len(),
+        });
+    }
+    let graph_bytes = r.take(len as usize, "relation graph")?;
+    let relations: RelationGraph = serde_json::from_slice(graph_bytes)
+        .map_err(|e| r.malformed(at, format!("relation graph JSON: {e}")))?;
+    if r.pos + 8 != bytes.len() {
+        return Err(r.malformed(
+            r.pos,
+            format!(
+                "{} unexpected bytes before the checksum",
+                bytes.len() - 8 - r.pos
+            ),
+        ));
+    }
+    SrMap::from_parts(options, cells, dirichlet, relations)
+}
+
+/// Reads a map file.
+pub fn read_map(path: impl AsRef<Path>) -> Result<SrMap> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(io_err(path))?;
+    decode_map(&bytes, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dirichlet::FitOptions;
+    use crate::graph::{Relation, RelationEdge};
+
+    fn sample_map() -> SrMap {
+        let cloud = crate::map::tests::random_cloud(2000, 5.0, 9);
+        let mut map = SrMap::new(MapOptions {
+            resolution_m: 0.3,
+            ..MapOptions::default()
+        })
+        .unwrap();
+        map.insert_cloud(&cloud, None).unwrap();
+        let training: Vec<(Vec<u16>, u8)> = map
+            .cells()
+            .iter()
+            .map(|c| {
+                (
+                    c.histogram.to_vec(),
+                    crate::dirichlet::majority(&c.histogram).unwrap_or(0),
+                )
+            })
+            .collect();
+        let model = DirichletModel::fit(
+            &training,
+            &FitOptions {
+                min_cells: 3,
+                ..FitOptions::default()
+            },
+        )
+        .unwrap();
+        map.set_dirichlet(Some(model));
+        map.relations.edges.push(RelationEdge {
+            a: 1,
+            b: 2,
+            bits: Relation::On.bit(),
+        });
+        map
+    }
+
+    #[test]
+    fn save_load_round_trip() {
+        let map = sample_map();
+        let bytes = encode_map(&map);
+        let back = decode_map(&bytes, Path::new("x.srt")).unwrap();
+        assert_eq!(back.cells(), map.cells());
+        assert_eq!(back.dirichlet(), map.dirichlet());
+        assert_eq!(back.relations, map.relations);
+        assert_eq!(back.options(), map.options());
+        assert_eq!(encode_map(&back), bytes);
+        let q = ([-1.0, -1.0, 0.0], [1.0, 1.0, 1.0]);
+        let (mut a, mut b) = (map.cells_in_box(q.0, q.1), back.cells_in_box(q.0, q.1));
+        a.sort_unstable();
+        b.sort_unstable();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn malformed_files_are_clear_errors() {
+        let bytes = encode_map(&sample_map());
+        let p = Path::new("bad.srt");
+        let err = decode_map(b"PLY\nformat", p).unwrap_err();
+        assert!(matches!(err, SrtreeError::BadMagic { .. }), "{err}");
+        assert!(err.to_string().contains("bad.srt"));
+        for cut in [4, 10, 30, 60, 500, bytes.len() - 3] {
+            let err = decode_map(&bytes[..cut], p).unwrap_err();
+            assert!(
+                matches!(
+                    err,
+                    SrtreeError::Truncated { .. }
+                        | SrtreeError::BadMagic { .. }
+                        | SrtreeError::Checksum { .. }
+                ),
+                "cut at {cut}: {err}"
+            );
+        }
+        let mut flipped = bytes.clone();
+        flipped[100] ^= 0x40;
+        assert!(matches!(
+            decode_map(&flipped, p),
+            Err(SrtreeError::Checksum { .. })
+        ));
+        let mut version = bytes.clone();
+        version[8] = 9;
+        assert!(matches!(
+            decode_map(&version, p),
+            Err(SrtreeError::UnsupportedVersion { version: 9, .. })
+        ));
+        // A bad label with a valid checksum is a Malformed error naming its offset.
+        let mut label = bytes.clone();
+        label[53 + 64] = 42;
+        let n = label.len();
+        let sum = fnv1a(&label[..n - 8]);
+        label[n - 8..].copy_from_slice(&sum.to_le_bytes());
+        let err = decode_map(&label, p).unwrap_err();
+        assert!(
+            matches!(err, SrtreeError::Malformed { offset: 117, .. }),
+            "{err}"
+        );
+        assert!(matches!(
+            read_map("/nonexistent/map.srt"),
+            Err(SrtreeError::Io { .. })
+        ));
+    }
+}

@@ -1,0 +1,28 @@
+//! The semantic R-tree map (SRTree) and spatial relations with MLN consistency (thesis §3.3).
+//!
+//! Where it sits in the pipeline: it reads labelled point clouds and relations datasets
+//! through `geodata` and runs its consistency inference on `mln` (which minimises on `pbo`).
+//! The `urbansem map …` and `urbansem relations …` commands are thin wrappers around it.
+//! Modules, in data-flow order:
+//!
+//! - [`dirichlet`]: per-class Dirichlet over cell class histograms, moment matching, label choice.
+//! - [`map`]: occupancy cells kept where occupied, R-tree index, queries, ray casting.
+//! - [`io`]: the documented binary `.srt` map file.
+//! - [`objects`]: per object cells, centroid, class, oriented box (normal-histogram yaw).
+//! - [`graph`]: the spatial relation graph and its queries.
+//!
+//! ```
+//! use srtree::map::{MapOptions, SrMap};
+//! let map = SrMap::new(MapOptions { resolution_m: 0.2, ..MapOptions::default() })?;
+//! assert!(map.is_empty());
+//! # Ok::<(), srtree::SrtreeError>(())
+//! ```
+
+pub mod dirichlet;
+pub mod error;
+pub mod graph;
+pub mod io;
+pub mod map;
+pub mod objects;
+
+pub use error::{Result, SrtreeError};
