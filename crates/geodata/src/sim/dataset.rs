@@ -7,10 +7,16 @@
 //!
 //! - **localization** ([`write_localization`]): `scan_000.ply` … in the gravity-levelled
 //!   sensor frame (origin at the sensor, x along the heading, z up) and `truth.json`
-//!   mapping each scan file name to `{"x", "y", "z", "yaw", "lat", "lon", "yaw_grid"}`:
-//!   `x`, `y`, `z` the sensor origin in the local frame, `yaw` from *geographic* east
-//!   (grid yaw plus meridian convergence), `yaw_grid` from the local frame's x axis. The
-//!   world carries the OSM map-error model unless disabled.
+//!   mapping each scan file name to `{"x", "y", "z", "yaw", "lat", "lon", "yaw_grid",
+//!   "world_x", "world_y", "world_yaw", "world_yaw_grid"}`. The world carries the OSM
+//!   map-error model unless disabled, so the world and the map disagree; like the thesis'
+//!   scans, "manually aligned with the data retrieved from OpenStreetMap", the truth is the
+//!   pose in the *map's* frame: `x`, `y` = p + D(p) for the world position p and the
+//!   map-error field D, `yaw_grid` = the world heading plus the field's local rotation
+//!   ½(∂D_y/∂x − ∂D_x/∂y), both in the local frame; `yaw` the same from *geographic* east
+//!   (plus meridian convergence); `lat`, `lon` of (`x`, `y`); `z` the sensor height in the
+//!   local frame. `world_x`, `world_y`, `world_yaw_grid`, `world_yaw` are the pose in the
+//!   simulated world (equal to the map pose without map error).
 //! - **streets** ([`write_streets`]): scans every `spacing_m` along a route driven on the
 //!   true street centre lines, registered into one `cloud.ply` in the local frame (labels:
 //!   street = driving area, sidewalk, …), `segments.json` — one entry per segment of
@@ -67,7 +73,8 @@ impl Default for LocalizationOptions {
     }
 }
 
-/// The true pose of one localization scan as written to `truth.json`.
+/// The true pose of one localization scan as written to `truth.json`: in the map's frame
+/// (through the map-error field), and in the world.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct TruthPose {
     /// Sensor origin east, metres in the local frame.
@@ -84,6 +91,14 @@ pub struct TruthPose {
     pub lon: f64,
     /// Heading counter-clockwise from the local frame's x axis, radians.
     pub yaw_grid: f64,
+    /// Sensor origin east in the simulated world (before the map error), metres.
+    pub world_x: f64,
+    /// Sensor origin north in the simulated world, metres.
+    pub world_y: f64,
+    /// Heading in the world, counter-clockwise from geographic east, radians.
+    pub world_yaw: f64,
+    /// Heading in the world, counter-clockwise from the local frame's x axis, radians.
+    pub world_yaw_grid: f64,
 }
 
 /// What a dataset writer produced.
@@ -143,18 +158,25 @@ pub fn write_localization(
         )?;
         let name = format!("scan_{i:03}.ply");
         write_cloud(out.join(&name), &cloud)?;
-        let xy = [pose.position[0], pose.position[1]];
+        let world_xy = [pose.position[0], pose.position[1]];
+        let field = &scene.map_error.field;
+        let xy = field.map_from_world(world_xy);
+        let yaw_grid = pose.yaw_rad + field.rotation_rad(world_xy);
         let (lat, lon) = scene.frame.to_wgs84(xy);
         truth.insert(
             name,
             TruthPose {
-                x: pose.position[0],
-                y: pose.position[1],
+                x: xy[0],
+                y: xy[1],
                 z: pose.position[2],
-                yaw: pose.yaw_rad + scene.frame.convergence_rad(xy),
+                yaw: yaw_grid + scene.frame.convergence_rad(xy),
                 lat,
                 lon,
-                yaw_grid: pose.yaw_rad,
+                yaw_grid,
+                world_x: world_xy[0],
+                world_y: world_xy[1],
+                world_yaw: pose.yaw_rad + scene.frame.convergence_rad(world_xy),
+                world_yaw_grid: pose.yaw_rad,
             },
         );
         summary.scans += 1;
@@ -180,6 +202,8 @@ pub fn write_localization(
                 "removed_buildings": scene.map_error.removed.len(),
                 "extra_buildings": scene.map_error.extra,
                 "mean_shift_m": scene.map_error.mean_shift_m,
+                "field": scene.map_error.field,
+                "truth_frame": "map: x, y, yaw, yaw_grid, lat, lon are the world pose p mapped to p + D(p) and turned by the field's local rotation; world_* are the pose in the simulated world",
             },
             "summary": summary,
         }),
@@ -805,9 +829,23 @@ mod tests {
         let truth: Value =
             serde_json::from_slice(&std::fs::read(a.join("truth.json")).unwrap()).unwrap();
         let pose = &truth["scan_000.ply"];
-        for key in ["x", "y", "z", "yaw", "lat", "lon"] {
+        for key in [
+            "x",
+            "y",
+            "z",
+            "yaw",
+            "lat",
+            "lon",
+            "world_x",
+            "world_y",
+            "world_yaw",
+        ] {
             assert!(pose[key].is_f64(), "{key} missing");
         }
+        // The map-error model is on: the map pose is the world pose through the field.
+        let shift = (pose["x"].as_f64().unwrap() - pose["world_x"].as_f64().unwrap())
+            .hypot(pose["y"].as_f64().unwrap() - pose["world_y"].as_f64().unwrap());
+        assert!(shift > 1e-3 && shift < 10.0, "shift {shift}");
         let cloud = crate::cloud::read_cloud(a.join("scan_000.ply")).unwrap();
         assert!(cloud.len() > 500);
         std::fs::remove_dir_all(&dir).ok();

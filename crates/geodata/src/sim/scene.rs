@@ -2,9 +2,12 @@
 //!
 //! - **Buildings**: every outline extruded to its height (`height` tag, else
 //!   `building:levels` × 3 m + 1 m, else seeded 8–25 m). With the *map-error model* on,
-//!   the world's buildings differ from the map as OSM outlines differ from reality: each
-//!   is shifted (normal, σ per axis, clipped) and rotated about its centroid, some map
-//!   buildings do not exist in the world, and the world has extra buildings the map lacks.
+//!   the world's buildings differ from the map as OSM outlines differ from reality: the
+//!   map point of a world point p is p + D(p) with D a smooth seeded displacement field
+//!   (imagery misregistration: shifts of a few metres, correlated over kilometres), every
+//!   map node has its own small noise (shared nodes stay shared, so blocks keep their
+//!   shape), some map buildings do not exist in the world, and the world has extra
+//!   buildings the map lacks. Streets and their truth are not displaced.
 //! - **Ground**: the paved driving area at z = 0 (capsules of radius wₛ/2 about each true
 //!   centre line, see [`super::truth`]); everything else 0.15 m higher behind a kerb:
 //!   sidewalks (capsules of radius wₛ/2 + sidewalk width, footways and paths, pedestrian
@@ -30,14 +33,27 @@ use rstar::{RTree, AABB};
 use serde::Serialize;
 
 /// Options of the OSM map-error model (world buildings vs map outlines).
+///
+/// OSM outlines are traced from aerial imagery, so their error is mostly a spatially
+/// correlated offset of a few metres from the imagery's misregistration (Fan, Zipf, Fu and
+/// Neis, "Quality assessment for building footprints data on OpenStreetMap", IJGIS 28 (2014),
+/// doi:10.1080/13658816.2013.867495: ≈ 4 m average offset in Munich), plus small tracing
+/// noise per node, missing buildings and buildings the map lacks. The model: the map point of
+/// a world point p is p + D(p) with D a smooth seeded [`DisplacementField`]; every map node
+/// gets its own noise keyed by its quantised coordinate, so nodes shared by adjacent buildings
+/// stay shared and blocks keep their shape.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MapErrorOptions {
-    /// Standard deviation of each building's shift per axis, metres.
-    pub shift_sigma_m: f64,
-    /// Largest shift per axis, metres.
-    pub max_shift_m: f64,
-    /// Standard deviation of each building's rotation about its centroid, radians.
-    pub rotation_sigma_rad: f64,
+    /// Root mean square of the smooth displacement field per axis, metres.
+    pub field_rms_m: f64,
+    /// Shortest and longest wavelength of the field's Fourier modes, metres.
+    pub field_wavelength_m: [f64; 2],
+    /// Number of Fourier modes per axis.
+    pub field_modes: usize,
+    /// Standard deviation of each map node's own noise per axis, metres.
+    pub node_sigma_m: f64,
+    /// Largest node noise per axis, metres.
+    pub max_node_m: f64,
     /// Probability that a map building does not exist in the world.
     pub removed_probability: f64,
     /// World buildings missing from the map, per km² of map.
@@ -48,25 +64,179 @@ impl MapErrorOptions {
     /// No map error: the world's buildings are the map's.
     pub fn none() -> Self {
         MapErrorOptions {
-            shift_sigma_m: 0.0,
-            max_shift_m: 0.0,
-            rotation_sigma_rad: 0.0,
+            field_rms_m: 0.0,
+            field_wavelength_m: [800.0, 3000.0],
+            field_modes: 0,
+            node_sigma_m: 0.0,
+            max_node_m: 0.0,
             removed_probability: 0.0,
             extra_per_km2: 0.0,
         }
     }
 
-    /// Errors of the size reported for OSM outlines: σ = 1 m shifts (≤ 3 m), σ = 1.5°
-    /// rotations, 3 % of map buildings missing from the world, 15 extra buildings per km².
+    /// Errors of the size reported for OSM outlines: a field of 1.75 m RMS per axis with
+    /// wavelengths 0.8–3 km (4 modes per axis), σ = 0.25 m node noise (≤ 0.75 m), 3 % of map
+    /// buildings missing from the world, 15 extra buildings per km².
     pub fn osm_like() -> Self {
         MapErrorOptions {
-            shift_sigma_m: 1.0,
-            max_shift_m: 3.0,
-            rotation_sigma_rad: 1.5_f64.to_radians(),
+            field_rms_m: 1.75,
+            field_wavelength_m: [800.0, 3000.0],
+            field_modes: 4,
+            node_sigma_m: 0.25,
+            max_node_m: 0.75,
             removed_probability: 0.03,
             extra_per_km2: 15.0,
         }
     }
+}
+
+/// One plane-wave mode of a [`DisplacementField`]: a cos(k · p + φ).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FieldMode {
+    /// Wave vector, radians per metre.
+    pub k_rad_per_m: [f64; 2],
+    /// Amplitude, metres.
+    pub amplitude_m: f64,
+    /// Phase, radians.
+    pub phase_rad: f64,
+}
+
+/// A smooth seeded 2-D displacement field D(p): the map point of the world point p is
+/// p + D(p) (the map-error model's imagery misregistration).
+///
+/// Each axis is a sum of plane waves with random directions, log-uniform wavelengths and
+/// random phases, of equal amplitude so that the spatial RMS per axis is the one asked for.
+/// O(modes) per evaluation.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct DisplacementField {
+    /// Modes of the x (east) component.
+    pub x_modes: Vec<FieldMode>,
+    /// Modes of the y (north) component.
+    pub y_modes: Vec<FieldMode>,
+}
+
+impl DisplacementField {
+    /// The zero field.
+    pub fn zero() -> Self {
+        DisplacementField::default()
+    }
+
+    /// A seeded field with the options' RMS, wavelengths and mode count.
+    pub fn seeded(options: &MapErrorOptions, seed: u64) -> Self {
+        if options.field_modes == 0 || options.field_rms_m <= 0.0 {
+            return DisplacementField::zero();
+        }
+        let mut rng = stream_rng(seed, purpose::MAP_ERROR, u64::MAX);
+        let amplitude_m = options.field_rms_m * (2.0 / options.field_modes as f64).sqrt();
+        let [lo, hi] = options.field_wavelength_m;
+        let (ln_lo, ln_hi) = (lo.max(1.0).ln(), hi.max(lo).max(1.0).ln());
+        let modes = |rng: &mut rand_chacha::ChaCha8Rng| -> Vec<FieldMode> {
+            (0..options.field_modes)
+                .map(|_| {
+                    let wavelength = if ln_hi > ln_lo {
+                        rng.gen_range(ln_lo..ln_hi).exp()
+                    } else {
+                        ln_lo.exp()
+                    };
+                    let dir: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
+                    let k = std::f64::consts::TAU / wavelength;
+                    FieldMode {
+                        k_rad_per_m: [k * dir.cos(), k * dir.sin()],
+                        amplitude_m,
+                        phase_rad: rng.gen_range(0.0..std::f64::consts::TAU),
+                    }
+                })
+                .collect()
+        };
+        let x_modes = modes(&mut rng);
+        let y_modes = modes(&mut rng);
+        DisplacementField { x_modes, y_modes }
+    }
+
+    fn component(modes: &[FieldMode], p: [f64; 2]) -> f64 {
+        modes
+            .iter()
+            .map(|m| {
+                m.amplitude_m
+                    * (m.k_rad_per_m[0] * p[0] + m.k_rad_per_m[1] * p[1] + m.phase_rad).cos()
+            })
+            .sum()
+    }
+
+    /// ∂/∂x and ∂/∂y of one component.
+    fn gradient(modes: &[FieldMode], p: [f64; 2]) -> [f64; 2] {
+        modes.iter().fold([0.0, 0.0], |g, m| {
+            let s = -m.amplitude_m
+                * (m.k_rad_per_m[0] * p[0] + m.k_rad_per_m[1] * p[1] + m.phase_rad).sin();
+            [g[0] + s * m.k_rad_per_m[0], g[1] + s * m.k_rad_per_m[1]]
+        })
+    }
+
+    /// D(p), metres.
+    pub fn displacement_m(&self, p: [f64; 2]) -> [f64; 2] {
+        [
+            Self::component(&self.x_modes, p),
+            Self::component(&self.y_modes, p),
+        ]
+    }
+
+    /// The map point of a world point: p + D(p).
+    pub fn map_from_world(&self, p: [f64; 2]) -> [f64; 2] {
+        let d = self.displacement_m(p);
+        [p[0] + d[0], p[1] + d[1]]
+    }
+
+    /// The world point of a map point m: the q with q + D(q) = m, by fixed-point iteration
+    /// (a contraction: |∇D| ≪ 1 for wavelengths of hundreds of metres).
+    pub fn world_from_map(&self, m: [f64; 2]) -> [f64; 2] {
+        let mut q = m;
+        for _ in 0..8 {
+            let d = self.displacement_m(q);
+            q = [m[0] - d[0], m[1] - d[1]];
+        }
+        q
+    }
+
+    /// The field's local rotation at p, ½(∂Dy/∂x − ∂Dx/∂y), radians counter-clockwise: a
+    /// heading in the world turns by this much in the map.
+    pub fn rotation_rad(&self, p: [f64; 2]) -> f64 {
+        let gx = Self::gradient(&self.x_modes, p);
+        let gy = Self::gradient(&self.y_modes, p);
+        0.5 * (gy[0] - gx[1])
+    }
+}
+
+/// A map node's own tracing noise, keyed by its coordinate quantised to 1 mm, so every
+/// building sharing the node gets the same noise.
+fn node_noise(options: &MapErrorOptions, seed: u64, m: [f64; 2]) -> [f64; 2] {
+    if options.node_sigma_m <= 0.0 {
+        return [0.0, 0.0];
+    }
+    let qx = (m[0] * 1000.0).round() as i64 as u64;
+    let qy = (m[1] * 1000.0).round() as i64 as u64;
+    let key = mix64(qx ^ mix64(qy)) | (1 << 63);
+    let mut rng = stream_rng(seed, purpose::MAP_ERROR, key);
+    let lim = options.max_node_m;
+    [
+        (options.node_sigma_m * normal(&mut rng)).clamp(-lim, lim),
+        (options.node_sigma_m * normal(&mut rng)).clamp(-lim, lim),
+    ]
+}
+
+/// The world ring of a map ring: each node through the inverse field, minus its own noise.
+fn world_ring(
+    ring: &[[f64; 2]],
+    field: &DisplacementField,
+    options: &MapErrorOptions,
+    seed: u64,
+) -> Vec<[f64; 2]> {
+    ring.iter()
+        .map(|&m| {
+            let q = field.world_from_map(m);
+            let n = node_noise(options, seed, m);
+            [q[0] - n[0], q[1] - n[1]]
+        })
+        .collect()
 }
 
 /// How much clutter the world has.
@@ -146,9 +316,10 @@ pub struct WorldBuilding {
     pub inners: Vec<Vec<[f64; 2]>>,
     /// Height of the walls, metres.
     pub height_m: f64,
-    /// Shift applied to the map outline, metres (zero without map error).
+    /// Shift of the outline's vertex centroid from the map's, metres (zero without map error).
     pub shift_m: [f64; 2],
-    /// Rotation applied about the outline's centroid, radians.
+    /// Local rotation of the world outline relative to the map's (minus the field's rotation
+    /// at its centroid), radians.
     pub rotation_rad: f64,
 }
 
@@ -178,6 +349,8 @@ pub struct MapErrorReport {
     pub extra: usize,
     /// Mean shift length of the kept buildings, metres.
     pub mean_shift_m: f64,
+    /// The displacement field: the map point of a world point p is p + D(p).
+    pub field: DisplacementField,
 }
 
 /// What a surface point is: class, object id, and a material index for intensity and colour.
@@ -368,19 +541,6 @@ fn centroid(ring: &[[f64; 2]]) -> [f64; 2] {
     [s[0] / n, s[1] / n]
 }
 
-fn transform_ring(ring: &[[f64; 2]], c: [f64; 2], rot: f64, shift: [f64; 2]) -> Vec<[f64; 2]> {
-    let (s, co) = rot.sin_cos();
-    ring.iter()
-        .map(|p| {
-            let q = [p[0] - c[0], p[1] - c[1]];
-            [
-                c[0] + co * q[0] - s * q[1] + shift[0],
-                c[1] + s * q[0] + co * q[1] + shift[1],
-            ]
-        })
-        .collect()
-}
-
 fn check_probability(name: &'static str, value: f64) -> Result<(), SimError> {
     if (0.0..=1.0).contains(&value) {
         Ok(())
@@ -408,9 +568,17 @@ fn check_non_negative(name: &'static str, value: f64) -> Result<(), SimError> {
 impl SceneOptions {
     fn validate(&self) -> Result<(), SimError> {
         let e = &self.map_error;
-        check_non_negative("map_error.shift_sigma_m", e.shift_sigma_m)?;
-        check_non_negative("map_error.max_shift_m", e.max_shift_m)?;
-        check_non_negative("map_error.rotation_sigma_rad", e.rotation_sigma_rad)?;
+        check_non_negative("map_error.field_rms_m", e.field_rms_m)?;
+        let [lo, hi] = e.field_wavelength_m;
+        if !(lo.is_finite() && hi.is_finite() && lo >= 50.0 && hi >= lo) {
+            return Err(SimError::InvalidOption {
+                name: "map_error.field_wavelength_m",
+                value: lo,
+                expected: "50 m ≤ shortest ≤ longest wavelength (a smooth field)",
+            });
+        }
+        check_non_negative("map_error.node_sigma_m", e.node_sigma_m)?;
+        check_non_negative("map_error.max_node_m", e.max_node_m)?;
         check_probability("map_error.removed_probability", e.removed_probability)?;
         check_non_negative("map_error.extra_per_km2", e.extra_per_km2)?;
         let c = &self.clutter;
@@ -538,6 +706,7 @@ impl Scene {
 
         // World buildings with the map-error model.
         let e = &options.map_error;
+        let field = DisplacementField::seeded(e, seed);
         let mut buildings = Vec::with_capacity(map.buildings.len());
         let mut report = MapErrorReport::default();
         let mut shift_sum = 0.0;
@@ -548,11 +717,6 @@ impl Scene {
                 report.removed.push(i);
                 continue;
             }
-            let shift = [
-                (e.shift_sigma_m * normal(&mut rng)).clamp(-e.max_shift_m, e.max_shift_m),
-                (e.shift_sigma_m * normal(&mut rng)).clamp(-e.max_shift_m, e.max_shift_m),
-            ];
-            let rotation = e.rotation_sigma_rad * normal(&mut rng);
             let c = centroid(&b.outer);
             let mut hrng = stream_rng(seed, purpose::HEIGHT, i as u64);
             let [hlo, hhi] = options.building_height_range_m;
@@ -566,21 +730,25 @@ impl Scene {
                     .map(|l| 3.0 * l + 1.0))
                 .unwrap_or(drawn)
                 .min(300.0);
+            let outer = world_ring(&b.outer, &field, e, seed);
+            let wc = centroid(&outer);
+            let shift = [wc[0] - c[0], wc[1] - c[1]];
             shift_sum += (shift[0] * shift[0] + shift[1] * shift[1]).sqrt();
             buildings.push(WorldBuilding {
                 map_index: Some(i),
-                outer: transform_ring(&b.outer, c, rotation, shift),
+                outer,
                 inners: b
                     .inners
                     .iter()
-                    .map(|r| transform_ring(r, c, rotation, shift))
+                    .map(|r| world_ring(r, &field, e, seed))
                     .collect(),
                 height_m,
                 shift_m: shift,
-                rotation_rad: rotation,
+                rotation_rad: -field.rotation_rad(wc),
             });
         }
         report.mean_shift_m = shift_sum / buildings.len().max(1) as f64;
+        report.field = field;
 
         // Ground capsules.
         let mut capsules = Vec::new();
@@ -1340,14 +1508,81 @@ mod tests {
         let scene = Scene::build(&map, &options, 2).unwrap();
         assert!(!scene.map_error.removed.is_empty());
         assert!(scene.map_error.extra > 0);
-        assert!(scene.map_error.mean_shift_m > 0.3 && scene.map_error.mean_shift_m < 3.0);
-        for b in &scene.buildings {
-            assert!(b.shift_m[0].abs() <= 3.0 && b.shift_m[1].abs() <= 3.0);
-        }
+        assert!(scene.map_error.mean_shift_m > 0.3 && scene.map_error.mean_shift_m < 8.0);
         assert_eq!(
             scene.buildings.len(),
             map.buildings.len() - scene.map_error.removed.len() + scene.map_error.extra
         );
+        // Each world node maps back onto its map node up to the node noise.
+        let field = &scene.map_error.field;
+        for b in scene.buildings.iter().filter(|b| b.map_index.is_some()) {
+            let m = &map.buildings[b.map_index.unwrap()].outer;
+            for (w, m) in b.outer.iter().zip(m) {
+                let back = field.map_from_world(*w);
+                assert!((back[0] - m[0]).abs() <= 0.76, "{back:?} vs {m:?}");
+                assert!((back[1] - m[1]).abs() <= 0.76, "{back:?} vs {m:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn shared_map_nodes_stay_shared_in_the_world() {
+        // Two buildings sharing the wall x = 10 (nodes (10, 0) and (10, 8)).
+        let mut map = small_map(4);
+        let a = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0]];
+        let b = vec![[10.0, 0.0], [20.0, 0.0], [20.0, 8.0], [10.0, 8.0]];
+        map.buildings.truncate(2);
+        map.buildings[0].outer = a;
+        map.buildings[0].inners.clear();
+        map.buildings[1].outer = b;
+        map.buildings[1].inners.clear();
+        let options = SceneOptions {
+            map_error: MapErrorOptions {
+                removed_probability: 0.0,
+                extra_per_km2: 0.0,
+                ..MapErrorOptions::osm_like()
+            },
+            ..SceneOptions::default()
+        };
+        let scene = Scene::build(&map, &options, 9).unwrap();
+        let (wa, wb) = (&scene.buildings[0].outer, &scene.buildings[1].outer);
+        assert_eq!(wa[1], wb[0]);
+        assert_eq!(wa[2], wb[3]);
+        assert_ne!(wa[0], [0.0, 0.0]);
+    }
+
+    #[test]
+    fn displacement_field_has_its_rms_inverts_and_rotates_as_its_curl() {
+        let options = MapErrorOptions::osm_like();
+        let field = DisplacementField::seeded(&options, 11);
+        let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
+        for i in 0..60 {
+            for j in 0..60 {
+                let p = [i as f64 * 150.0 - 4500.0, j as f64 * 150.0 - 4500.0];
+                let d = field.displacement_m(p);
+                sx += d[0] * d[0];
+                sy += d[1] * d[1];
+                n += 1.0;
+                let q = field.world_from_map(p);
+                let back = field.map_from_world(q);
+                assert!((back[0] - p[0]).abs() < 1e-9 && (back[1] - p[1]).abs() < 1e-9);
+            }
+        }
+        for rms in [(sx / n).sqrt(), (sy / n).sqrt()] {
+            assert!((rms - 1.75).abs() < 0.6, "rms {rms}");
+        }
+        // The rotation is the curl's half, checked by central differences.
+        let p = [123.0, -456.0];
+        let h = 0.5;
+        let dx = |q: [f64; 2]| field.displacement_m(q);
+        let ddy_dx = (dx([p[0] + h, p[1]])[1] - dx([p[0] - h, p[1]])[1]) / (2.0 * h);
+        let ddx_dy = (dx([p[0], p[1] + h])[0] - dx([p[0], p[1] - h])[0]) / (2.0 * h);
+        assert!((field.rotation_rad(p) - 0.5 * (ddy_dx - ddx_dy)).abs() < 1e-8);
+        assert!(field.rotation_rad(p).abs() < 0.02);
+        assert_eq!(DisplacementField::seeded(&options, 11), field);
+        assert_ne!(DisplacementField::seeded(&options, 12), field);
+        let zero = DisplacementField::seeded(&MapErrorOptions::none(), 11);
+        assert_eq!(zero.map_from_world(p), p);
     }
 
     #[test]
