@@ -9,6 +9,11 @@
 //! - [`map`]: occupancy cells kept where occupied, R-tree index, queries, ray casting.
 //! - [`io`]: the documented binary `.srt` map file.
 //! - [`objects`]: per object cells, centroid, class, oriented box (normal-histogram yaw).
+//! - [`features`]: pairwise features of two objects in a viewpoint frame.
+//! - [`svm`]: linear SVM by dual coordinate descent (liblinear), cross-validation.
+//! - [`consistency`]: the relation MLN (thesis knowledge base), MAP by `mln`, weight learning.
+//! - [`relations`]: training, inference, relation graph and Table 3.6 evaluation.
+//! - [`dataset`]: reader of simulated `relations` datasets.
 //! - [`graph`]: the spatial relation graph and its queries.
 //!
 //! ```
@@ -18,11 +23,16 @@
 //! # Ok::<(), srtree::SrtreeError>(())
 //! ```
 
+pub mod consistency;
+pub mod dataset;
 pub mod dirichlet;
 pub mod error;
+pub mod features;
 pub mod graph;
 pub mod io;
 pub mod map;
 pub mod objects;
+pub mod relations;
+pub mod svm;
 
 pub use error::{Result, SrtreeError};

@@ -1,0 +1,232 @@
+//! Reader of `relations` datasets written by `urbansem sim dataset --kind relations`.
+//!
+//! A dataset folder has `dataset.json` (`train`, `test`: scene indices) and per scene
+//! `scene_XXX.ply` (a labelled scan in the local frame with `label` and `object` columns)
+//! and `scene_XXX.json` (`viewpoint` `{x, y, z, yaw}`, `objects` `[{id, class, ground, …}]`,
+//! `pairs` `[{a, b, truth: {On, LeftOf, Behind}, annotated: {…}}]`). Each scene's scan is
+//! inserted into an [`SrMap`] and its objects extracted from the map, so the relations are
+//! estimated from the map and never from the simulator's true boxes.
+
+use crate::error::{io_err, Result, SrtreeError};
+use crate::features::ViewObject;
+use crate::graph::{Relation, Viewpoint};
+use crate::map::{MapOptions, SrMap};
+use crate::objects::{extract_objects, ObjectOptions};
+use rayon::prelude::*;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// One annotated ordered pair, as indices into [`Scene::objects`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LabelledPair {
+    /// Subject index.
+    pub a: usize,
+    /// Object index.
+    pub b: usize,
+    /// Noise-free relations (bits of [`Relation`]).
+    pub truth: u8,
+    /// The annotator's relations (with annotator noise).
+    pub annotated: u8,
+}
+
+/// One scene: its viewpoint, objects estimated from the map, and labelled pairs.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// Scene index in the dataset.
+    pub index: usize,
+    /// The viewpoint.
+    pub viewpoint: Viewpoint,
+    /// Objects of the dataset's list found in the map, seen from the viewpoint.
+    pub objects: Vec<ViewObject>,
+    /// Labelled pairs between them.
+    pub pairs: Vec<LabelledPair>,
+    /// Pairs of the file whose objects the map did not hold (scored as all-false).
+    pub missing_pairs: Vec<(u32, u32, u8)>,
+}
+
+/// A loaded dataset.
+#[derive(Debug, Clone)]
+pub struct RelationsDataset {
+    /// The folder.
+    pub dir: PathBuf,
+    /// Training scenes.
+    pub train: Vec<Scene>,
+    /// Test scenes.
+    pub test: Vec<Scene>,
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    serde_json::from_str(&text).map_err(|e| SrtreeError::Dataset {
+        path: path.to_path_buf(),
+        message: format!("line {}: {e}", e.line()),
+    })
+}
+
+fn bad(path: &Path, message: String) -> SrtreeError {
+    SrtreeError::Dataset {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+fn indices(meta: &Value, key: &str, path: &Path) -> Result<Vec<usize>> {
+    meta.get(key)
+        .and_then(Value::as_array)
+        .ok_or_else(|| bad(path, format!("missing array `{key}` of scene indices")))?
+        .iter()
+        .map(|v| {
+            v.as_u64()
+                .map(|i| i as usize)
+                .ok_or_else(|| bad(path, format!("`{key}` holds {v}, expected scene indices")))
+        })
+        .collect()
+}
+
+fn relation_bits(v: &Value, path: &Path, what: &str) -> Result<u8> {
+    let mut bits = 0;
+    for r in Relation::BASE {
+        match v.get(r.name()).and_then(Value::as_bool) {
+            Some(true) => bits |= r.bit(),
+            Some(false) => {}
+            None => {
+                return Err(bad(
+                    path,
+                    format!("{what} lacks the boolean `{}`", r.name()),
+                ))
+            }
+        }
+    }
+    Ok(bits)
+}
+
+/// Reads the viewpoint object `{x, y, z, yaw}` of a scene file.
+pub fn read_viewpoint(v: &Value, path: &Path) -> Result<Viewpoint> {
+    let num = |k: &str| {
+        v.get(k)
+            .and_then(Value::as_f64)
+            .ok_or_else(|| bad(path, format!("viewpoint lacks the number `{k}`")))
+    };
+    Ok(Viewpoint {
+        position: [num("x")?, num("y")?, num("z")?],
+        yaw_rad: num("yaw")?,
+    })
+}
+
+/// Loads one scene: reads its scan into a map and its labels.
+pub fn load_scene(
+    dir: &Path,
+    index: usize,
+    map_options: &MapOptions,
+    objects: &ObjectOptions,
+) -> Result<Scene> {
+    let json_path = dir.join(format!("scene_{index:03}.json"));
+    let ply_path = dir.join(format!("scene_{index:03}.ply"));
+    let json = read_json(&json_path)?;
+    let viewpoint = read_viewpoint(
+        json.get("viewpoint")
+            .ok_or_else(|| bad(&json_path, "missing `viewpoint`".into()))?,
+        &json_path,
+    )?;
+    let cloud = geodata::cloud::read_cloud(&ply_path)?;
+    if cloud.object.is_none() {
+        return Err(SrtreeError::MissingColumn {
+            what: "a relations scene",
+            column: "object",
+        });
+    }
+    let mut map = SrMap::new(map_options.clone())?;
+    map.insert_cloud(&cloud, Some(viewpoint.position))?;
+    let extracted = extract_objects(&map, objects);
+    let listed: Vec<u32> = json
+        .get("objects")
+        .and_then(Value::as_array)
+        .ok_or_else(|| bad(&json_path, "missing array `objects`".into()))?
+        .iter()
+        .map(|o| {
+            o.get("id")
+                .and_then(Value::as_u64)
+                .map(|v| v as u32)
+                .ok_or_else(|| bad(&json_path, format!("object without an integer `id`: {o}")))
+        })
+        .collect::<Result<_>>()?;
+    let view: Vec<ViewObject> = extracted
+        .par_iter()
+        .filter(|o| listed.contains(&o.id))
+        .map(|o| ViewObject::from_map_object(&map, o, &viewpoint))
+        .collect();
+    let position = |id: u32| view.iter().position(|o| o.id == id);
+    let mut pairs = Vec::new();
+    let mut missing_pairs = Vec::new();
+    for p in json
+        .get("pairs")
+        .and_then(Value::as_array)
+        .ok_or_else(|| bad(&json_path, "missing array `pairs`".into()))?
+    {
+        let id = |k: &str| {
+            p.get(k)
+                .and_then(Value::as_u64)
+                .map(|v| v as u32)
+                .ok_or_else(|| bad(&json_path, format!("pair without an integer `{k}`: {p}")))
+        };
+        let (a, b) = (id("a")?, id("b")?);
+        let truth = relation_bits(
+            p.get("truth").unwrap_or(&Value::Null),
+            &json_path,
+            "a pair's `truth`",
+        )?;
+        let annotated = relation_bits(
+            p.get("annotated").unwrap_or(&Value::Null),
+            &json_path,
+            "a pair's `annotated`",
+        )?;
+        match (position(a), position(b)) {
+            (Some(a), Some(b)) => pairs.push(LabelledPair {
+                a,
+                b,
+                truth,
+                annotated,
+            }),
+            _ => missing_pairs.push((a, b, truth)),
+        }
+    }
+    Ok(Scene {
+        index,
+        viewpoint,
+        objects: view,
+        pairs,
+        missing_pairs,
+    })
+}
+
+impl RelationsDataset {
+    /// Loads every train and test scene of a dataset folder (scenes in parallel).
+    pub fn load(
+        dir: impl AsRef<Path>,
+        map_options: &MapOptions,
+        objects: &ObjectOptions,
+    ) -> Result<RelationsDataset> {
+        let dir = dir.as_ref();
+        let meta_path = dir.join("dataset.json");
+        let meta = read_json(&meta_path)?;
+        if meta.get("kind").and_then(Value::as_str) != Some("relations") {
+            return Err(bad(
+                &meta_path,
+                format!(
+                    "kind is {}, expected \"relations\"",
+                    meta.get("kind").unwrap_or(&Value::Null)
+                ),
+            ));
+        }
+        let load = |ids: Vec<usize>| -> Result<Vec<Scene>> {
+            ids.into_par_iter()
+                .map(|i| load_scene(dir, i, map_options, objects))
+                .collect()
+        };
+        Ok(RelationsDataset {
+            dir: dir.to_path_buf(),
+            train: load(indices(&meta, "train", &meta_path)?)?,
+            test: load(indices(&meta, "test", &meta_path)?)?,
+        })
+    }
+}

@@ -1,0 +1,448 @@
+//! Pairwise geometric features of two objects in the frame of a viewpoint (thesis §3.3.2).
+//!
+//! The viewpoint frame has x along the viewing direction, y to the left and z up, with its
+//! origin at the observer. For the ordered pair (a, b) the features are, in order
+//! ([`FEATURE_NAMES`]):
+//!
+//! - distances: between centroids, the minimum between the boxes (of their axis-aligned
+//!   hulls in the view frame), the maximum between box corners;
+//! - per projected axis x, y, z: the centroid difference and the two interval gaps
+//!   `lo_a − hi_b` and `lo_b − hi_a` of the boxes' projections;
+//! - overlap percentages: the fraction of a's cells inside the convex hull of b's cells in
+//!   the projection along each axis (the y–z, x–z and x–y planes), and the same for b in a;
+//! - angular features in cylindrical coordinates about the observer (azimuth, left
+//!   positive): the centroid azimuth difference, the lateral-boundary differences
+//!   `lo_a − hi_b` and `hi_a − lo_b` of the box corners' azimuth intervals, their centre
+//!   difference and overlap as a fraction of the narrower, the same two from the cells'
+//!   azimuth extents, and the range differences of the centroids and of the nearest corners;
+//! - the top-view distance from a's footprint centre to b's nearest cell;
+//! - indicators: a in front, b in front (centroid x > 0), a is ground, b is ground
+//!   (street or sidewalk class in the map).
+//!
+//! Cost per pair: O(|a| log |hull b| + |b|) with objects subsampled to at most
+//! [`MAX_FEATURE_CELLS`] cells for the hull tests.
+
+use crate::graph::Viewpoint;
+use crate::objects::{MapObject, OrientedBox};
+use crate::SrtreeError;
+use geodata::classes::Class;
+
+/// Names of the features, in vector order.
+pub const FEATURE_NAMES: [&str; 34] = [
+    "centroid_distance",
+    "box_distance_min",
+    "box_distance_max",
+    "centroid_dx",
+    "centroid_dy",
+    "centroid_dz",
+    "gap_x_a_after_b",
+    "gap_y_a_after_b",
+    "gap_z_a_after_b",
+    "gap_x_b_after_a",
+    "gap_y_b_after_a",
+    "gap_z_b_after_a",
+    "a_in_b_hull_yz",
+    "a_in_b_hull_xz",
+    "a_in_b_hull_xy",
+    "b_in_a_hull_yz",
+    "b_in_a_hull_xz",
+    "b_in_a_hull_xy",
+    "azimuth_centroid_diff",
+    "azimuth_lo_a_minus_hi_b",
+    "azimuth_hi_a_minus_lo_b",
+    "azimuth_interval_centre_diff",
+    "azimuth_overlap_of_narrower",
+    "cells_azimuth_lo_a_minus_hi_b",
+    "cells_azimuth_overlap_of_narrower",
+    "range_centroid_diff",
+    "range_nearest_corner_diff",
+    "top_view_distance_to_b",
+    "a_in_front",
+    "b_in_front",
+    "a_ground",
+    "b_ground",
+    "height_a",
+    "height_b",
+];
+
+/// Number of features.
+pub const FEATURE_COUNT: usize = FEATURE_NAMES.len();
+
+/// Objects are subsampled to at most this many cells for the hull and azimuth features.
+pub const MAX_FEATURE_CELLS: usize = 600;
+
+/// Whether a class is a ground surface (no LeftOf/Behind; things stand on it).
+pub fn is_ground(class: Class) -> bool {
+    matches!(class, Class::Street | Class::Sidewalk)
+}
+
+/// An object seen from a viewpoint, with everything the pair features need.
+#[derive(Debug, Clone)]
+pub struct ViewObject {
+    /// Object id.
+    pub id: u32,
+    /// Class.
+    pub class: Class,
+    /// Subsampled cell centres in the view frame.
+    pub cells: Vec<[f64; 3]>,
+    /// All cell centres in the view frame, x and y only (top-view distances).
+    pub footprint_cells: Vec<[f64; 2]>,
+    /// Centroid in the view frame.
+    pub centroid: [f64; 3],
+    /// Box corners in the view frame.
+    pub corners: [[f64; 3]; 8],
+    /// Box footprint centre in the view frame.
+    pub box_centre: [f64; 3],
+    /// Axis-aligned hull of the corners in the view frame.
+    pub lo: [f64; 3],
+    /// Axis-aligned hull of the corners in the view frame.
+    pub hi: [f64; 3],
+    /// Azimuth interval of the box corners (lo, hi), radians, left positive.
+    pub azimuth: [f64; 2],
+    /// Azimuth interval of the cells.
+    pub cells_azimuth: [f64; 2],
+    /// Range of the nearest footprint corner, metres.
+    pub near_range: f64,
+    /// Convex hulls of the cells projected along x (y–z), y (x–z) and z (x–y).
+    pub hulls: [Vec<[f64; 2]>; 3],
+}
+
+impl ViewObject {
+    /// The object seen from `viewpoint`; `cells` are its cell centres in the map frame.
+    pub fn new(
+        id: u32,
+        class: Class,
+        cells_in_map: &[[f64; 3]],
+        bbox: &OrientedBox,
+        viewpoint: &Viewpoint,
+    ) -> ViewObject {
+        let stride = cells_in_map.len().div_ceil(MAX_FEATURE_CELLS).max(1);
+        let all: Vec<[f64; 3]> = cells_in_map.iter().map(|&p| viewpoint.to_view(p)).collect();
+        let cells: Vec<[f64; 3]> = all.iter().step_by(stride).copied().collect();
+        let n = all.len().max(1) as f64;
+        let centroid = [0, 1, 2].map(|k| all.iter().map(|p| p[k]).sum::<f64>() / n);
+        let corners = bbox.corners().map(|c| viewpoint.to_view(c));
+        let box_centre = viewpoint.to_view(bbox.centre);
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for c in &corners {
+            for k in 0..3 {
+                lo[k] = lo[k].min(c[k]);
+                hi[k] = hi[k].max(c[k]);
+            }
+        }
+        let azimuth = interval(corners.iter().map(|c| c[1].atan2(c[0])));
+        let cells_azimuth = interval(all.iter().map(|c| c[1].atan2(c[0])));
+        let near_range = corners[..4]
+            .iter()
+            .map(|c| c[0].hypot(c[1]))
+            .fold(f64::INFINITY, f64::min);
+        let hulls = [(1, 2), (0, 2), (0, 1)]
+            .map(|(i, j)| convex_hull(cells.iter().map(|p| [p[i], p[j]]).collect()));
+        ViewObject {
+            id,
+            class,
+            footprint_cells: all.iter().map(|p| [p[0], p[1]]).collect(),
+            cells,
+            centroid,
+            corners,
+            box_centre,
+            lo,
+            hi,
+            azimuth,
+            cells_azimuth,
+            near_range,
+            hulls,
+        }
+    }
+
+    /// A map object seen from `viewpoint`.
+    pub fn from_map_object(
+        map: &crate::map::SrMap,
+        o: &MapObject,
+        viewpoint: &Viewpoint,
+    ) -> ViewObject {
+        let cells: Vec<[f64; 3]> = o
+            .cells
+            .iter()
+            .map(|&i| map.centre(map.cells()[i as usize].key))
+            .collect();
+        ViewObject::new(o.id, o.class, &cells, &o.bbox, viewpoint)
+    }
+}
+
+fn interval(angles: impl Iterator<Item = f64>) -> [f64; 2] {
+    let mut out = [f64::INFINITY, f64::NEG_INFINITY];
+    for a in angles {
+        out[0] = out[0].min(a);
+        out[1] = out[1].max(a);
+    }
+    if out[0] > out[1] {
+        [0.0, 0.0]
+    } else {
+        out
+    }
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise, no collinear points.
+pub fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * pts.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// Whether a point lies in a convex counter-clockwise polygon (boundary included, with a
+/// tolerance of `tol` metres); degenerate hulls (≤ 2 points) test the distance to them.
+pub fn in_convex(hull: &[[f64; 2]], p: [f64; 2], tol: f64) -> bool {
+    match hull.len() {
+        0 => false,
+        1 => (p[0] - hull[0][0]).hypot(p[1] - hull[0][1]) <= tol,
+        2 => segment_distance(hull[0], hull[1], p) <= tol,
+        n => (0..n).all(|i| {
+            let (a, b) = (hull[i], hull[(i + 1) % n]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]).max(1e-12);
+            ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])) / len >= -tol
+        }),
+    }
+}
+
+fn segment_distance(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> f64 {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let len2 = d[0] * d[0] + d[1] * d[1];
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+}
+
+fn overlap_of_narrower(a: [f64; 2], b: [f64; 2]) -> f64 {
+    let overlap = (a[1].min(b[1]) - a[0].max(b[0])).max(0.0);
+    let narrower = (a[1] - a[0]).min(b[1] - b[0]).max(1e-9);
+    (overlap / narrower).min(1.0)
+}
+
+/// The feature vector of the ordered pair (a, b).
+pub fn pair_features(a: &ViewObject, b: &ViewObject, tol_m: f64) -> [f64; FEATURE_COUNT] {
+    let mut f = [0.0; FEATURE_COUNT];
+    let d3 = |p: [f64; 3], q: [f64; 3]| {
+        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+    };
+    f[0] = d3(a.centroid, b.centroid);
+    let gap: Vec<f64> = (0..3)
+        .map(|k| (a.lo[k] - b.hi[k]).max(b.lo[k] - a.hi[k]).max(0.0))
+        .collect();
+    f[1] = (gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2]).sqrt();
+    f[2] = a
+        .corners
+        .iter()
+        .flat_map(|&p| b.corners.iter().map(move |&q| d3(p, q)))
+        .fold(0.0, f64::max);
+    for k in 0..3 {
+        f[3 + k] = a.centroid[k] - b.centroid[k];
+        f[6 + k] = a.lo[k] - b.hi[k];
+        f[9 + k] = b.lo[k] - a.hi[k];
+    }
+    let planes = [(1, 2), (0, 2), (0, 1)];
+    for (h, (i, j)) in planes.into_iter().enumerate() {
+        let frac = |x: &ViewObject, y: &ViewObject| {
+            let inside = x
+                .cells
+                .iter()
+                .filter(|p| in_convex(&y.hulls[h], [p[i], p[j]], tol_m))
+                .count();
+            inside as f64 / x.cells.len().max(1) as f64
+        };
+        f[12 + h] = frac(a, b);
+        f[15 + h] = frac(b, a);
+    }
+    let az = |p: [f64; 3]| p[1].atan2(p[0]);
+    f[18] = az(a.centroid) - az(b.centroid);
+    f[19] = a.azimuth[0] - b.azimuth[1];
+    f[20] = a.azimuth[1] - b.azimuth[0];
+    f[21] = 0.5 * (a.azimuth[0] + a.azimuth[1]) - 0.5 * (b.azimuth[0] + b.azimuth[1]);
+    f[22] = overlap_of_narrower(a.azimuth, b.azimuth);
+    f[23] = a.cells_azimuth[0] - b.cells_azimuth[1];
+    f[24] = overlap_of_narrower(a.cells_azimuth, b.cells_azimuth);
+    f[25] = a.box_centre[0].hypot(a.box_centre[1]) - b.box_centre[0].hypot(b.box_centre[1]);
+    f[26] = a.near_range - b.near_range;
+    f[27] = b
+        .footprint_cells
+        .iter()
+        .map(|q| (q[0] - a.box_centre[0]).hypot(q[1] - a.box_centre[1]))
+        .fold(f64::INFINITY, f64::min)
+        .min(50.0);
+    f[28] = f64::from(u8::from(a.centroid[0] > 0.0));
+    f[29] = f64::from(u8::from(b.centroid[0] > 0.0));
+    f[30] = f64::from(u8::from(is_ground(a.class)));
+    f[31] = f64::from(u8::from(is_ground(b.class)));
+    f[32] = a.hi[2] - a.lo[2];
+    f[33] = b.hi[2] - b.lo[2];
+    f
+}
+
+/// Feature scaling learnt on training vectors: standardisation (clipped to ±5) plus
+/// thermometer indicators `[x > t]` at the training deciles of each feature, so that the
+/// linear classifier can place thresholds (an additive model over the features).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FeatureScaler {
+    /// Mean per raw feature.
+    pub mean: Vec<f64>,
+    /// Standard deviation per raw feature (1 where constant).
+    pub std: Vec<f64>,
+    /// Thresholds per raw feature (distinct training deciles).
+    pub thresholds: Vec<Vec<f64>>,
+}
+
+impl FeatureScaler {
+    /// Learns the scaling from raw training vectors.
+    pub fn fit(raw: &[[f64; FEATURE_COUNT]]) -> Result<FeatureScaler, SrtreeError> {
+        if raw.is_empty() {
+            return Err(SrtreeError::Training {
+                relation: "all".into(),
+                message: "no training pairs".into(),
+            });
+        }
+        let n = raw.len() as f64;
+        let mut mean = vec![0.0; FEATURE_COUNT];
+        let mut std = vec![0.0; FEATURE_COUNT];
+        let mut thresholds = Vec::with_capacity(FEATURE_COUNT);
+        for k in 0..FEATURE_COUNT {
+            let mut col: Vec<f64> = raw.iter().map(|v| v[k]).collect();
+            mean[k] = col.iter().sum::<f64>() / n;
+            let var = col.iter().map(|v| (v - mean[k]).powi(2)).sum::<f64>() / n;
+            std[k] = if var > 1e-18 { var.sqrt() } else { 1.0 };
+            col.sort_by(f64::total_cmp);
+            let mut t: Vec<f64> = (1..10).map(|q| col[(col.len() - 1) * q / 10]).collect();
+            t.dedup();
+            // A threshold at the maximum never fires.
+            t.retain(|&x| x < col[col.len() - 1]);
+            thresholds.push(t);
+        }
+        Ok(FeatureScaler {
+            mean,
+            std,
+            thresholds,
+        })
+    }
+
+    /// Length of a scaled vector.
+    pub fn dims(&self) -> usize {
+        FEATURE_COUNT + self.thresholds.iter().map(Vec::len).sum::<usize>()
+    }
+
+    /// The scaled vector of a raw one.
+    pub fn scale(&self, raw: &[f64; FEATURE_COUNT]) -> Vec<f32> {
+        let mut out = Vec::with_capacity(self.dims());
+        for ((&v, &m), &s) in raw.iter().zip(&self.mean).zip(&self.std) {
+            out.push((((v - m) / s).clamp(-5.0, 5.0)) as f32);
+        }
+        for (k, ts) in self.thresholds.iter().enumerate() {
+            out.extend(ts.iter().map(|&t| f32::from(u8::from(raw[k] > t))));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hull_and_containment() {
+        let hull = convex_hull(vec![
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [1.0, 1.0],
+            [0.0, 1.0],
+            [0.5, 0.5],
+            [0.5, 0.0],
+        ]);
+        assert_eq!(hull.len(), 4);
+        assert!(in_convex(&hull, [0.5, 0.5], 0.0));
+        assert!(in_convex(&hull, [1.0, 0.5], 1e-9));
+        assert!(!in_convex(&hull, [1.2, 0.5], 0.1));
+        assert!(in_convex(&[[0.0, 0.0], [1.0, 0.0]], [0.5, 0.05], 0.1));
+    }
+
+    fn object(id: u32, x: f64, y: f64, class: Class) -> ViewObject {
+        let vp = Viewpoint {
+            position: [0.0, 0.0, 0.0],
+            yaw_rad: 0.0,
+        };
+        let cells: Vec<[f64; 3]> = (0..10)
+            .flat_map(|i| {
+                (0..10).map(move |j| [x - 0.5 + 0.1 * i as f64, y - 0.5 + 0.1 * j as f64, 0.5])
+            })
+            .collect();
+        let bbox = OrientedBox {
+            centre: [x, y, 0.5],
+            half_extents: [0.5, 0.5, 0.5],
+            yaw_rad: 0.0,
+        };
+        ViewObject::new(id, class, &cells, &bbox, &vp)
+    }
+
+    #[test]
+    fn left_and_behind_features_have_the_right_signs() {
+        let left = object(1, 10.0, 5.0, Class::Car);
+        let right = object(2, 10.0, -5.0, Class::Car);
+        let f = pair_features(&left, &right, 0.05);
+        assert!(f[19] > 0.0, "a's right boundary is left of b's left one");
+        assert_eq!(f[22], 0.0);
+        assert!((f[0] - 10.0).abs() < 1e-9);
+        assert!((f[4] - 10.0).abs() < 1e-9);
+        let far = object(3, 20.0, 0.0, Class::Car);
+        let near = object(4, 8.0, 0.0, Class::Car);
+        let f = pair_features(&far, &near, 0.05);
+        assert!(f[22] > 0.99 && f[25] > 11.0 && f[26] > 11.0);
+        assert!(
+            f[12] > 0.99,
+            "far is hidden behind near in the y-z projection"
+        );
+        assert_eq!([f[28], f[29], f[30]], [1.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn scaler_adds_decile_indicators() {
+        let raw: Vec<[f64; FEATURE_COUNT]> = (0..100)
+            .map(|i| {
+                let mut v = [0.0; FEATURE_COUNT];
+                v[0] = i as f64;
+                v
+            })
+            .collect();
+        let s = FeatureScaler::fit(&raw).unwrap();
+        assert_eq!(s.thresholds[0].len(), 9);
+        assert!(s.thresholds[1].is_empty());
+        let x = s.scale(&raw[55]);
+        assert_eq!(x.len(), FEATURE_COUNT + 9);
+        let on: f32 = x[FEATURE_COUNT..].iter().sum();
+        assert_eq!(on, 5.0);
+    }
+}
