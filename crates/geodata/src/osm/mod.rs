@@ -67,7 +67,7 @@ pub(crate) fn is_kept_key(key: &[u8]) -> bool {
 }
 
 /// A node as read: id and WGS84 position in degrees.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct RawNode {
     pub id: i64,
     pub lat: f64,
@@ -75,7 +75,7 @@ pub(crate) struct RawNode {
 }
 
 /// A way as read: id, node references and kept tags.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct RawWay {
     pub id: i64,
     pub refs: Vec<i64>,
@@ -83,7 +83,7 @@ pub(crate) struct RawWay {
 }
 
 /// A relation as read: id, way members with their role, kept tags, count of non-way members.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct RawRelation {
     pub id: i64,
     pub way_members: Vec<(i64, String)>,
@@ -122,48 +122,88 @@ fn is_building(tags: &[(String, String)]) -> Option<&str> {
     tag(tags, "building").filter(|v| *v != "no")
 }
 
-/// Node table sorted by id for binary-search lookup.
+/// Node table: ids in ascending order with their WGS84 positions, searched through a small
+/// first-level table of every 64th id. Lookups of a way's nodes, whose ids are usually
+/// close, then stay in cache, which a hash map would defeat. Positions are projected when a
+/// kept way asks for them (in the parallel way pass), so nodes that no building or street
+/// uses (points of interest, landuse, water) are never projected.
 pub(crate) struct NodeTable {
-    /// Node positions in the local frame, by slot.
-    local: Vec<[f64; 2]>,
-    slot_of_id: rustc_hash::FxHashMap<i64, usize>,
+    /// Node ids, ascending and unique.
+    ids: Vec<i64>,
+    /// `ids[64 k]` for every k.
+    block_first: Vec<i64>,
+    /// (latitude, longitude) in degrees, parallel to `ids`.
+    lat_lon: Vec<[f64; 2]>,
+    projector: crate::projection::BoxProjector,
 }
 
+/// Ids per block of the node table's first level.
+const NODE_BLOCK: usize = 64;
+
 impl NodeTable {
-    /// Projects every node once (in parallel) and indexes the slots by id.
-    fn new(nodes: &[RawNode], frame: &LocalFrame) -> Self {
-        let (local, slot_of_id) = rayon::join(
-            || {
-                nodes
-                    .par_iter()
-                    .map(|n| frame.to_local(n.lat, n.lon))
-                    .collect()
-            },
-            || {
-                let mut slot_of_id = rustc_hash::FxHashMap::with_capacity_and_hasher(
-                    nodes.len(),
-                    Default::default(),
-                );
-                for (slot, n) in nodes.iter().enumerate() {
-                    slot_of_id.insert(n.id, slot);
+    /// Sorts the nodes by id (files are usually sorted already); of equal ids the last wins.
+    fn new(nodes: &[RawNode], frame: &LocalFrame, bbox_lonlat: [f64; 4]) -> Self {
+        let sorted = nodes.windows(2).all(|w| w[0].id < w[1].id);
+        let (ids, lat_lon) = if sorted {
+            (
+                nodes.iter().map(|n| n.id).collect::<Vec<_>>(),
+                nodes.iter().map(|n| [n.lat, n.lon]).collect(),
+            )
+        } else {
+            let mut order: Vec<usize> = (0..nodes.len()).collect();
+            order.sort_by_key(|&i| nodes[i].id);
+            let mut ids = Vec::with_capacity(nodes.len());
+            let mut lat_lon = Vec::with_capacity(nodes.len());
+            for (k, &i) in order.iter().enumerate() {
+                let n = nodes[i];
+                if order.get(k + 1).is_some_and(|&j| nodes[j].id == n.id) {
+                    continue;
                 }
-                slot_of_id
-            },
-        );
-        NodeTable { local, slot_of_id }
+                ids.push(n.id);
+                lat_lon.push([n.lat, n.lon]);
+            }
+            (ids, lat_lon)
+        };
+        NodeTable {
+            block_first: ids.iter().step_by(NODE_BLOCK).copied().collect(),
+            ids,
+            lat_lon,
+            projector: crate::projection::BoxProjector::new(*frame, bbox_lonlat),
+        }
     }
 
-    /// Local position of a node id, if the file has it.
-    fn get(&self, id: i64) -> Option<[f64; 2]> {
-        self.slot_of_id
-            .get(&id)
-            .and_then(|&slot| self.local.get(slot))
-            .copied()
+    /// Index of a node id in `ids`, if the file has it.
+    fn index_of(&self, id: i64) -> Option<usize> {
+        let block = self.block_first.partition_point(|&first| first <= id);
+        let start = block.checked_sub(1)? * NODE_BLOCK;
+        let end = (start + NODE_BLOCK).min(self.ids.len());
+        let k = self.ids.get(start..end)?.binary_search(&id).ok()?;
+        Some(start + k)
     }
 
-    /// Local positions of all `refs`, or `None` if any is missing.
+    fn local_at(&self, index: usize) -> Option<[f64; 2]> {
+        let [lat, lon] = *self.lat_lon.get(index)?;
+        Some(self.projector.to_local(lat, lon))
+    }
+
+    /// Local positions of all `refs`, or `None` if any is missing. Consecutive references
+    /// are usually consecutive ids, so the neighbours of the last hit are tried first.
     fn project(&self, refs: &[i64]) -> Option<Vec<[f64; 2]>> {
-        refs.iter().map(|&id| self.get(id)).collect()
+        let mut out = Vec::with_capacity(refs.len());
+        let mut last = usize::MAX;
+        for &id in refs {
+            let next = last.wrapping_add(1);
+            let k = if self.ids.get(next) == Some(&id) {
+                next
+            } else if self.ids.get(last) == Some(&id) {
+                last
+            } else {
+                self.index_of(id)?
+            };
+            last = k;
+            out.push(self.local_at(k)?);
+        }
+        Some(out)
     }
 }
 
@@ -203,6 +243,18 @@ struct WayCounts {
     building_degenerate: usize,
     highway_missing: usize,
     highway_short: usize,
+}
+
+impl WayCounts {
+    fn add(&mut self, o: &WayCounts) {
+        self.building_ways += o.building_ways;
+        self.open_building_ways += o.open_building_ways;
+        self.highway_ways += o.highway_ways;
+        self.building_missing += o.building_missing;
+        self.building_degenerate += o.building_degenerate;
+        self.highway_missing += o.highway_missing;
+        self.highway_short += o.highway_short;
+    }
 }
 
 fn build_way(way: &RawWay, nodes: &NodeTable, counts: &mut WayCounts) -> WayOutcome {
@@ -368,37 +420,45 @@ impl OsmMap {
             relations: raw.relations.len(),
             ..OsmStats::default()
         };
-        let nodes = NodeTable::new(&raw.nodes, &frame);
+        let nodes = NodeTable::new(&raw.nodes, &frame, bbox_lonlat);
 
-        let per_way: Vec<(WayOutcome, WayCounts)> = raw
+        // Per rayon split: the split's buildings and highways in way order, and its counts;
+        // splits are joined left to right, so the output keeps the file's way order.
+        type Split = (Vec<Building>, Vec<HighwayWay>, WayCounts);
+        let (mut buildings, highways, counts) = raw
             .ways
             .par_iter()
-            .map(|w| {
-                let mut c = WayCounts::default();
-                let o = build_way(w, &nodes, &mut c);
-                (o, c)
-            })
-            .collect();
-        let mut buildings = Vec::new();
-        let mut highways = Vec::new();
-        for (outcome, c) in per_way {
-            stats.building_ways += c.building_ways;
-            stats.open_building_ways += c.open_building_ways;
-            stats.highway_ways += c.highway_ways;
-            stats.skipped_building_ways_missing_nodes += c.building_missing;
-            stats.skipped_building_ways_degenerate += c.building_degenerate;
-            stats.skipped_highway_ways_missing_nodes += c.highway_missing;
-            stats.skipped_highway_ways_too_short += c.highway_short;
-            match outcome {
-                WayOutcome::Building(b) => buildings.push(b),
-                WayOutcome::Highway(h) => highways.push(h),
-                WayOutcome::Both(b, h) => {
-                    buildings.push(b);
-                    highways.push(h);
-                }
-                WayOutcome::Nothing => {}
-            }
-        }
+            .fold(
+                || (Vec::new(), Vec::new(), WayCounts::default()),
+                |(mut bs, mut hs, mut c): Split, w| {
+                    match build_way(w, &nodes, &mut c) {
+                        WayOutcome::Building(b) => bs.push(b),
+                        WayOutcome::Highway(h) => hs.push(h),
+                        WayOutcome::Both(b, h) => {
+                            bs.push(b);
+                            hs.push(h);
+                        }
+                        WayOutcome::Nothing => {}
+                    }
+                    (bs, hs, c)
+                },
+            )
+            .reduce(
+                || (Vec::new(), Vec::new(), WayCounts::default()),
+                |(mut bs, mut hs, mut c): Split, (b2, h2, c2): Split| {
+                    bs.extend(b2);
+                    hs.extend(h2);
+                    c.add(&c2);
+                    (bs, hs, c)
+                },
+            );
+        stats.building_ways += counts.building_ways;
+        stats.open_building_ways += counts.open_building_ways;
+        stats.highway_ways += counts.highway_ways;
+        stats.skipped_building_ways_missing_nodes += counts.building_missing;
+        stats.skipped_building_ways_degenerate += counts.building_degenerate;
+        stats.skipped_highway_ways_missing_nodes += counts.highway_missing;
+        stats.skipped_highway_ways_too_short += counts.highway_short;
 
         let mut way_refs: rustc_hash::FxHashMap<i64, &[i64]> = rustc_hash::FxHashMap::default();
         let wanted: rustc_hash::FxHashSet<i64> = raw
