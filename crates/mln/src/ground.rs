@@ -254,16 +254,63 @@ enum Arg {
 }
 
 /// Evidence and domains, shared read-only by the parallel grounders.
+/// A map keyed by the constant ids of one predicate's ground atoms. Atoms of arity ≤ 2 (almost
+/// all in the benchmark sets) are packed into one `u64` key, so a lookup hashes one word
+/// instead of a slice; all keys of one map have the predicate's arity, so packing is exact.
+#[derive(Clone)]
+struct AtomMap<V> {
+    packed: FxHashMap<u64, V>,
+    long: FxHashMap<Box<[u32]>, V>,
+}
+
+impl<V> Default for AtomMap<V> {
+    fn default() -> Self {
+        AtomMap {
+            packed: FxHashMap::default(),
+            long: FxHashMap::default(),
+        }
+    }
+}
+
+impl<V> AtomMap<V> {
+    fn pack(args: &[u32]) -> Option<u64> {
+        match *args {
+            [] => Some(0),
+            [a] => Some(u64::from(a)),
+            [a, b] => Some(u64::from(a) << 32 | u64::from(b)),
+            _ => None,
+        }
+    }
+
+    fn get(&self, args: &[u32]) -> Option<&V> {
+        match Self::pack(args) {
+            Some(key) => self.packed.get(&key),
+            None => self.long.get(args),
+        }
+    }
+
+    fn insert(&mut self, args: Box<[u32]>, value: V) {
+        match Self::pack(&args) {
+            Some(key) => {
+                self.packed.insert(key, value);
+            }
+            None => {
+                self.long.insert(args, value);
+            }
+        }
+    }
+}
+
 struct World<'a> {
     program: &'a Program,
     /// Per predicate: evidence atoms (constant ids) → truth value.
-    evidence: Vec<FxHashMap<Box<[u32]>, bool>>,
+    evidence: Vec<AtomMap<bool>>,
     /// Per predicate: true facts.
     true_facts: Vec<Vec<Box<[u32]>>>,
     /// Per predicate, per argument position: constant → indices into `true_facts`.
     fact_index: Vec<Vec<FxHashMap<u32, Vec<u32>>>>,
     open: Vec<bool>,
-    canopy: Vec<Option<FxHashSet<Box<[u32]>>>>,
+    canopy: Vec<Option<AtomMap<()>>>,
     domains: FxHashMap<String, Vec<u32>>,
     /// Constant name → id (every constant of evidence, formulas and queries).
     const_ids: FxHashMap<String, u32>,
@@ -276,7 +323,7 @@ impl World<'_> {
             Some(false) => State::False,
             None if !self.open[predicate] => State::False,
             None => match &self.canopy[predicate] {
-                Some(set) if !set.contains(args) => State::False,
+                Some(set) if set.get(args).is_none() => State::False,
                 _ => State::Unknown,
             },
         }
@@ -383,7 +430,7 @@ pub fn ground(
         .iter()
         .map(|p| tuffy_style && !p.closed_world)
         .collect();
-    let mut canopy: Vec<Option<FxHashSet<Box<[u32]>>>> = vec![None; np];
+    let mut canopy: Vec<Option<AtomMap<()>>> = vec![None; np];
     let mut listed_all: Vec<bool> = vec![false; np];
     for a in query {
         open[a.predicate] = true;
@@ -398,8 +445,8 @@ pub fn ground(
         match ground_args {
             Some(args) => {
                 canopy[a.predicate]
-                    .get_or_insert_with(FxHashSet::default)
-                    .insert(args.into_boxed_slice());
+                    .get_or_insert_with(AtomMap::default)
+                    .insert(args.into_boxed_slice(), ());
             }
             None => listed_all[a.predicate] = true,
         }
@@ -435,7 +482,7 @@ pub fn ground(
         .collect();
     let domains: FxHashMap<String, Vec<u32>> =
         domain_sets.into_iter().map(|(k, v)| (k, v.0)).collect();
-    let mut evidence_by_pred: Vec<FxHashMap<Box<[u32]>, bool>> = vec![FxHashMap::default(); np];
+    let mut evidence_by_pred: Vec<AtomMap<bool>> = vec![AtomMap::default(); np];
     for ((p, args), v) in evidence_map {
         evidence_by_pred[p].insert(args, v);
     }
