@@ -7,6 +7,10 @@ mod report;
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+/// mimalloc: the MLN grounder and the OSM reader allocate millions of small vectors.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Semantic maps for robots in cities.
 #[derive(Parser)]
 #[command(name = "urbansem", version, about, long_about = None)]
