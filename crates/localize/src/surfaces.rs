@@ -2,12 +2,18 @@
 //! the voxels whose normal is horizontal, projected to the ground plane (thesis §5.3.2).
 //!
 //! The scan is gravity-levelled (z up), so a horizontal normal means a vertical surface.
-//! Occupied voxels stand in for the RMAP cuboid cells of the thesis; each voxel's normal is
-//! the smallest-eigenvalue eigenvector of the covariance of the points in its 3 × 3 × 3
-//! voxel neighbourhood. Cost O(n) in the points plus O(v) in the occupied voxels.
+//! Occupied voxels stand in for the RMAP cuboid cells of the thesis. Walls are tall, so the
+//! normal of a voxel comes from its *column*: the points of a vertical surface stack up in
+//! one ground-plane cell however far away it is, while a 3-D voxel neighbourhood holds about
+//! one point beyond 40 m at a 0.4° scanner step. Per ground-plane column (cells of the voxel
+//! size) the mean x, y of its points higher than `clearance_m` above the local ground (the
+//! lowest point of a `ground_cell_m` cell and its neighbours) is one sample; a voxel above
+//! the clearance gets the normal of the line fitted (2-D PCA) to the column samples within
+//! `column_radius_m`, if they are collinear enough. Cars, pedestrians and low fences lie below
+//! the clearance; tree crowns and poles give no line. Cost O(n) in the points plus
+//! O(c · r²) for c occupied columns and r the radius in cells.
 
 use crate::{LocalizeError, Result};
-use nalgebra::{Matrix3, SymmetricEigen};
 use rustc_hash::FxHashMap;
 
 /// Options of the surface extraction.
@@ -23,12 +29,16 @@ pub struct SurfaceOptions {
     pub min_z_m: f64,
     /// Highest point height relative to the sensor kept, metres.
     pub max_z_m: f64,
-    /// Largest |n_z| of a normal counted as horizontal.
-    pub max_normal_z: f64,
-    /// Largest ratio of the smallest to the middle covariance eigenvalue (planarity).
+    /// Points lower than this above the local ground are clutter (cars, people), metres.
+    pub clearance_m: f64,
+    /// Cell side of the local ground estimate (lowest point), metres.
+    pub ground_cell_m: f64,
+    /// Radius of the column neighbourhood a normal is fitted to, metres.
+    pub column_radius_m: f64,
+    /// Largest ratio of the smaller to the larger eigenvalue of the columns' 2-D covariance.
     pub max_flatness: f64,
-    /// Fewest points in a voxel neighbourhood for a normal.
-    pub min_points: usize,
+    /// Fewest columns in a neighbourhood for a normal.
+    pub min_columns: usize,
 }
 
 impl Default for SurfaceOptions {
@@ -39,9 +49,11 @@ impl Default for SurfaceOptions {
             min_range_m: 1.5,
             min_z_m: -0.5,
             max_z_m: 30.0,
-            max_normal_z: 0.3,
-            max_flatness: 0.2,
-            min_points: 6,
+            clearance_m: 2.5,
+            ground_cell_m: 2.0,
+            column_radius_m: 1.2,
+            max_flatness: 0.3,
+            min_columns: 3,
         }
     }
 }
@@ -57,54 +69,12 @@ pub struct SurfaceCell {
     pub normal_yaw_rad: f64,
 }
 
+/// Sums of one column's points above the clearance.
 #[derive(Clone, Copy, Default)]
-struct Moments {
+struct Column {
     n: f64,
-    s: [f64; 3],
-    ss: [f64; 6],
-}
-
-impl Moments {
-    fn add_point(&mut self, p: [f64; 3]) {
-        self.n += 1.0;
-        for (s, v) in self.s.iter_mut().zip(p) {
-            *s += v;
-        }
-        self.ss[0] += p[0] * p[0];
-        self.ss[1] += p[0] * p[1];
-        self.ss[2] += p[0] * p[2];
-        self.ss[3] += p[1] * p[1];
-        self.ss[4] += p[1] * p[2];
-        self.ss[5] += p[2] * p[2];
-    }
-
-    fn add(&mut self, o: &Moments) {
-        self.n += o.n;
-        for k in 0..3 {
-            self.s[k] += o.s[k];
-        }
-        for k in 0..6 {
-            self.ss[k] += o.ss[k];
-        }
-    }
-
-    fn mean(&self) -> [f64; 3] {
-        [self.s[0] / self.n, self.s[1] / self.n, self.s[2] / self.n]
-    }
-
-    fn covariance(&self) -> Matrix3<f64> {
-        let m = self.mean();
-        let c = |k: usize, i: usize, j: usize| self.ss[k] / self.n - m[i] * m[j];
-        let (xx, xy, xz, yy, yz, zz) = (
-            c(0, 0, 0),
-            c(1, 0, 1),
-            c(2, 0, 2),
-            c(3, 1, 1),
-            c(4, 1, 2),
-            c(5, 2, 2),
-        );
-        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
-    }
+    sx: f64,
+    sy: f64,
 }
 
 /// Checks that every point is finite.
@@ -130,59 +100,121 @@ pub fn vertical_cells(points: &[[f64; 3]], options: &SurfaceOptions) -> Result<V
         });
     }
     let inv = 1.0 / options.voxel_m;
-    let mut voxels: FxHashMap<[i32; 3], Moments> = FxHashMap::default();
+    let ground_inv = 1.0 / options.ground_cell_m.max(options.voxel_m);
     let (r2_max, r2_min) = (
         options.max_range_m * options.max_range_m,
         options.min_range_m * options.min_range_m,
     );
+    let kept = |p: &[f64; 3]| {
+        let r2 = p[0] * p[0] + p[1] * p[1];
+        r2 <= r2_max && r2 >= r2_min && p[2] >= options.min_z_m && p[2] <= options.max_z_m
+    };
+    let ground_key = |p: &[f64; 3]| {
+        [
+            (p[0] * ground_inv).floor() as i32,
+            (p[1] * ground_inv).floor() as i32,
+        ]
+    };
+    // Local ground: the lowest point per ground cell (every point in range counts).
+    let mut lowest: FxHashMap<[i32; 2], f64> = FxHashMap::default();
     for p in points {
         let r2 = p[0] * p[0] + p[1] * p[1];
-        if r2 > r2_max || r2 < r2_min || p[2] < options.min_z_m || p[2] > options.max_z_m {
+        if r2 > r2_max || r2 < r2_min {
             continue;
         }
-        let key = [
-            (p[0] * inv).floor() as i32,
-            (p[1] * inv).floor() as i32,
-            (p[2] * inv).floor() as i32,
-        ];
-        voxels.entry(key).or_default().add_point(*p);
+        let z = lowest.entry(ground_key(p)).or_insert(f64::INFINITY);
+        *z = z.min(p[2]);
+    }
+    let ground_at = |key: [i32; 2]| -> f64 {
+        let mut g = f64::INFINITY;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                if let Some(&z) = lowest.get(&[key[0] + dx, key[1] + dy]) {
+                    g = g.min(z);
+                }
+            }
+        }
+        g
+    };
+    let ground: FxHashMap<[i32; 2], f64> = lowest.keys().map(|&k| (k, ground_at(k))).collect();
+    // Columns and voxels of the points above the clearance.
+    let mut columns: FxHashMap<[i32; 2], Column> = FxHashMap::default();
+    let mut voxels: FxHashMap<[i32; 3], Column> = FxHashMap::default();
+    for p in points.iter().filter(|p| kept(p)) {
+        let g = ground.get(&ground_key(p)).copied().unwrap_or(f64::INFINITY);
+        if p[2] < g + options.clearance_m {
+            continue;
+        }
+        let key = [(p[0] * inv).floor() as i32, (p[1] * inv).floor() as i32];
+        let c = columns.entry(key).or_default();
+        c.n += 1.0;
+        c.sx += p[0];
+        c.sy += p[1];
+        let v = voxels
+            .entry([key[0], key[1], (p[2] * inv).floor() as i32])
+            .or_default();
+        v.n += 1.0;
+        v.sx += p[0];
+        v.sy += p[1];
+    }
+    // A normal per column from the column means around it.
+    let reach = (options.column_radius_m * inv).ceil() as i32;
+    let r2 = options.column_radius_m * options.column_radius_m;
+    let mut normals: FxHashMap<[i32; 2], f64> = FxHashMap::default();
+    for (key, own) in &columns {
+        let centre = [own.sx / own.n, own.sy / own.n];
+        let (mut n, mut s) = (0.0, [0.0; 2]);
+        let mut ss = [0.0; 3];
+        for dx in -reach..=reach {
+            for dy in -reach..=reach {
+                let Some(c) = columns.get(&[key[0] + dx, key[1] + dy]) else {
+                    continue;
+                };
+                let m = [c.sx / c.n, c.sy / c.n];
+                let (ex, ey) = (m[0] - centre[0], m[1] - centre[1]);
+                if ex * ex + ey * ey > r2 {
+                    continue;
+                }
+                n += 1.0;
+                s[0] += ex;
+                s[1] += ey;
+                ss[0] += ex * ex;
+                ss[1] += ex * ey;
+                ss[2] += ey * ey;
+            }
+        }
+        if (n as usize) < options.min_columns.max(2) {
+            continue;
+        }
+        let (mx, my) = (s[0] / n, s[1] / n);
+        let (cxx, cxy, cyy) = (
+            ss[0] / n - mx * mx,
+            ss[1] / n - mx * my,
+            ss[2] / n - my * my,
+        );
+        // Eigenvalues of the 2 × 2 covariance.
+        let half_trace = 0.5 * (cxx + cyy);
+        let root = (0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy).sqrt();
+        let (l_small, l_large) = (half_trace - root, half_trace + root);
+        if l_large <= 0.0 || l_small > options.max_flatness * l_large {
+            continue;
+        }
+        // The line's direction is the large eigenvector; the normal is perpendicular.
+        let line_dir = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+        normals.insert(*key, crate::wrap_pi(line_dir + std::f64::consts::FRAC_PI_2));
     }
     let mut keys: Vec<[i32; 3]> = voxels.keys().copied().collect();
     keys.sort_unstable();
     let mut cells = Vec::new();
     for key in keys {
-        let Some(own) = voxels.get(&key) else {
+        let (Some(v), Some(&normal_yaw_rad)) = (voxels.get(&key), normals.get(&[key[0], key[1]]))
+        else {
             continue;
         };
-        let mut m = Moments::default();
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    if let Some(v) = voxels.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
-                        m.add(v);
-                    }
-                }
-            }
-        }
-        if (m.n as usize) < options.min_points {
-            continue;
-        }
-        let eig = SymmetricEigen::new(m.covariance());
-        let mut order = [0usize, 1, 2];
-        order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-        let (l0, l1) = (eig.eigenvalues[order[0]], eig.eigenvalues[order[1]]);
-        if l1 <= 0.0 || l0 > options.max_flatness * l1 {
-            continue;
-        }
-        let n = eig.eigenvectors.column(order[0]);
-        if n[2].abs() > options.max_normal_z {
-            continue;
-        }
-        let c = own.mean();
         cells.push(SurfaceCell {
-            xy: [c[0], c[1]],
-            z: c[2],
-            normal_yaw_rad: crate::wrap_pi(n[1].atan2(n[0])),
+            xy: [v.sx / v.n, v.sy / v.n],
+            z: (key[2] as f64 + 0.5) * options.voxel_m,
+            normal_yaw_rad,
         });
     }
     Ok(cells)
@@ -218,6 +250,70 @@ mod tests {
                 crate::orientation_diff(c.normal_yaw_rad, 0.0) < 0.05,
                 "{c:?}"
             );
+        }
+    }
+
+    /// A scanner at the origin, 1.8 m up, stepping 0.4° in azimuth and 0.5° in elevation,
+    /// seeing a 12 m wall x = `dist` (|y| ≤ 20 m), a 1.5 m car-like box, and the ground.
+    fn scanned_wall(dist: f64) -> Vec<[f64; 3]> {
+        let mut pts = Vec::new();
+        for a in 0..900 {
+            let az = (a as f64 * 0.4).to_radians();
+            for e in 0..120 {
+                let el = (-30.0 + e as f64 * 0.5f64).to_radians();
+                let d = [az.cos() * el.cos(), az.sin() * el.cos(), el.sin()];
+                let mut t = f64::INFINITY;
+                if d[2] < 0.0 {
+                    t = t.min(1.8 / -d[2]);
+                }
+                if d[0] > 0.0 {
+                    let tw = dist / d[0];
+                    let (y, z) = (tw * d[1], tw * d[2]);
+                    if y.abs() <= 20.0 && (-1.8..=10.2).contains(&z) {
+                        t = t.min(tw);
+                    }
+                }
+                // A car at x ∈ [-8, -4], y ∈ [-1, 1], up to 1.5 m over the ground.
+                if d[0] < 0.0 {
+                    let tc = -4.0 / d[0];
+                    let (y, z) = (tc * d[1], tc * d[2]);
+                    if y.abs() <= 1.0 && z <= -0.3 {
+                        t = t.min(tc);
+                    }
+                }
+                if t.is_finite() {
+                    pts.push([t * d[0], t * d[1], t * d[2]]);
+                }
+            }
+        }
+        pts
+    }
+
+    #[test]
+    fn far_walls_get_normals_and_low_clutter_does_not() {
+        for dist in [10.0, 30.0, 55.0] {
+            let cells = vertical_cells(&scanned_wall(dist), &SurfaceOptions::default()).unwrap();
+            let on_wall: Vec<_> = cells
+                .iter()
+                .filter(|c| (c.xy[0] - dist).abs() < 0.3)
+                .collect();
+            assert!(
+                on_wall.len() * 10 >= cells.len() * 9,
+                "{dist} m: {} of {}",
+                on_wall.len(),
+                cells.len()
+            );
+            let ys: Vec<f64> = on_wall.iter().map(|c| c.xy[1]).collect();
+            let span = ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+                - ys.iter().cloned().fold(f64::INFINITY, f64::min);
+            assert!(span > 30.0, "{dist} m: wall seen over {span:.1} m");
+            for c in on_wall {
+                assert!(
+                    crate::orientation_diff(c.normal_yaw_rad, 0.0) < 0.1,
+                    "{c:?}"
+                );
+            }
+            assert!(cells.iter().all(|c| c.xy[0] > 0.0), "the car got a normal");
         }
     }
 

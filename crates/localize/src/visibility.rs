@@ -1,5 +1,6 @@
 //! The map edges visible from a position: an angular sweep with occlusion (thesis §5.3.3,
-//! V_e(t_x, t_y)).
+//! V_e(t_x, t_y)), clipped to where the scanner samples them densely enough for the
+//! extraction to see them ([`observable_part`]).
 //!
 //! The full turn is split into `rays` equal angular bins; every edge within range is swept
 //! over the bins its angular interval covers, and each bin keeps the nearest edge along its
@@ -17,6 +18,10 @@ pub struct VisibilityOptions {
     pub range_m: f64,
     /// Number of angular bins over the full turn.
     pub rays: usize,
+    /// Azimuth step of the scanner, degrees (0: every visible piece is observable).
+    pub scanner_step_deg: f64,
+    /// Largest spacing of the scanner's columns along a wall for it to be observed, metres.
+    pub max_column_spacing_m: f64,
 }
 
 impl Default for VisibilityOptions {
@@ -24,6 +29,8 @@ impl Default for VisibilityOptions {
         VisibilityOptions {
             range_m: 60.0,
             rays: 2880,
+            scanner_step_deg: 0.4,
+            max_column_spacing_m: 1.2,
         }
     }
 }
@@ -179,7 +186,9 @@ pub fn ray_buffer(
     buf
 }
 
-/// The visible pieces of the edges from a viewpoint (occlusion by every edge in range).
+/// The observable pieces of the edges from a viewpoint: visible (occlusion by every edge in
+/// range, [`pieces_from_buffer`]) and sampled densely enough by the scanner
+/// ([`observable_part`]).
 pub fn visible_segments(
     edges: &[Segment],
     grid: &EdgeGrid,
@@ -189,6 +198,55 @@ pub fn visible_segments(
     let near = grid.near(viewpoint, options.range_m);
     let buf = ray_buffer(edges, &near, viewpoint, options);
     pieces_from_buffer(edges, &buf, viewpoint)
+        .into_iter()
+        .filter_map(|s| observable_part(&s, viewpoint, options))
+        .collect()
+}
+
+/// The part of a visible piece where the scanner's columns fall closer together than
+/// `max_column_spacing_m`, or `None`.
+///
+/// A wall at perpendicular distance h from the viewpoint is hit by columns Δθ apart at a
+/// spacing of r²·Δθ/h at range r, so it is sampled densely enough within the radius
+/// R = √(s_max·h/Δθ) (grazing walls only near the foot of the perpendicular). The piece is
+/// clipped to the disc of radius min(R, range). With `scanner_step_deg` = 0 only the range
+/// applies.
+pub fn observable_part(
+    piece: &Segment,
+    viewpoint: [f64; 2],
+    options: &VisibilityOptions,
+) -> Option<Segment> {
+    let len = piece.length();
+    if len <= 0.0 {
+        return None;
+    }
+    let d = [
+        (piece.b[0] - piece.a[0]) / len,
+        (piece.b[1] - piece.a[1]) / len,
+    ];
+    let w = [piece.a[0] - viewpoint[0], piece.a[1] - viewpoint[1]];
+    let h = (w[0] * d[1] - w[1] * d[0]).abs();
+    let step_rad = options.scanner_step_deg.to_radians();
+    let radius = if step_rad > 0.0 {
+        (options.max_column_spacing_m * h / step_rad)
+            .sqrt()
+            .min(options.range_m)
+    } else {
+        options.range_m
+    };
+    // |w + t d|² = radius² with t the arc length from a.
+    let foot = -(w[0] * d[0] + w[1] * d[1]);
+    let disc = radius * radius - h * h;
+    if disc <= 0.0 {
+        return None;
+    }
+    let half = disc.sqrt();
+    let (t0, t1) = ((foot - half).max(0.0), (foot + half).min(len));
+    if t1 - t0 <= 1e-9 {
+        return None;
+    }
+    let at = |t: f64| [piece.a[0] + t * d[0], piece.a[1] + t * d[1]];
+    Some(Segment::new(at(t0), at(t1)))
 }
 
 /// Runs of rays won by one edge → its visible pieces.
@@ -273,6 +331,7 @@ mod tests {
         let options = VisibilityOptions {
             range_m: 45.0,
             rays: 720,
+            ..VisibilityOptions::default()
         };
         for trial in 0..30 {
             let edges = random_outlines(&mut rng, 12);
@@ -322,6 +381,40 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn grazing_walls_are_observed_only_near_the_foot_of_the_perpendicular() {
+        let options = VisibilityOptions {
+            scanner_step_deg: 0.4,
+            max_column_spacing_m: 1.2,
+            ..VisibilityOptions::default()
+        };
+        // A wall 2 m beside the viewpoint, 100 m long: R = √(1.2 · 2 / Δθ) ≈ 18.5 m.
+        let wall = Segment::new([-50.0, 2.0], [50.0, 2.0]);
+        let part = observable_part(&wall, [0.0, 0.0], &options).unwrap();
+        let r = (1.2 * 2.0 / 0.4f64.to_radians()).sqrt();
+        let half = (r * r - 4.0).sqrt();
+        assert!((part.a[0] + half).abs() < 1e-9 && (part.b[0] - half).abs() < 1e-9);
+        // Every clipped point's column spacing r²Δθ/h is at most the limit.
+        for p in [part.a, part.b] {
+            let r2 = p[0] * p[0] + p[1] * p[1];
+            assert!(r2 * 0.4f64.to_radians() / 2.0 <= 1.2 + 1e-9);
+        }
+        // A facing wall 30 m away is observed out to the range.
+        let facing = Segment::new([30.0, -80.0], [30.0, 80.0]);
+        let part = observable_part(&facing, [0.0, 0.0], &options).unwrap();
+        assert!((part.length() - 2.0 * (60.0f64 * 60.0 - 900.0).sqrt()).abs() < 1e-9);
+        // Without a scanner step only the range clips.
+        let plain = VisibilityOptions {
+            scanner_step_deg: 0.0,
+            ..options
+        };
+        let part = observable_part(&wall, [0.0, 0.0], &plain).unwrap();
+        assert!((part.length() - 100.0).abs() < 1e-9);
+        assert!(
+            observable_part(&Segment::new([70.0, 0.0], [70.0, 5.0]), [0.0, 0.0], &plain).is_none()
+        );
     }
 
     #[test]

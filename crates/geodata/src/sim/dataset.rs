@@ -16,7 +16,10 @@
 //!   ½(∂D_y/∂x − ∂D_x/∂y), both in the local frame; `yaw` the same from *geographic* east
 //!   (plus meridian convergence); `lat`, `lon` of (`x`, `y`); `z` the sensor height in the
 //!   local frame. `world_x`, `world_y`, `world_yaw_grid`, `world_yaw` are the pose in the
-//!   simulated world (equal to the map pose without map error).
+//!   simulated world (equal to the map pose without map error). Poses are sidewalk poses
+//!   from which at least `min_map_building_view` of the horizon (720 horizontal rays at
+//!   sensor height, through clutter) meets a building the map has within `view_range_m`:
+//!   like the thesis' Munich and Bremen scans, they are taken among buildings.
 //! - **streets** ([`write_streets`]): scans every `spacing_m` along a route driven on the
 //!   true street centre lines, registered into one `cloud.ply` in the local frame (labels:
 //!   street = driving area, sidewalk, …), `segments.json` — one entry per segment of
@@ -57,6 +60,12 @@ pub struct LocalizationOptions {
     pub sensor: SensorOptions,
     /// Sensor height above the sidewalk, metres.
     pub sensor_height_m: f64,
+    /// Smallest fraction of the horizon (horizontal rays from the sensor) that must meet a
+    /// building the map has within `view_range_m`: scans are taken among buildings, as the
+    /// thesis' datasets were (0: any sidewalk pose).
+    pub min_map_building_view: f64,
+    /// Range of that view test, metres.
+    pub view_range_m: f64,
 }
 
 impl Default for LocalizationOptions {
@@ -69,8 +78,68 @@ impl Default for LocalizationOptions {
             },
             sensor: SensorOptions::default(),
             sensor_height_m: 1.8,
+            min_map_building_view: 0.1,
+            view_range_m: 60.0,
         }
     }
+}
+
+/// Fraction of 720 horizontal rays from the sensor that meet a building the map has (not an
+/// extra world building) within `range_m`.
+pub fn map_building_view(scene: &Scene, pose: &Pose, range_m: f64) -> f64 {
+    const RAYS: usize = 720;
+    let hits = (0..RAYS)
+        .filter(|&k| {
+            let a = k as f64 * std::f64::consts::TAU / RAYS as f64;
+            scene
+                .cast(pose.position, [a.cos(), a.sin(), 0.0], range_m)
+                .and_then(|h| {
+                    let id = h.surface.object as usize;
+                    id.checked_sub(1).and_then(|i| scene.buildings.get(i))
+                })
+                .is_some_and(|b| b.map_index.is_some())
+        })
+        .count();
+    hits as f64 / RAYS as f64
+}
+
+/// Sidewalk poses with at least `min_map_building_view` of the horizon on map buildings,
+/// drawn in seeded batches.
+fn localization_poses(
+    scene: &Scene,
+    options: &LocalizationOptions,
+    seed: u64,
+) -> Result<Vec<Pose>, SimError> {
+    let h = options.sensor_height_m;
+    if options.min_map_building_view <= 0.0 {
+        return scene.sample_poses_with_height(options.scans, h, seed);
+    }
+    let mut out = Vec::with_capacity(options.scans);
+    let mut tried = 0;
+    for batch in 0..50u64 {
+        let batch_seed = if batch == 0 {
+            seed
+        } else {
+            mix64(seed ^ mix64(batch))
+        };
+        for pose in scene.sample_poses_with_height(options.scans.max(1), h, batch_seed)? {
+            tried += 1;
+            if out.len() < options.scans
+                && map_building_view(scene, &pose, options.view_range_m)
+                    >= options.min_map_building_view
+            {
+                out.push(pose);
+            }
+        }
+        if out.len() >= options.scans {
+            return Ok(out);
+        }
+    }
+    Err(SimError::NoPoses {
+        wanted: options.scans,
+        found: out.len(),
+        tries: tried,
+    })
 }
 
 /// The true pose of one localization scan as written to `truth.json`: in the map's frame
@@ -144,7 +213,7 @@ pub fn write_localization(
 ) -> Result<DatasetSummary, SimError> {
     std::fs::create_dir_all(out).map_err(io_err(out))?;
     let scene = Scene::build(map, &options.scene, seed)?;
-    let poses = scene.sample_poses_with_height(options.scans, options.sensor_height_m, seed)?;
+    let poses = localization_poses(&scene, options, seed)?;
     let mut truth = BTreeMap::new();
     let mut summary = DatasetSummary::default();
     let started = std::time::Instant::now();
@@ -197,6 +266,8 @@ pub fn write_localization(
             "frame_origin": {"lat": lat0, "lon": lon0},
             "sensor": options.sensor,
             "sensor_height_m": options.sensor_height_m,
+            "min_map_building_view": options.min_map_building_view,
+            "view_range_m": options.view_range_m,
             "map_error": {
                 "options": options.scene.map_error,
                 "removed_buildings": scene.map_error.removed.len(),
@@ -849,6 +920,24 @@ mod tests {
         let cloud = crate::cloud::read_cloud(a.join("scan_000.ply")).unwrap();
         assert!(cloud.len() > 500);
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn localization_poses_see_map_buildings() {
+        let map = map();
+        let options = LocalizationOptions {
+            scans: 6,
+            min_map_building_view: 0.2,
+            ..LocalizationOptions::default()
+        };
+        let scene = Scene::build(&map, &options.scene, 4).unwrap();
+        let poses = localization_poses(&scene, &options, 4).unwrap();
+        assert_eq!(poses.len(), 6);
+        for p in &poses {
+            assert!(map_building_view(&scene, p, 60.0) >= 0.2, "{p:?}");
+        }
+        let again = localization_poses(&scene, &options, 4).unwrap();
+        assert_eq!(poses, again);
     }
 
     #[test]
