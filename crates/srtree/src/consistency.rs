@@ -27,6 +27,7 @@ use crate::graph::Relation;
 use mln::ground::{ground, GroundOptions};
 use mln::infer::{map_inference, InferOptions};
 use mln::parse::{parse_evidence, parse_program, parse_query};
+use mln::walksat::{max_walk_sat, Factor, WalkSatOptions};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -149,8 +150,65 @@ pub fn map_relations(
     let problem = ground(&program, &ev, "relations.db", &q, &GroundOptions::default())
         .map_err(|e| err(&e))?;
     let result = map_inference(&problem, options);
+    // A second search started from the classifier's decisions (complements filled in):
+    // MaxWalkSAT on the ground formulas; the better of the two answers is kept.
+    let idx = |c: u32| -> Option<usize> {
+        problem
+            .constants
+            .get(c as usize)?
+            .strip_prefix('O')?
+            .parse()
+            .ok()
+    };
+    let start: Vec<bool> = problem
+        .atoms
+        .iter()
+        .map(|atom| {
+            let name = &program.predicates[atom.predicate].name;
+            let (Some(a), Some(b)) = (
+                atom.args.first().and_then(|&c| idx(c)),
+                atom.args.get(1).and_then(|&c| idx(c)),
+            ) else {
+                return false;
+            };
+            match Relation::from_name(name) {
+                Some(Relation::RightOf) => scene.svm.get(Relation::LeftOf, b, a),
+                Some(Relation::InFrontOf) => scene.svm.get(Relation::Behind, b, a),
+                Some(r) => scene.svm.get(r, a, b),
+                None => false,
+            }
+        })
+        .collect();
+    let factors: Vec<Factor> = problem
+        .factors
+        .iter()
+        .map(|f| Factor {
+            weight: f.weight,
+            clauses: f.clauses.clone(),
+        })
+        .collect();
+    let (walk, _) = max_walk_sat(
+        &factors,
+        problem.atoms.len(),
+        Some(&start),
+        &WalkSatOptions {
+            max_flips: 20 * problem.atoms.len().max(100),
+            chains: 1,
+            ..options.walksat.clone()
+        },
+    );
+    let key = |x: &[bool]| {
+        let s = problem.score(x);
+        (s.hard_violations, s.cost)
+    };
+    let (k1, k2) = (key(&result.assignment), key(&walk));
+    let best = if k2.0 < k1.0 || (k2.0 == k1.0 && k2.1 < k1.1) {
+        &walk
+    } else {
+        &result.assignment
+    };
     for (i, atom) in problem.atoms.iter().enumerate() {
-        if !result.assignment[i] {
+        if !best[i] {
             continue;
         }
         let name = &program.predicates[atom.predicate].name;
@@ -160,14 +218,6 @@ pub fn map_relations(
         if !Relation::BASE.contains(&r) {
             continue;
         }
-        let idx = |c: u32| -> Option<usize> {
-            problem
-                .constants
-                .get(c as usize)?
-                .strip_prefix('O')?
-                .parse()
-                .ok()
-        };
         if let (Some(a), Some(b)) = (
             atom.args.first().and_then(|&c| idx(c)),
             atom.args.get(1).and_then(|&c| idx(c)),
@@ -249,10 +299,55 @@ pub struct LearnOptions {
 impl Default for LearnOptions {
     fn default() -> Self {
         LearnOptions {
-            epochs: 15,
-            learning_rate: 0.05,
-            infer: InferOptions::default(),
+            epochs: 5,
+            learning_rate: 0.01,
+            infer: InferOptions {
+                tabu_moves: 5000,
+                ..InferOptions::default()
+            },
         }
+    }
+}
+
+/// Starting weights from counts in the training scenes: each soft formula's log-odds of
+/// holding where it is not trivially true (evidence: the classifier agrees with the label;
+/// transitivity: the conclusion holds where both premises do), with add-one smoothing.
+pub fn initial_weights(scenes: &[(MlnScene, Assignment)]) -> MlnWeights {
+    let mut held = [0.0f64; 6];
+    let mut broken = [0.0f64; 6];
+    for (s, y) in scenes {
+        let n = y.n;
+        for (k, r) in Relation::BASE.into_iter().enumerate() {
+            for a in 0..n {
+                for b in 0..n {
+                    if a == b || !s.subject[a] {
+                        continue;
+                    }
+                    if y.get(r, a, b) == s.svm.get(r, a, b) {
+                        held[3 + k] += 1.0;
+                    } else {
+                        broken[3 + k] += 1.0;
+                    }
+                    if !y.get(r, a, b) {
+                        continue;
+                    }
+                    for c in 0..n {
+                        if c != a && c != b && y.get(r, b, c) {
+                            if y.get(r, a, c) {
+                                held[k] += 1.0;
+                            } else {
+                                broken[k] += 1.0;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let w = |k: usize| (((held[k] + 1.0) / (broken[k] + 1.0)).ln()).max(0.0);
+    MlnWeights {
+        transitivity: [w(0), w(1), w(2)],
+        evidence: [w(3), w(4), w(5)],
     }
 }
 
@@ -280,8 +375,8 @@ pub fn learn_weights(
         }
         let scale = options.learning_rate / scenes.len().max(1) as f64;
         for k in 0..3 {
-            w.transitivity[k] += scale * grad[k];
-            w.evidence[k] += scale * grad[3 + k];
+            w.transitivity[k] = (w.transitivity[k] + scale * grad[k]).max(0.0);
+            w.evidence[k] = (w.evidence[k] + scale * grad[3 + k]).max(0.0);
         }
         for k in 0..3 {
             sum[k] += w.transitivity[k];

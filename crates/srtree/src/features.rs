@@ -17,7 +17,10 @@
 //!   azimuth extents, and the range differences of the centroids and of the nearest corners;
 //! - the top-view distance from a's footprint centre to b's nearest cell;
 //! - indicators: a in front, b in front (centroid x > 0), a is ground, b is ground
-//!   (street or sidewalk class in the map).
+//!   (street or sidewalk class in the map); the heights of both boxes;
+//! - support: a's lowest cell above the median height of b's cells within 2.5 m of a's
+//!   footprint centre (5 m if there are none), and the fraction of 8 compass sectors
+//!   around a's footprint centre in which b has a cell within 4 m.
 //!
 //! Cost per pair: O(|a| log |hull b| + |b|) with objects subsampled to at most
 //! [`MAX_FEATURE_CELLS`] cells for the hull tests.
@@ -28,7 +31,7 @@ use crate::SrtreeError;
 use geodata::classes::Class;
 
 /// Names of the features, in vector order.
-pub const FEATURE_NAMES: [&str; 34] = [
+pub const FEATURE_NAMES: [&str; 36] = [
     "centroid_distance",
     "box_distance_min",
     "box_distance_max",
@@ -63,6 +66,8 @@ pub const FEATURE_NAMES: [&str; 34] = [
     "b_ground",
     "height_a",
     "height_b",
+    "a_bottom_above_b_ground_nearby",
+    "b_sectors_around_a",
 ];
 
 /// Number of features.
@@ -85,8 +90,10 @@ pub struct ViewObject {
     pub class: Class,
     /// Subsampled cell centres in the view frame.
     pub cells: Vec<[f64; 3]>,
-    /// All cell centres in the view frame, x and y only (top-view distances).
-    pub footprint_cells: Vec<[f64; 2]>,
+    /// All cell centres in the view frame.
+    pub footprint_cells: Vec<[f64; 3]>,
+    /// Lowest cell centre height in the view frame.
+    pub bottom: f64,
     /// Centroid in the view frame.
     pub centroid: [f64; 3],
     /// Box corners in the view frame.
@@ -142,7 +149,8 @@ impl ViewObject {
         ViewObject {
             id,
             class,
-            footprint_cells: all.iter().map(|p| [p[0], p[1]]).collect(),
+            bottom: all.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min),
+            footprint_cells: all.clone(),
             cells,
             centroid,
             corners,
@@ -303,6 +311,27 @@ pub fn pair_features(a: &ViewObject, b: &ViewObject, tol_m: f64) -> [f64; FEATUR
     f[31] = f64::from(u8::from(is_ground(b.class)));
     f[32] = a.hi[2] - a.lo[2];
     f[33] = b.hi[2] - b.lo[2];
+    let c = a.box_centre;
+    let mut near_z: Vec<f64> = Vec::new();
+    let mut sectors = [false; 8];
+    for q in &b.footprint_cells {
+        let (dx, dy) = (q[0] - c[0], q[1] - c[1]);
+        let d = dx.hypot(dy);
+        if d <= 2.5 {
+            near_z.push(q[2]);
+        }
+        if d <= 4.0 {
+            let s = ((dy.atan2(dx) + std::f64::consts::PI) / (std::f64::consts::PI / 4.0)) as usize;
+            sectors[s.min(7)] = true;
+        }
+    }
+    f[34] = if near_z.is_empty() || !a.bottom.is_finite() {
+        5.0
+    } else {
+        near_z.sort_by(f64::total_cmp);
+        (a.bottom - near_z[near_z.len() / 2]).clamp(-5.0, 5.0)
+    };
+    f[35] = sectors.iter().filter(|&&s| s).count() as f64 / 8.0;
     f
 }
 

@@ -41,9 +41,12 @@ impl Default for TrainOptions {
     fn default() -> Self {
         TrainOptions {
             folds: 5,
-            cs: vec![0.01, 0.1, 1.0, 10.0],
-            positive_weights: vec![1.0, 2.0],
-            svm: SvmOptions::default(),
+            cs: vec![0.01, 0.1, 1.0],
+            positive_weights: vec![1.0, 3.0],
+            svm: SvmOptions {
+                max_epochs: 300,
+                ..SvmOptions::default()
+            },
             learn: LearnOptions::default(),
             hull_tolerance_m: 0.05,
         }
@@ -152,7 +155,8 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
             )
         })
         .collect();
-    let mln = learn_weights(&mln_scenes, &MlnWeights::default(), &options.learn)?;
+    let start = crate::consistency::initial_weights(&mln_scenes);
+    let mln = learn_weights(&mln_scenes, &start, &options.learn)?;
     Ok(RelationModel {
         scaler,
         svms,

@@ -42,6 +42,12 @@ enum Command {
     Streets(cmd::streets::StreetsArgs),
     /// Global localization of a 3-D scan on OSM building outlines.
     Localize(cmd::localize::LocalizeArgs),
+    /// Semantic R-tree maps: build from a labelled cloud, query.
+    #[command(subcommand)]
+    Map(cmd::srtree::MapCommand),
+    /// Spatial relations (On, LeftOf, Behind) with MLN consistency: train, infer, eval.
+    #[command(subcommand)]
+    Relations(cmd::srtree::RelationsCommand),
     /// Benchmarks against the peer implementations named in the issues.
     #[command(subcommand)]
     Bench(cmd::bench::BenchCommand),
@@ -58,6 +64,8 @@ fn main() -> ExitCode {
         Command::Sim(c) => cmd::sim::run(c),
         Command::Streets(a) => cmd::streets::run(a),
         Command::Localize(a) => cmd::localize::run(a),
+        Command::Map(c) => cmd::srtree::run_map(c),
+        Command::Relations(c) => cmd::srtree::run_relations(c),
         Command::Bench(c) => cmd::bench::run(c),
     };
     match result {

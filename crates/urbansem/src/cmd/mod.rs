@@ -8,4 +8,5 @@ pub mod mln;
 pub mod osm;
 pub mod pbo;
 pub mod sim;
+pub mod srtree;
 pub mod streets;
