@@ -45,7 +45,7 @@ impl Default for SurfaceOptions {
     fn default() -> Self {
         SurfaceOptions {
             voxel_m: 0.3,
-            max_range_m: 60.0,
+            max_range_m: 75.0,
             min_range_m: 1.5,
             min_z_m: -0.5,
             max_z_m: 30.0,

@@ -27,7 +27,7 @@ pub struct VisibilityOptions {
 impl Default for VisibilityOptions {
     fn default() -> Self {
         VisibilityOptions {
-            range_m: 60.0,
+            range_m: 75.0,
             rays: 2880,
             scanner_step_deg: 0.4,
             max_column_spacing_m: 1.2,
@@ -386,6 +386,7 @@ mod tests {
     #[test]
     fn grazing_walls_are_observed_only_near_the_foot_of_the_perpendicular() {
         let options = VisibilityOptions {
+            range_m: 60.0,
             scanner_step_deg: 0.4,
             max_column_spacing_m: 1.2,
             ..VisibilityOptions::default()

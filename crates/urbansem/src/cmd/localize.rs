@@ -766,14 +766,15 @@ pub(crate) fn demo_stage(
     let poses = scene
         .sample_poses_with_height(2, 1.8, args.seed)
         .context("placing scanner poses")?;
-    let localizer =
-        Localizer::new(&map, LocalizeOptions::default()).context("preparing the map")?;
     // A coarser scanner than the datasets' (0.8° × 1°) keeps the stage at a few seconds.
     let sensor = SensorOptions {
         h_step_deg: 0.8,
         v_step_deg: 1.0,
         ..SensorOptions::default()
     };
+    let mut options = LocalizeOptions::default();
+    options.visibility.scanner_step_deg = sensor.h_step_deg;
+    let localizer = Localizer::new(&map, options).context("preparing the map")?;
     let mut rows = Vec::new();
     let mut figures = Vec::new();
     let mut files = Vec::new();
@@ -787,10 +788,14 @@ pub(crate) fn demo_stage(
             ScanFrame::Sensor,
         )
         .context("scanning")?;
+        // The truth in the map's frame, as the datasets' truth.json.
+        let field = &scene.map_error.field;
+        let world_xy = [pose.position[0], pose.position[1]];
+        let map_xy = field.map_from_world(world_xy);
         let truth = Pose2 {
-            x: pose.position[0],
-            y: pose.position[1],
-            yaw_rad: pose.yaw_rad,
+            x: map_xy[0],
+            y: map_xy[1],
+            yaw_rad: pose.yaw_rad + field.rotation_rad(world_xy),
         };
         let result = localizer
             .localize_points(&cloud.positions)
