@@ -7,6 +7,9 @@
 //! annotated labels); the MLN weights are learnt by the voted perceptron from the
 //! classifiers' *out-of-fold* decisions, so that the evidence weights reflect the
 //! classifiers' accuracy on unseen scenes rather than on their own training data.
+//! Annotator noise is handled by filtering: training pairs whose label the out-of-fold
+//! classifier contradicts by more than [`TrainOptions::filter_margin`] are left out of the
+//! second cross-validation and the final classifier.
 
 use crate::consistency::{
     hard_violations, learn_weights, map_relations, Assignment, LearnOptions, MlnScene, MlnWeights,
@@ -35,6 +38,8 @@ pub struct TrainOptions {
     pub learn: LearnOptions,
     /// Metres of tolerance in the hull-overlap features.
     pub hull_tolerance_m: f64,
+    /// Training pairs contradicted by the out-of-fold decision by more than this are dropped.
+    pub filter_margin: f64,
 }
 
 impl Default for TrainOptions {
@@ -49,6 +54,7 @@ impl Default for TrainOptions {
             },
             learn: LearnOptions::default(),
             hull_tolerance_m: 0.05,
+            filter_margin: 0.5,
         }
     }
 }
@@ -62,6 +68,8 @@ pub struct RelationModel {
     pub svms: Vec<LinearSvm>,
     /// Cross-validation scores per relation: (C, positive weight, F1).
     pub cv_scores: Vec<Vec<(f64, f64, f64)>>,
+    /// Training pairs left out by noise filtering, per relation.
+    pub filtered_pairs: Vec<usize>,
     /// The MLN's soft weights.
     pub mln: MlnWeights,
     /// Hull tolerance used in the features, metres.
@@ -115,6 +123,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         .iter()
         .map(|s| Assignment::empty(s.objects.len()))
         .collect();
+    let mut filtered = Vec::new();
     for r in Relation::BASE {
         let y: Vec<bool> = labels.iter().map(|&b| b & r.bit() != 0).collect();
         if y.iter().all(|&v| v) || y.iter().all(|&v| !v) {
@@ -123,10 +132,31 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
                 message: format!("all {} training pairs have the same label", y.len()),
             });
         }
+        let cv_all: CvResult = cross_validate(
+            &x,
+            &y,
+            &groups,
+            None,
+            options.folds,
+            &options.cs,
+            &options.positive_weights,
+            &options.svm,
+        )?;
+        // Noise filtering (Brodley & Friedl 1999): training pairs whose label the
+        // out-of-fold classifier contradicts by more than the margin are left out, and the
+        // classifier is cross-validated and trained again on the rest.
+        let keep: Vec<bool> = y
+            .iter()
+            .zip(&cv_all.out_of_fold_decision)
+            .map(|(&t, &d)| {
+                !((t && d < -options.filter_margin) || (!t && d > options.filter_margin))
+            })
+            .collect();
         let cv: CvResult = cross_validate(
             &x,
             &y,
             &groups,
+            Some(&keep),
             options.folds,
             &options.cs,
             &options.positive_weights,
@@ -135,7 +165,20 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         for (i, &(s, a, b)) in owner.iter().enumerate() {
             oof[s].set(r, a, b, cv.out_of_fold[i]);
         }
-        svms.push(LinearSvm::train(&x, &y, &cv.best)?);
+        let kx: Vec<Vec<f32>> = x
+            .iter()
+            .zip(&keep)
+            .filter(|(_, &k)| k)
+            .map(|(v, _)| v.clone())
+            .collect();
+        let ky: Vec<bool> = y
+            .iter()
+            .zip(&keep)
+            .filter(|(_, &k)| k)
+            .map(|(&v, _)| v)
+            .collect();
+        svms.push(LinearSvm::train(&kx, &ky, &cv.best)?);
+        filtered.push(keep.iter().filter(|&&k| !k).count());
         cv_scores.push(cv.scores);
     }
     let mln_scenes: Vec<(MlnScene, Assignment)> = scenes
@@ -161,6 +204,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         scaler,
         svms,
         cv_scores,
+        filtered_pairs: filtered,
         mln,
         hull_tolerance_m: tol,
     })

@@ -199,13 +199,17 @@ pub struct CvResult {
     pub scores: Vec<(f64, f64, f64)>,
     /// Out-of-fold predictions of the chosen options, per sample.
     pub out_of_fold: Vec<bool>,
+    /// Out-of-fold decision values of the chosen options, per sample.
+    pub out_of_fold_decision: Vec<f64>,
 }
 
-/// k-fold cross-validation over groups: fold of a sample = group mod k.
+/// k-fold cross-validation over groups: fold of a sample = group mod k; samples with
+/// `keep[i] == false` are left out of training but still predicted and scored.
 pub fn cross_validate(
     x: &[Vec<f32>],
     y: &[bool],
     groups: &[usize],
+    keep: Option<&[bool]>,
     folds: usize,
     cs: &[f64],
     positive_weights: &[f64],
@@ -219,11 +223,13 @@ pub fn cross_validate(
     let runs: Vec<(usize, usize)> = (0..grid.len())
         .flat_map(|g| (0..folds).map(move |f| (g, f)))
         .collect();
-    type FoldPredictions = (usize, usize, Vec<(usize, bool)>);
+    type FoldPredictions = (usize, usize, Vec<(usize, f64)>);
     let predictions: Vec<Result<FoldPredictions>> = runs
         .par_iter()
         .map(|&(g, f)| {
-            let train: Vec<usize> = (0..x.len()).filter(|&i| groups[i] % folds != f).collect();
+            let train: Vec<usize> = (0..x.len())
+                .filter(|&i| groups[i] % folds != f && keep.is_none_or(|k| k[i]))
+                .collect();
             let test: Vec<usize> = (0..x.len()).filter(|&i| groups[i] % folds == f).collect();
             let opts = SvmOptions {
                 c: grid[g].0,
@@ -233,17 +239,17 @@ pub fn cross_validate(
             let tx: Vec<Vec<f32>> = train.iter().map(|&i| x[i].clone()).collect();
             let ty: Vec<bool> = train.iter().map(|&i| y[i]).collect();
             if tx.is_empty() || ty.iter().all(|&v| v) || ty.iter().all(|&v| !v) {
-                return Ok((g, f, test.iter().map(|&i| (i, false)).collect()));
+                return Ok((g, f, test.iter().map(|&i| (i, -1.0)).collect()));
             }
             let svm = LinearSvm::train(&tx, &ty, &opts)?;
             Ok((
                 g,
                 f,
-                test.iter().map(|&i| (i, svm.predict(&x[i]))).collect(),
+                test.iter().map(|&i| (i, svm.decision(&x[i]))).collect(),
             ))
         })
         .collect();
-    let mut per_grid = vec![vec![false; x.len()]; grid.len()];
+    let mut per_grid = vec![vec![-1.0; x.len()]; grid.len()];
     for r in predictions {
         let (g, _, preds) = r?;
         for (i, p) in preds {
@@ -253,7 +259,10 @@ pub fn cross_validate(
     let scores: Vec<(f64, f64, f64)> = grid
         .iter()
         .zip(&per_grid)
-        .map(|(&(c, p), pred)| (c, p, f1(pred, y)))
+        .map(|(&(c, p), d)| {
+            let pred: Vec<bool> = d.iter().map(|&v| v > 0.0).collect();
+            (c, p, f1(&pred, y))
+        })
         .collect();
     let best_g = (0..grid.len())
         .max_by(|&a, &b| scores[a].2.total_cmp(&scores[b].2).then(b.cmp(&a)))
@@ -265,7 +274,8 @@ pub fn cross_validate(
             ..base.clone()
         },
         scores,
-        out_of_fold: per_grid.swap_remove(best_g),
+        out_of_fold: per_grid[best_g].iter().map(|&v| v > 0.0).collect(),
+        out_of_fold_decision: per_grid.swap_remove(best_g),
     })
 }
 
@@ -332,6 +342,7 @@ mod tests {
             &x,
             &y,
             &groups,
+            None,
             5,
             &[1e-4, 10.0],
             &[1.0],
