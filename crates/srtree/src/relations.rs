@@ -124,6 +124,11 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         .map(|s| Assignment::empty(s.objects.len()))
         .collect();
     let mut filtered = Vec::new();
+    let grid: Vec<(f64, f64)> = options
+        .cs
+        .iter()
+        .flat_map(|&c| options.positive_weights.iter().map(move |&p| (c, p)))
+        .collect();
     for r in Relation::BASE {
         let y: Vec<bool> = labels.iter().map(|&b| b & r.bit() != 0).collect();
         if y.iter().all(|&v| v) || y.iter().all(|&v| !v) {
@@ -132,16 +137,8 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
                 message: format!("all {} training pairs have the same label", y.len()),
             });
         }
-        let cv_all: CvResult = cross_validate(
-            &x,
-            &y,
-            &groups,
-            None,
-            options.folds,
-            &options.cs,
-            &options.positive_weights,
-            &options.svm,
-        )?;
+        let cv_all: CvResult =
+            cross_validate(&x, &y, &groups, None, options.folds, &grid, &options.svm)?;
         // Noise filtering (Brodley & Friedl 1999): training pairs whose label the
         // out-of-fold classifier contradicts by more than the margin are left out, and the
         // classifier is cross-validated and trained again on the rest.
@@ -158,8 +155,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
             &groups,
             Some(&keep),
             options.folds,
-            &options.cs,
-            &options.positive_weights,
+            &grid,
             &options.svm,
         )?;
         for (i, &(s, a, b)) in owner.iter().enumerate() {

@@ -203,7 +203,8 @@ pub struct CvResult {
     pub out_of_fold_decision: Vec<f64>,
 }
 
-/// k-fold cross-validation over groups: fold of a sample = group mod k; samples with
+/// k-fold cross-validation over groups of each (C, positive weight) of `grid`: fold of a
+/// sample = group mod k; samples with
 /// `keep[i] == false` are left out of training but still predicted and scored.
 pub fn cross_validate(
     x: &[Vec<f32>],
@@ -211,15 +212,10 @@ pub fn cross_validate(
     groups: &[usize],
     keep: Option<&[bool]>,
     folds: usize,
-    cs: &[f64],
-    positive_weights: &[f64],
+    grid: &[(f64, f64)],
     base: &SvmOptions,
 ) -> Result<CvResult> {
     let folds = folds.max(2);
-    let grid: Vec<(f64, f64)> = cs
-        .iter()
-        .flat_map(|&c| positive_weights.iter().map(move |&p| (c, p)))
-        .collect();
     let runs: Vec<(usize, usize)> = (0..grid.len())
         .flat_map(|g| (0..folds).map(move |f| (g, f)))
         .collect();
@@ -344,8 +340,7 @@ mod tests {
             &groups,
             None,
             5,
-            &[1e-4, 10.0],
-            &[1.0],
+            &[(1e-4, 1.0), (10.0, 1.0)],
             &SvmOptions::default(),
         )
         .unwrap();
