@@ -165,6 +165,10 @@ pub struct FitOptions {
     pub max_cells_per_class: usize,
     /// Seed of the subsample.
     pub seed: u64,
+    /// Fit only on cells whose histogram holds two or more classes (default false). The
+    /// choice is only ever open on such cells (see [`DirichletModel::label`]), and pure
+    /// cells, the large majority, would otherwise set the precision.
+    pub mixed_only: bool,
 }
 
 impl Default for FitOptions {
@@ -174,6 +178,7 @@ impl Default for FitOptions {
             min_cells: 20,
             max_cells_per_class: 200_000,
             seed: 1,
+            mixed_only: false,
         }
     }
 }
@@ -204,7 +209,8 @@ impl DirichletModel {
         let k = cells.first().map_or(0, |c| c.0.len());
         let mut by_class: Vec<Vec<usize>> = vec![Vec::new(); k];
         for (i, (h, c)) in cells.iter().enumerate() {
-            if h.len() == k {
+            let mixed = h.iter().filter(|&&n| n > 0).count() >= 2;
+            if h.len() == k && (mixed || !options.mixed_only) {
                 if let Some(v) = by_class.get_mut(usize::from(*c)) {
                     v.push(i);
                 }
@@ -239,8 +245,10 @@ impl DirichletModel {
         })
     }
 
-    /// The class id of largest Dirichlet likelihood for a histogram (`None`: no model fits
-    /// its length or the histogram is empty).
+    /// The class id of largest Dirichlet likelihood among the classes present in a histogram
+    /// (`None`: no model fits its length, the histogram is empty, or no present class has
+    /// a Dirichlet). A cell is never labelled with a class none of its points has, so a
+    /// one-class histogram gets that class.
     pub fn label(&self, counts: &[u16]) -> Option<u8> {
         if counts.len() != self.classes.len() || counts.iter().all(|&c| c == 0) {
             return None;
@@ -250,6 +258,9 @@ impl DirichletModel {
         let mut best: Option<(f64, u8)> = None;
         for (j, d) in self.classes.iter().enumerate() {
             let Some(d) = d else { continue };
+            if counts[j] == 0 {
+                continue;
+            }
             let mut lp = d.log_norm;
             for (&a, &c) in d.alpha.iter().zip(counts) {
                 lp += (a - 1.0) * ((f64::from(c) + self.smoothing) / total).ln();
@@ -369,7 +380,11 @@ mod tests {
             };
             let counts: Vec<u16> = (0..k).map(|_| rng.gen_range(0..6)).collect();
             let got = model.label(&counts);
-            if counts.iter().all(|&c| c == 0) || classes.iter().all(Option::is_none) {
+            if classes
+                .iter()
+                .zip(&counts)
+                .all(|(d, &c)| d.is_none() || c == 0)
+            {
                 assert_eq!(got, None);
                 continue;
             }
@@ -381,6 +396,9 @@ mod tests {
             let mut best = (f64::NEG_INFINITY, 0u8);
             for (j, d) in classes.iter().enumerate() {
                 let Some(d) = d else { continue };
+                if counts[j] == 0 {
+                    continue;
+                }
                 let b: f64 = d.alpha.iter().map(|&a| gamma(a)).product::<f64>()
                     / gamma(d.alpha.iter().sum());
                 let p: f64 = d

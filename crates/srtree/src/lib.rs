@@ -8,6 +8,8 @@
 //! - [`dirichlet`]: per-class Dirichlet over cell class histograms, moment matching, label choice.
 //! - [`map`]: occupancy cells kept where occupied, R-tree index, queries, ray casting.
 //! - [`io`]: the documented binary `.srt` map file.
+//! - [`scans`]: the real labelled scans of `../shared/data/lidar/`, registered with their poses.
+//! - [`label_eval`]: Dirichlet label choice against majority vote on the real scans.
 //! - [`objects`]: per object cells, centroid, class, oriented box (normal-histogram yaw).
 //! - [`features`]: pairwise features of two objects in a viewpoint frame.
 //! - [`svm`]: linear SVM by dual coordinate descent (liblinear), cross-validation.
@@ -30,9 +32,11 @@ pub mod error;
 pub mod features;
 pub mod graph;
 pub mod io;
+pub mod label_eval;
 pub mod map;
 pub mod objects;
 pub mod relations;
+pub mod scans;
 pub mod svm;
 
 pub use error::{Result, SrtreeError};

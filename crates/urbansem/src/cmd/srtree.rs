@@ -67,6 +67,24 @@ pub enum MapCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Dirichlet label choice vs majority vote on the real labelled scans (KITTI-360, MCD).
+    EvalLabels {
+        /// The folder holding `kitti360_2013_05_28_drive_0009/` and `mcd_kth_day_06/`.
+        #[arg(long, default_value = "../shared/data/lidar")]
+        data: PathBuf,
+        /// Cell size, metres.
+        #[arg(long, default_value_t = 0.1)]
+        resolution: f64,
+        /// Use at most this many scans per sequence (evenly spread).
+        #[arg(long)]
+        max_scans: Option<usize>,
+        /// Write the fitted Dirichlet model (JSON, for `map build --dirichlet`).
+        #[arg(long)]
+        model_out: Option<PathBuf>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// Subcommands of `urbansem relations`.
@@ -289,7 +307,103 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        MapCommand::EvalLabels {
+            data,
+            resolution,
+            max_scans,
+            model_out,
+            json,
+        } => eval_labels(&data, resolution, max_scans, model_out.as_deref(), json),
     }
+}
+
+/// `urbansem map eval-labels`: runs [`srtree::label_eval`] and prints both agreements.
+fn eval_labels(
+    data: &Path,
+    resolution: f64,
+    max_scans: Option<usize>,
+    model_out: Option<&Path>,
+    json: bool,
+) -> anyhow::Result<()> {
+    use srtree::label_eval::{evaluate_labels, LabelEvalOptions, LabelScore, PROTOCOL};
+    let t = Instant::now();
+    let sequences = srtree::scans::load_sequences(data, max_scans)
+        .with_context(|| format!("reading the labelled scans under {}", data.display()))?;
+    let load_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let ev = evaluate_labels(
+        &sequences,
+        &LabelEvalOptions {
+            resolution_m: resolution,
+            ..LabelEvalOptions::default()
+        },
+    )?;
+    let eval_s = t.elapsed().as_secs_f64();
+    if let Some(p) = model_out {
+        std::fs::write(p, serde_json::to_string_pretty(&ev.model)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    let score_json = |s: &LabelScore| {
+        json!({
+            "cells": s.cells,
+            "dirichlet": s.dirichlet_rate(),
+            "majority": s.majority_rate(),
+            "mixed_cells": s.mixed_cells,
+            "dirichlet_mixed": s.dirichlet_rate_mixed(),
+            "majority_mixed": s.majority_rate_mixed(),
+        })
+    };
+    if json {
+        let seqs: serde_json::Map<String, Value> = ev
+            .sequences
+            .iter()
+            .map(|(n, s)| (n.clone(), score_json(s)))
+            .collect();
+        let out = json!({
+            "protocol": PROTOCOL,
+            "resolution_m": resolution,
+            "scans": sequences.iter().map(|s| (s.name.clone(), json!(s.scans.len()))).collect::<serde_json::Map<String, Value>>(),
+            "points": sequences.iter().map(|s| s.points()).sum::<usize>(),
+            "train_cells": ev.train_cells.iter().map(|(n, c)| (n.clone(), json!(c))).collect::<serde_json::Map<String, Value>>(),
+            "sequences": seqs,
+            "total": score_json(&ev.total),
+            "seconds_load": load_s,
+            "seconds_eval": eval_s,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!("protocol: {PROTOCOL}");
+    for s in &sequences {
+        println!(
+            "  {}: {} scans, {} points",
+            s.name,
+            s.scans.len(),
+            s.points()
+        );
+    }
+    for (n, c) in &ev.train_cells {
+        println!("  {n}: {c} training cells");
+    }
+    println!(
+        "{:<10} {:>9} {:>10} {:>10} {:>9} {:>10} {:>10}",
+        "test", "cells", "Dirichlet", "majority", "mixed", "Dir.mixed", "maj.mixed"
+    );
+    let total = ("all".to_string(), ev.total);
+    for (n, s) in ev.sequences.iter().chain(std::iter::once(&total)) {
+        println!(
+            "{:<10} {:>9} {:>9.2}% {:>9.2}% {:>9} {:>9.2}% {:>9.2}%",
+            n,
+            s.cells,
+            100.0 * s.dirichlet_rate(),
+            100.0 * s.majority_rate(),
+            s.mixed_cells,
+            100.0 * s.dirichlet_rate_mixed(),
+            100.0 * s.majority_rate_mixed()
+        );
+    }
+    println!("({load_s:.1} s reading, {eval_s:.1} s evaluating, {resolution} m cells)");
+    Ok(())
 }
 
 fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
