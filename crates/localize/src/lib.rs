@@ -19,10 +19,12 @@
 //!   confidence.
 //! - [`refine`]: continuous 2-D alignment of the best candidates.
 //! - [`hashing`]: the geometric-hashing baseline of Cham et al. (2010).
+//! - [`distractors`]: a map embedded among distractor buildings of another real map.
 //! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables.
 
 pub mod candidates;
 pub mod chamfer;
+pub mod distractors;
 pub mod eval;
 pub mod hashing;
 pub mod pipeline;
@@ -172,6 +174,12 @@ pub enum LocalizeError {
         grid_m: f64,
         /// Cell limit.
         max_cells: usize,
+    },
+    /// A map that must have buildings has none.
+    #[error("{what} has no building outlines; check that the extract covers built-up land")]
+    NoBuildings {
+        /// Which map.
+        what: &'static str,
     },
     /// A dataset file is malformed or missing.
     #[error("{path}: {message}")]

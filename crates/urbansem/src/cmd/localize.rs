@@ -8,6 +8,7 @@ use crate::report::Svg;
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::osm::OsmMap;
+use localize::distractors::{embed_among_distractors, DistractorOptions, DistractorSummary};
 use localize::eval::{accurate_within, is_mcd, mcd_scans, Accuracy, EvalScan, SimDataset};
 use localize::hashing::{CornerIndex, HashingOptions};
 use localize::pipeline::{Localization, LocalizeOptions, Localizer};
@@ -127,6 +128,16 @@ pub struct EvalArgs {
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
+    /// Embed the map among distractor buildings and streets cut from this other real OSM map
+    /// (rotated tiles in a ring around the map's buildings; see `localize::distractors`).
+    #[arg(long)]
+    pub distractors: Option<PathBuf>,
+    /// Seed of the distractor tiles' rotations and source centres.
+    #[arg(long, default_value_t = 1)]
+    pub distractor_seed: u64,
+    /// Width of the distractor ring around the map's building bounding box, metres.
+    #[arg(long, default_value_t = 400.0)]
+    pub distractor_ring_m: f64,
 }
 
 /// Runs `urbansem localize`.
@@ -399,6 +410,27 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let t = Instant::now();
     let map = OsmMap::load(&map_path)
         .with_context(|| format!("loading the map {}", map_path.display()))?;
+    let (map, distractors) = match &args.distractors {
+        Some(other_path) => {
+            let other = OsmMap::load(other_path)
+                .with_context(|| format!("loading the distractor map {}", other_path.display()))?;
+            let options = DistractorOptions {
+                ring_m: args.distractor_ring_m,
+                seed: args.distractor_seed,
+                ..DistractorOptions::default()
+            };
+            let (composed, summary) = embed_among_distractors(&map, &other, &options)
+                .with_context(|| {
+                    format!(
+                        "embedding {} among distractors from {}",
+                        map_path.display(),
+                        other_path.display()
+                    )
+                })?;
+            (composed, Some((other_path.clone(), options, summary)))
+        }
+        None => (map, None),
+    };
     let load_map_s = t.elapsed().as_secs_f64();
     let localizer = Localizer::new(&map, options(CostKind::Reverse, args.grid_m))
         .with_context(|| format!("preparing the map {}", map_path.display()))?;
@@ -479,8 +511,12 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         &localizer,
         &records,
         mcd,
+        distractors.as_ref(),
     )
 }
+
+/// The distractor map, its options and what was built.
+type Distractors = (PathBuf, DistractorOptions, DistractorSummary);
 
 fn top1_error(ranked: &[Pose2], truth: &Pose2) -> (f64, f64) {
     ranked.first().map_or((f64::NAN, f64::NAN), |p| {
@@ -530,6 +566,7 @@ fn summarize(
     localizer: &Localizer<'_>,
     records: &[ScanRecord],
     mcd: bool,
+    distractors: Option<&Distractors>,
 ) -> anyhow::Result<()> {
     let n = records.len();
     let method_rows: Vec<(&str, Method)> = methods
@@ -636,6 +673,18 @@ fn summarize(
     ];
     let timing: Vec<(&str, (f64, f64, f64))> = stages.iter().map(|(n, f)| (*n, stage(f))).collect();
     let threads = rayon::current_num_threads();
+    let grid_m = localizer.dt.grid_m;
+    let search_area_km2 = localizer.domain.cells() as f64 * grid_m * grid_m / 1e6;
+    let distractors_json = distractors.map(|(path, o, s)| {
+        json!({
+            "map": path.display().to_string(),
+            "seed": o.seed,
+            "ring_m": o.ring_m,
+            "gap_m": o.gap_m,
+            "tile_m": o.tile_m,
+            "summary": s,
+        })
+    });
     if args.json {
         let scans: Vec<Value> = records
             .iter()
@@ -658,6 +707,7 @@ fn summarize(
                     "truth": {"x": r.truth.x, "y": r.truth.y, "yaw_grid": r.truth.yaw_rad},
                     "segments": r.result.segments.len(),
                     "raw_poses": r.result.raw_poses,
+                    "search": r.result.search,
                     "candidates": r.result.candidates.len(),
                     "confidence": r.result.confidence,
                     "top1": errs,
@@ -673,6 +723,8 @@ fn summarize(
             "map": map_path.display().to_string(),
             "scans": n,
             "thresholds": {"chamfer": {"m": 4.0, "rad": 0.2}, "hashing": {"m": 5.0, "rad": std::f64::consts::FRAC_PI_6}},
+            "distractors": distractors_json,
+            "search_area_km2": search_area_km2,
             "n_accurate": table,
             "accurate_in_candidate_set": in_set,
             "top1_within_2m_3deg": {"dcm": strict_top1[0], "forward": strict_top1[1], "reverse": strict_top1[2], "symmetric": strict_top1[3]},
@@ -699,6 +751,29 @@ fn summarize(
         args.dataset.display(),
         map_path.display(),
         if mcd { "real MCD scans" } else { "simulated" }
+    );
+    if let Some((path, o, s)) = distractors {
+        println!(
+            "embedded among distractors from {} (seed {}, ring {} m, gap {} m, tiles {} m): {} target buildings, {} distractor buildings ({} dropped at tile seams), {} distractor street segments in {} tiles; building box {:.2} km² → {:.2} km²",
+            path.display(),
+            o.seed,
+            o.ring_m,
+            o.gap_m,
+            o.tile_m,
+            s.target_buildings,
+            s.distractor_buildings,
+            s.dropped_overlapping,
+            s.distractor_street_segments,
+            s.tiles.len(),
+            s.target_area_km2,
+            s.outer_area_km2
+        );
+    }
+    println!(
+        "search area {search_area_km2:.2} km² ({} cells × {} yaws)",
+        localizer.domain.cells(),
+        records.first().map_or(0, |r| r.result.search.space
+            / localizer.domain.cells().max(1))
     );
     println!("N_accurate (thresholds 4 m / 0.2 rad; hashing 5 m / π/6), k best candidates within radius w (m) of the truth:");
     let mut header = format!("{:<10} {:>3}", "method", "k");
