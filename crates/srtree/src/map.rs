@@ -220,6 +220,9 @@ pub struct SrMap {
     index: FxHashMap<[i32; 3], u32>,
     tree: RTree<CellEntry, CellTreeParams>,
     dirichlet: Option<DirichletModel>,
+    /// Per cell: touched in the current batch (all false between batches; reused so a
+    /// batch costs O(its points), not O(map)).
+    stamp: Vec<bool>,
     /// The spatial relation graph inferred over the map's objects.
     pub relations: crate::graph::RelationGraph,
 }
@@ -255,6 +258,7 @@ impl SrMap {
             index: FxHashMap::default(),
             tree: RTree::new_with_params(),
             dirichlet: None,
+            stamp: Vec::new(),
             relations: Default::default(),
         })
     }
@@ -352,6 +356,57 @@ impl SrMap {
         cloud: &PointCloud,
         origin: Option<[f64; 3]>,
     ) -> Result<InsertStats> {
+        let old_len = self.cells.len();
+        let mut stats = self.update_cells(cloud, origin)?;
+        stats.bulk_loaded = self.index_new_cells(old_len);
+        Ok(stats)
+    }
+
+    /// Inserts scans one after the other (each a batch of its own, with its sensor origin
+    /// for ray casting), and indexes the new cells once at the end, as OctoMap's lazy
+    /// evaluation defers its inner nodes. Returns the summed statistics.
+    pub fn insert_scans(
+        &mut self,
+        scans: &[(&PointCloud, Option<[f64; 3]>)],
+    ) -> Result<InsertStats> {
+        let old_len = self.cells.len();
+        let mut total = InsertStats::default();
+        for (cloud, origin) in scans {
+            let s = self.update_cells(cloud, *origin)?;
+            total.points += s.points;
+            total.new_cells += s.new_cells;
+            total.touched_cells += s.touched_cells;
+            total.rays += s.rays;
+            total.misses += s.misses;
+        }
+        total.bulk_loaded = self.index_new_cells(old_len);
+        Ok(total)
+    }
+
+    /// Adds the cells from `old_len` on to the R-tree: a bulk load when they are more than
+    /// a quarter of the old map, else one insertion each. Returns whether it bulk-loaded.
+    fn index_new_cells(&mut self, old_len: usize) -> bool {
+        let new_cells = self.cells.len() - old_len;
+        if new_cells == 0 {
+            return false;
+        }
+        if new_cells * 4 > old_len {
+            self.rebuild_tree();
+            return true;
+        }
+        for i in old_len..self.cells.len() {
+            let e = self.entry(i);
+            self.tree.insert(e);
+        }
+        false
+    }
+
+    /// Endpoint, ray and label updates of one batch; the R-tree is left to the caller.
+    fn update_cells(
+        &mut self,
+        cloud: &PointCloud,
+        origin: Option<[f64; 3]>,
+    ) -> Result<InsertStats> {
         cloud.check_columns()?;
         let r = self.options.resolution_m;
         let limit_m = KEY_LIMIT * r;
@@ -385,7 +440,8 @@ impl SrMap {
         // Endpoint updates, one pass (hash lookups dominate; the cells touched are recorded
         // once through a batch stamp).
         let mut touched: Vec<u32> = Vec::new();
-        let mut stamp: Vec<bool> = vec![false; old_len];
+        let mut stamp = std::mem::take(&mut self.stamp);
+        stamp.resize(old_len, false);
         let labels = cloud.label.as_deref();
         let rgbs = cloud.rgb.as_deref();
         let objects = cloud.object.as_deref();
@@ -432,6 +488,10 @@ impl SrMap {
             stats.rays = rays;
             stats.misses = misses;
         }
+        for &ci in &touched {
+            stamp[ci as usize] = false;
+        }
+        self.stamp = stamp;
         // Labels of the touched cells.
         let model = self.dirichlet.as_ref();
         let cells = &mut self.cells;
@@ -441,18 +501,6 @@ impl SrMap {
             .collect();
         for (ci, l) in new_labels {
             cells[ci as usize].label = l;
-        }
-        // The R-tree.
-        if stats.new_cells > 0 {
-            if stats.new_cells * 4 > old_len {
-                self.rebuild_tree();
-                stats.bulk_loaded = true;
-            } else {
-                for i in old_len..self.cells.len() {
-                    let e = self.entry(i);
-                    self.tree.insert(e);
-                }
-            }
         }
         Ok(stats)
     }
@@ -815,6 +863,34 @@ pub(crate) mod tests {
             assert_eq!(map.cells_of_class(class), want);
         }
         assert!(map.tree_height() >= 2);
+    }
+
+    #[test]
+    fn deferred_indexing_equals_one_batch_at_a_time() {
+        let clouds: Vec<PointCloud> = (0..4).map(|s| random_cloud(800, 5.0, 20 + s)).collect();
+        let options = MapOptions {
+            resolution_m: 0.3,
+            ray_casting: true,
+            ..MapOptions::default()
+        };
+        let mut one_by_one = SrMap::new(options.clone()).unwrap();
+        for c in &clouds {
+            one_by_one.insert_cloud(c, Some([0.1, 0.2, 0.3])).unwrap();
+        }
+        let mut deferred = SrMap::new(options).unwrap();
+        let batch: Vec<(&PointCloud, Option<[f64; 3]>)> =
+            clouds.iter().map(|c| (c, Some([0.1, 0.2, 0.3]))).collect();
+        let stats = deferred.insert_scans(&batch).unwrap();
+        assert_eq!(stats.points, 3200);
+        assert_eq!(deferred.cells(), one_by_one.cells());
+        let (mut a, mut b) = (
+            deferred.cells_in_box([-2.0, -2.0, 0.0], [2.0, 3.0, 1.0]),
+            one_by_one.cells_in_box([-2.0, -2.0, 0.0], [2.0, 3.0, 1.0]),
+        );
+        a.sort_unstable();
+        b.sort_unstable();
+        assert_eq!(a, b);
+        assert!(!a.is_empty());
     }
 
     #[test]

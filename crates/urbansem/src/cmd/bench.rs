@@ -30,6 +30,8 @@ pub enum BenchCommand {
     /// MLN MAP inference on the benchmark sets: our cost and time against Tuffy's shipped
     /// answers (re-scored by our evaluator) and the thesis' time targets.
     Mln(MlnBenchArgs),
+    /// SRTree map insertion and box queries on the real scans (peers: scripts/bench_srtree_octomap.py).
+    Srtree(crate::cmd::srtree::SrtreeBenchArgs),
 }
 
 /// Options of `urbansem bench pbo`.
@@ -60,6 +62,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
         BenchCommand::Pbo(args) => bench_pbo(&args),
         BenchCommand::Mln(args) => bench_mln(&args),
+        BenchCommand::Srtree(args) => crate::cmd::srtree::bench_srtree(&args),
     }
 }
 
