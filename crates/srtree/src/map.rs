@@ -364,7 +364,8 @@ impl SrMap {
 
     /// Inserts scans one after the other (each a batch of its own, with its sensor origin
     /// for ray casting), and indexes the new cells once at the end, as OctoMap's lazy
-    /// evaluation defers its inner nodes. Returns the summed statistics.
+    /// evaluation defers its inner nodes, then releases the cell vector's spare capacity.
+    /// Returns the summed statistics.
     pub fn insert_scans(
         &mut self,
         scans: &[(&PointCloud, Option<[f64; 3]>)],
@@ -380,6 +381,8 @@ impl SrMap {
             total.misses += s.misses;
         }
         total.bulk_loaded = self.index_new_cells(old_len);
+        // A batch of scans is the whole map or a large part: drop the growth slack.
+        self.cells.shrink_to_fit();
         Ok(total)
     }
 
