@@ -8,17 +8,16 @@
 //! FDCM cost). The search is a branch and bound over translation boxes of 2^h × 2^h cells per
 //! yaw, as in Cartographer's real-time correlative scan matcher (Hess et al., ICRA 2016,
 //! doi:10.1109/ICRA.2016.7487258): a box's bound sums the [`BoundPyramid`] at level h, samples
-//! sharing a block and channel are summed once with their count, and a box is cut when its
-//! bound exceeds factor × the best cost found so far. Since the best only decreases, every
-//! pose within the factor of the final minimum survives: the result equals exhaustive search
-//! ([`exhaustive_search`], checked in the tests).
+//! sharing a block and channel are summed once with their count. A best-first phase finds
+//! the exact minimum, then a parallel depth-first phase cuts every box whose bound exceeds
+//! factor × minimum (see [`search`]): every pose within the factor of the minimum survives,
+//! and the result equals exhaustive search ([`exhaustive_search`], checked in the tests).
 
-use crate::chamfer::{BoundPyramid, DtTensor};
+use crate::chamfer::{BoundPyramid, DtTensor, GridView};
 use crate::{angle_diff, Pose2, Segment};
 use geodata::osm::index::MapIndex;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Options of the candidate search.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,6 +26,7 @@ pub struct SearchOptions {
     pub yaw_step_deg: f64,
     /// Top level of the branch and bound (boxes of 2^levels cells).
     pub levels: u32,
+
     /// Keep every pose with cost ≤ keep_factor × minimum (given as numerator/denominator).
     pub keep_factor: (u64, u64),
     /// Poses are searched over the edges' bounding box grown by this, metres.
@@ -221,6 +221,85 @@ fn box_bound(
     sum
 }
 
+/// A template's entries at one level as offsets into that level's flat grid.
+#[derive(Debug, Clone, Default)]
+struct Plan {
+    /// (offset into the grid relative to the box's first cell, count), in entry order.
+    terms: Vec<(i64, u64)>,
+    /// Smallest entry offsets (x, y).
+    lo: [i64; 2],
+    /// Largest entry offsets (x, y).
+    hi: [i64; 2],
+}
+
+/// Every template's [`Plan`] per level, with the grid views they index.
+struct Plans<'a> {
+    views: Vec<GridView<'a>>,
+    per_template: Vec<Vec<Plan>>,
+}
+
+impl<'a> Plans<'a> {
+    fn new(dt: &'a DtTensor, pyr: &'a BoundPyramid, templates: &[Template]) -> Plans<'a> {
+        let mut views = vec![dt.view(), pyr.fine_view()];
+        views.extend((2..=pyr.top()).map_while(|h| pyr.level_view(h)));
+        let per_template = templates
+            .par_iter()
+            .map(|t| {
+                views
+                    .iter()
+                    .enumerate()
+                    .map(|(h, v)| {
+                        let entries = t.levels.get(if h <= 1 { 0 } else { h });
+                        let entries = entries.map_or(&[][..], Vec::as_slice);
+                        let mut plan = Plan {
+                            terms: Vec::with_capacity(entries.len()),
+                            lo: [i64::MAX; 2],
+                            hi: [i64::MIN; 2],
+                        };
+                        for &(x, y, c, n) in entries {
+                            plan.terms.push(((y * v.w + x) * v.channels + c as i64, n));
+                            plan.lo = [plan.lo[0].min(x), plan.lo[1].min(y)];
+                            plan.hi = [plan.hi[0].max(x), plan.hi[1].max(y)];
+                        }
+                        plan
+                    })
+                    .collect()
+            })
+            .collect();
+        Plans {
+            views,
+            per_template,
+        }
+    }
+
+    /// [`box_bound`] by flat offsets when every entry of the box lies in the stored grid
+    /// (`None` otherwise): the same terms in the same order, so the same value.
+    #[inline]
+    fn bound(&self, k: usize, h: u32, bx: i64, by: i64, limit: u64) -> Option<u64> {
+        let v = self.views.get(h as usize)?;
+        let plan = self.per_template.get(k)?.get(h as usize)?;
+        let (x0, y0) = if h == 1 { (bx << 1, by << 1) } else { (bx, by) };
+        let (sx, sy) = (x0 + v.offset, y0 + v.offset);
+        if plan.terms.is_empty()
+            || sx + plan.lo[0] < 0
+            || sy + plan.lo[1] < 0
+            || sx + plan.hi[0] >= v.w
+            || sy + plan.hi[1] >= v.h
+        {
+            return None;
+        }
+        let base = (sy * v.w + sx) * v.channels;
+        let mut sum = 0u64;
+        for &(r, n) in &plan.terms {
+            sum += v.data.get((base + r) as usize).copied().unwrap_or(255) as u64 * n;
+            if sum > limit {
+                break;
+            }
+        }
+        Some(sum)
+    }
+}
+
 /// Largest cost within `factor` of `best`.
 fn limit_of(best: u64, factor: (u64, u64)) -> u64 {
     let l = (best as u128) * (factor.0 as u128) / (factor.1.max(1) as u128);
@@ -242,8 +321,73 @@ pub struct SearchStats {
     pub space: u64,
 }
 
+/// A node of the search: (bound, level h, template, first cell x, first cell y); the node
+/// covers the translations `[x, x + 2^h) × [y, y + 2^h)` at its template's yaw, and at h = 0
+/// its bound is the exact cost.
+type Node = (u64, u32, usize, i64, i64);
+
+/// Pushes the children of a node at level h > 0 that meet the domain and whose bound is
+/// ≤ `limit` (bound sums stop above it); returns how many bounds were evaluated. A child's
+/// bound is the larger of its own and its parent's (both bound the child's poses), so bounds
+/// never decrease going down.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn expand(
+    dt: &DtTensor,
+    pyr: &BoundPyramid,
+    templates: &[Template],
+    plans: &Plans<'_>,
+    domain: Domain,
+    &(parent, h, k, x, y): &Node,
+    limit: u64,
+    out: &mut Vec<Node>,
+) -> u64 {
+    let Some(t) = templates.get(k) else {
+        return 0;
+    };
+    let half = 1i64 << (h - 1);
+    let ch = h - 1;
+    let mut evaluated = 0;
+    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+        let (cx, cy) = (x + dx * half, y + dy * half);
+        if cx >= domain.i1 || cy >= domain.j1 || cx + half <= domain.i0 || cy + half <= domain.j0 {
+            continue;
+        }
+        evaluated += 1;
+        let (bx, by) = (cx >> ch, cy >> ch);
+        let b = plans
+            .bound(k, ch, bx, by, limit)
+            .unwrap_or_else(|| box_bound(dt, pyr, t, ch, bx, by, limit))
+            .max(parent);
+        if b <= limit {
+            out.push((b, ch, k, cx, cy));
+        }
+    }
+    evaluated
+}
+
+/// Nodes expanded together in the best-first phase.
+const BATCH: usize = 1024;
+
+/// Number of buckets of width `width` for bounds up to `max_bound`.
+fn buckets_len(max_bound: u64, width: u64) -> usize {
+    (max_bound / width) as usize + 1
+}
+
 /// Every pose (over all templates and the domain) with cost ≤ factor × minimum, sorted by
 /// (cost, yaw, i, j), by branch and bound. Equal to [`exhaustive_search`].
+///
+/// Two phases, so that no box is bounded against a cut looser than factor × the minimum:
+/// 1. best first: the queue starts with the top-level boxes of every yaw; the 1024 best
+///    non-leaf entries are expanded at a time (in parallel) until the best entry is a leaf,
+///    whose cost is then the minimum (every other entry's bound is at least that cost).
+///    Children bounded above factor × the best leaf seen are dropped: they hold no pose within
+///    factor × the minimum.
+/// 2. depth first, in parallel over the queue's remaining entries within factor × the
+///    minimum, with that fixed cut.
+///
+/// The expanded nodes are exactly those whose bound is ≤ factor × minimum (phase 1 expands
+/// those below the minimum), each once.
 pub fn search(
     dt: &DtTensor,
     pyr: &BoundPyramid,
@@ -251,94 +395,154 @@ pub fn search(
     domain: Domain,
     factor: (u64, u64),
 ) -> (Vec<RawPose>, SearchStats) {
-    let top = pyr.top();
-    let s = 1i64 << top;
-    let mut roots: Vec<(u64, usize, i64, i64)> = Vec::new();
-    let bi0 = domain.i0 >> top;
-    let bj0 = domain.j0 >> top;
-    let bi1 = (domain.i1 - 1) >> top;
-    let bj1 = (domain.j1 - 1) >> top;
-    let stats_boxes = AtomicU64::new(0);
-    let stats_leaves = AtomicU64::new(0);
-    if domain.cells() == 0 {
-        return (Vec::new(), SearchStats::default());
+    let mut stats = SearchStats {
+        boxes: 0,
+        leaves: 0,
+        space: domain.cells() * templates.len() as u64,
+    };
+    if domain.cells() == 0 || templates.is_empty() {
+        return (Vec::new(), stats);
     }
-    for (k, t) in templates.iter().enumerate() {
-        for bj in bj0..=bj1 {
-            for bi in bi0..=bi1 {
-                roots.push((
-                    box_bound(dt, pyr, t, top, bi, bj, u64::MAX),
-                    k,
-                    bi * s,
-                    bj * s,
-                ));
+    let top = pyr.top();
+    let plans = Plans::new(dt, pyr, templates);
+    let (bi0, bj0) = (domain.i0 >> top, domain.j0 >> top);
+    let (bi1, bj1) = ((domain.i1 - 1) >> top, (domain.j1 - 1) >> top);
+    let roots: Vec<Node> = templates
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(k, t)| {
+            let plans = &plans;
+            (bj0..=bj1).flat_map(move |bj| {
+                (bi0..=bi1).map(move |bi| {
+                    let b = plans
+                        .bound(k, top, bi, bj, u64::MAX)
+                        .unwrap_or_else(|| box_bound(dt, pyr, t, top, bi, bj, u64::MAX));
+                    (b, top, k, bi << top, bj << top)
+                })
+            })
+        })
+        .collect();
+    let count = |h: u32, n: u64, stats: &mut SearchStats| {
+        if h == 0 {
+            stats.leaves += n;
+        } else {
+            stats.boxes += n;
+        }
+    };
+    count(top, roots.len() as u64, &mut stats);
+    // Phase 1, with a bucket queue (bounds are integers, and children's bounds are at least
+    // their parent's, so the queue's minimum only grows).
+    let max_bound = roots
+        .iter()
+        .map(|r| r.0)
+        .max()
+        .unwrap_or(0)
+        .max(255 * templates.iter().map(|t| t.samples).max().unwrap_or(0));
+    let width = (max_bound / (1 << 20)).max(1);
+    let mut buckets: Vec<Vec<Node>> = vec![Vec::new(); buckets_len(max_bound, width)];
+    let bucket_of = |b: u64| ((b / width) as usize).min(buckets_len(max_bound, width) - 1);
+    for r in roots {
+        if let Some(v) = buckets.get_mut(bucket_of(r.0)) {
+            v.push(r);
+        }
+    }
+    let mut leaves: Vec<Node> = Vec::new();
+    let mut best_leaf = u64::MAX;
+    let mut cursor = 0usize;
+    let mut batch: Vec<Node> = Vec::with_capacity(BATCH);
+    loop {
+        // Done when every queued box's bound is at least the best leaf's cost.
+        while cursor < buckets.len() && buckets[cursor].is_empty() {
+            cursor += 1;
+        }
+        if cursor >= buckets.len() || (cursor as u64) * width >= best_leaf {
+            break;
+        }
+        // At least as large as best_leaf even for a factor below 1.
+        let cut = limit_of(best_leaf, factor).max(best_leaf);
+        batch.clear();
+        let bucket = &mut buckets[cursor];
+        let take = bucket.len().min(BATCH);
+        batch.extend(bucket.drain(bucket.len() - take..).filter(|n| n.0 <= cut));
+        let expanded: Vec<(u64, u64, Vec<Node>)> = batch
+            .par_chunks(BATCH / 8)
+            .map(|chunk| {
+                let (mut boxes, mut leaves, mut out) = (0, 0, Vec::with_capacity(4 * chunk.len()));
+                for node in chunk {
+                    let n = expand(dt, pyr, templates, &plans, domain, node, cut, &mut out);
+                    if node.1 == 1 {
+                        leaves += n;
+                    } else {
+                        boxes += n;
+                    }
+                }
+                (boxes, leaves, out)
+            })
+            .collect();
+        for (boxes, leaves_n, kids) in expanded {
+            stats.boxes += boxes;
+            stats.leaves += leaves_n;
+            for kid in kids {
+                if kid.1 == 0 {
+                    best_leaf = best_leaf.min(kid.0);
+                    leaves.push(kid);
+                } else if let Some(v) = buckets.get_mut(bucket_of(kid.0)) {
+                    v.push(kid);
+                }
             }
         }
     }
-    stats_boxes.fetch_add(roots.len() as u64, Ordering::Relaxed);
-    roots.sort_unstable();
-    let best = AtomicU64::new(u64::MAX);
-    let mut found: Vec<RawPose> = roots
+    if best_leaf == u64::MAX && buckets.iter().all(Vec::is_empty) {
+        return (Vec::new(), stats);
+    }
+    let minimum = best_leaf;
+    // Phase 2.
+    let limit = limit_of(minimum, factor);
+    let frontier: Vec<Node> = buckets
+        .into_iter()
+        .flatten()
+        .chain(leaves)
+        .filter(|node| node.0 <= limit)
+        .collect();
+    let (found, boxes, leaves) = frontier
         .par_iter()
         .with_min_len(16)
-        .flat_map_iter(|&(lb, k, x, y)| {
-            let mut out = Vec::new();
-            let mut stack = vec![(lb, top, x, y)];
-            let t = &templates[k];
-            let (mut nb, mut nl) = (0u64, 0u64);
-            while let Some((lb, h, x, y)) = stack.pop() {
-                if !within(lb, best.load(Ordering::Relaxed), factor) {
-                    continue;
-                }
-                if h == 0 {
-                    out.push(RawPose {
-                        cost: lb,
-                        yaw_index: k,
-                        i: x,
-                        j: y,
-                    });
-                    best.fetch_min(lb, Ordering::Relaxed);
-                    continue;
-                }
-                let half = 1i64 << (h - 1);
-                let mut children: Vec<(u64, u32, i64, i64)> = Vec::with_capacity(4);
-                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                    let (cx, cy) = (x + dx * half, y + dy * half);
-                    if cx >= domain.i1
-                        || cy >= domain.j1
-                        || cx + half <= domain.i0
-                        || cy + half <= domain.j0
-                    {
+        .fold(
+            || (Vec::new(), 0u64, 0u64),
+            |(mut found, mut boxes, mut leaves), root| {
+                let mut stack = vec![*root];
+                while let Some(node) = stack.pop() {
+                    let (cost, h, k, i, j) = node;
+                    if h == 0 {
+                        found.push(RawPose {
+                            cost,
+                            yaw_index: k,
+                            i,
+                            j,
+                        });
                         continue;
                     }
-                    let ch = h - 1;
-                    let limit = limit_of(best.load(Ordering::Relaxed), factor);
-                    let b = box_bound(dt, pyr, t, ch, cx >> ch, cy >> ch, limit);
-                    if ch == 0 {
-                        nl += 1;
+                    let n = expand(dt, pyr, templates, &plans, domain, &node, limit, &mut stack);
+                    if h == 1 {
+                        leaves += n;
                     } else {
-                        nb += 1;
-                    }
-                    if within(b, best.load(Ordering::Relaxed), factor) {
-                        children.push((b, ch, cx, cy));
+                        boxes += n;
                     }
                 }
-                children.sort_unstable_by(|a, b| b.cmp(a));
-                stack.extend(children);
-            }
-            stats_boxes.fetch_add(nb, Ordering::Relaxed);
-            stats_leaves.fetch_add(nl, Ordering::Relaxed);
-            out
-        })
-        .collect();
-    let final_best = best.load(Ordering::Relaxed);
-    found.retain(|p| within(p.cost, final_best, factor));
+                (found, boxes, leaves)
+            },
+        )
+        .reduce(
+            || (Vec::new(), 0, 0),
+            |mut a, b| {
+                a.0.extend(b.0);
+                (a.0, a.1 + b.1, a.2 + b.2)
+            },
+        );
+    stats.boxes += boxes;
+    stats.leaves += leaves;
+    let mut found = found;
     found.sort_unstable();
-    let stats = SearchStats {
-        boxes: stats_boxes.load(Ordering::Relaxed),
-        leaves: stats_leaves.load(Ordering::Relaxed),
-        space: domain.cells() * templates.len() as u64,
-    };
     (found, stats)
 }
 
@@ -538,6 +742,36 @@ mod tests {
         fn search_equals_exhaustive_search(seed in 0u64..10_000, levels in 1u32..6, num in 5u64..20) {
             check_equal_to_exhaustive(seed, levels, (num, 5));
         }
+    }
+
+    #[test]
+    fn flat_plans_equal_box_bounds() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let map = random_segments(&mut rng, 20, 20.0);
+        let scan = random_segments(&mut rng, 6, 6.0);
+        let dt = DtTensor::build(&map, &ChamferOptions::default()).unwrap();
+        let pyr = BoundPyramid::build(&dt, 4);
+        let templates: Vec<Template> = (0..6)
+            .map(|k| build_template(&scan, k as f64, &dt, 4))
+            .collect();
+        let plans = Plans::new(&dt, &pyr, &templates);
+        let mut fast = 0;
+        for _ in 0..4000 {
+            let k = rng.gen_range(0..templates.len());
+            let h = rng.gen_range(0..=4u32);
+            let span = (dt.width.max(dt.height) as i64 >> h) + 4;
+            let (bx, by) = (rng.gen_range(-4..span), rng.gen_range(-4..span));
+            let limit = if rng.gen_bool(0.5) {
+                u64::MAX
+            } else {
+                rng.gen_range(0..3000)
+            };
+            if let Some(b) = plans.bound(k, h, bx, by, limit) {
+                assert_eq!(b, box_bound(&dt, &pyr, &templates[k], h, bx, by, limit));
+                fast += 1;
+            }
+        }
+        assert!(fast > 500, "{fast}");
     }
 
     #[test]

@@ -276,6 +276,33 @@ impl DtTensor {
     pub fn bytes(&self) -> usize {
         self.data.len()
     }
+
+    /// The tensor as a flat cell-major grid.
+    pub fn view(&self) -> GridView<'_> {
+        GridView {
+            data: &self.data,
+            w: self.width as i64,
+            h: self.height as i64,
+            channels: self.channels as i64,
+            offset: 0,
+        }
+    }
+}
+
+/// A cell-major u8 grid (all channels of a cell adjacent) as one flat slice, so that a sum
+/// over fixed cell offsets is one index addition per term.
+#[derive(Debug, Clone, Copy)]
+pub struct GridView<'a> {
+    /// Values, index `((y + offset) · w + x + offset) · channels + c`.
+    pub data: &'a [u8],
+    /// Stored cells along x.
+    pub w: i64,
+    /// Stored cells along y.
+    pub h: i64,
+    /// Channels per cell.
+    pub channels: i64,
+    /// Stored position of coordinate 0 (coordinates from −offset are stored).
+    pub offset: i64,
 }
 
 /// Integral distance transforms of FDCM: per channel, the running sum of the channel along
@@ -484,6 +511,18 @@ impl BoundPyramid {
         self.fine.get(channels, c, x, y)
     }
 
+    /// The fine level (2 × 2 minima at every cell) as a flat grid.
+    pub fn fine_view(&self) -> GridView<'_> {
+        self.fine.view()
+    }
+
+    /// Level h ≥ 1 (blocks of 2^h cells) as a flat grid, `None` beyond the top.
+    pub fn level_view(&self, level: u32) -> Option<GridView<'_>> {
+        self.levels
+            .get((level as usize).checked_sub(1)?)
+            .map(BoundLevel::view)
+    }
+
     /// Highest level.
     pub fn top(&self) -> u32 {
         self.levels.len() as u32
@@ -506,6 +545,16 @@ impl BoundPyramid {
 }
 
 impl BoundLevel {
+    fn view(&self) -> GridView<'_> {
+        GridView {
+            data: &self.data,
+            w: self.w as i64,
+            h: self.h as i64,
+            channels: self.channels as i64,
+            offset: 1,
+        }
+    }
+
     #[inline]
     fn get(&self, _channels: usize, c: usize, bi: i64, bj: i64) -> u8 {
         self.cell(bi, bj)
