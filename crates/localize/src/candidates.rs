@@ -13,7 +13,7 @@
 //! factor × minimum (see [`search`]): every pose within the factor of the minimum survives,
 //! and the result equals exhaustive search ([`exhaustive_search`], checked in the tests).
 
-use crate::chamfer::{BoundPyramid, DtTensor, GridView};
+use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
 use crate::{angle_diff, Pose2, Segment};
 use geodata::osm::index::MapIndex;
 use rayon::prelude::*;
@@ -210,8 +210,11 @@ fn box_bound(
             }
         }
         _ => {
-            for &(x, y, c, n) in &t.levels[h as usize] {
-                sum += pyr.get(dt.channels, h, c, bx + x, by + y) as u64 * n;
+            // Windows at stride 2^(h − k) over the entries of level h − k.
+            let k = stride_shift(h);
+            let (x0, y0) = (bx << k, by << k);
+            for &(x, y, c, n) in &t.levels[(h - k) as usize] {
+                sum += pyr.get(h, c, x0 + x, y0 + y) as u64 * n;
                 if sum > limit {
                     break;
                 }
@@ -240,8 +243,8 @@ struct Plans<'a> {
 
 impl<'a> Plans<'a> {
     fn new(dt: &'a DtTensor, pyr: &'a BoundPyramid, templates: &[Template]) -> Plans<'a> {
-        let mut views = vec![dt.view(), pyr.fine_view()];
-        views.extend((2..=pyr.top()).map_while(|h| pyr.level_view(h)));
+        let mut views = vec![dt.view()];
+        views.extend((1..=pyr.top()).map_while(|h| pyr.level_view(h)));
         let per_template = templates
             .par_iter()
             .map(|t| {
@@ -249,7 +252,11 @@ impl<'a> Plans<'a> {
                     .iter()
                     .enumerate()
                     .map(|(h, v)| {
-                        let entries = t.levels.get(if h <= 1 { 0 } else { h });
+                        let level = match h {
+                            0 | 1 => 0,
+                            _ => h - stride_shift(h as u32) as usize,
+                        };
+                        let entries = t.levels.get(level);
                         let entries = entries.map_or(&[][..], Vec::as_slice);
                         let mut plan = Plan {
                             terms: Vec::with_capacity(entries.len()),
@@ -278,7 +285,12 @@ impl<'a> Plans<'a> {
     fn bound(&self, k: usize, h: u32, bx: i64, by: i64, limit: u64) -> Option<u64> {
         let v = self.views.get(h as usize)?;
         let plan = self.per_template.get(k)?.get(h as usize)?;
-        let (x0, y0) = if h == 1 { (bx << 1, by << 1) } else { (bx, by) };
+        let shift = match h {
+            0 => 0,
+            1 => 1,
+            _ => stride_shift(h),
+        };
+        let (x0, y0) = (bx << shift, by << shift);
         let (sx, sy) = (x0 + v.offset, y0 + v.offset);
         if plan.terms.is_empty()
             || sx + plan.lo[0] < 0
