@@ -516,13 +516,14 @@ pub fn search(
         .chain(leaves)
         .filter(|node| node.0 <= limit)
         .collect();
-    let (found, boxes, leaves) = frontier
+    // One stack per rayon split, reused across its roots.
+    let (found, boxes, leaves, _) = frontier
         .par_iter()
         .with_min_len(16)
         .fold(
-            || (Vec::new(), 0u64, 0u64),
-            |(mut found, mut boxes, mut leaves), root| {
-                let mut stack = vec![*root];
+            || (Vec::new(), 0u64, 0u64, Vec::with_capacity(64)),
+            |(mut found, mut boxes, mut leaves, mut stack), root| {
+                stack.push(*root);
                 while let Some(node) = stack.pop() {
                     let (cost, h, k, i, j) = node;
                     if h == 0 {
@@ -541,14 +542,14 @@ pub fn search(
                         boxes += n;
                     }
                 }
-                (found, boxes, leaves)
+                (found, boxes, leaves, stack)
             },
         )
         .reduce(
-            || (Vec::new(), 0, 0),
+            || (Vec::new(), 0, 0, Vec::new()),
             |mut a, b| {
                 a.0.extend(b.0);
-                (a.0, a.1 + b.1, a.2 + b.2)
+                (a.0, a.1 + b.1, a.2 + b.2, a.3)
             },
         );
     stats.boxes += boxes;
