@@ -109,10 +109,11 @@ def ensure_pracmln(venv, work):
     say(f"pracmln {PRACMLN_VERSION}: creating venv {venv}")
     subprocess.check_call([sys.executable, "-m", "venv", venv])
     subprocess.check_call([py, "-m", "pip", "install", "-q", "wheel", "setuptools"])
-    meta = json.load(urllib.request.urlopen(f"https://pypi.org/pypi/pracmln/{PRACMLN_VERSION}/json"))
-    url = next(u["url"] for u in meta["urls"] if u["packagetype"] == "sdist")
     src = os.path.join(work, "pracmln-src")
     os.makedirs(src, exist_ok=True)
+    # `pip download` cannot fetch it: it runs the unpatched setup.py. PyPI's JSON names the sdist.
+    meta = json.load(urllib.request.urlopen("https://pypi.org/pypi/pracmln/json"))
+    url = next(u["url"] for u in meta["releases"][PRACMLN_VERSION] if u["packagetype"] == "sdist")
     tgz = os.path.join(src, os.path.basename(url))
     say(f"pracmln: downloading the sdist {url}")
     urllib.request.urlretrieve(url, tgz)
