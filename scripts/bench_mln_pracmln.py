@@ -416,6 +416,8 @@ def main():
         if known:
             row["same_unknown_atoms"] = known == {mine["ground_atoms"]}
         rows.append(row)
+        with open(os.path.join(args.work, "results.jsonl"), "a") as f:  # survives an interrupt
+            f.write(json.dumps(row) + "\n")
         if not args.json:
             cells = [name, str(mine["ground_atoms"]) + (
                          "" if row.get("same_unknown_atoms", True) else f" (pracmln {known})"),
