@@ -100,7 +100,7 @@ def ensure_pracmln(venv, work):
     share = os.path.abspath(os.path.join(venv, "share"))
     tb2 = os.path.join(share, "pracmln", "3rdparty", "toulbar2-0.9.7.0", "x86_64", "Linux",
                        "toulbar2")
-    env = dict(os.environ, XDG_DATA_DIRS=share)
+    env = dict(os.environ, XDG_DATA_DIRS=share, PYTHONHASHSEED="0")  # reproducible set order
     if os.path.exists(py) and os.access(tb2, os.X_OK) and subprocess.call(
             [py, "-c", "import pracmln"], env=env, stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL) == 0:
