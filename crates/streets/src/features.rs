@@ -7,7 +7,10 @@
 //! points (log); 4-bin histograms of R, G, B and of H, S, V. Bins without points get no
 //! features. The bin's true class (for training and evaluation) is the majority label of its
 //! points within 0.25 m of the bin's lowest point (ground under a car or a tree counts, the car
-//! or canopy does not).
+//! or canopy does not) when that is a ground class ([`is_ground_class`]); a bin whose lowest
+//! points are a car, a bicycle, a pole, a trunk or a wall has no true class: the ground under
+//! it is not seen (the thesis' Fig. 4.4 leaves such bins unlabelled too), so it is left out of
+//! training and scoring, though the model still uses its prediction.
 //!
 //! Cost: O(P log P) for the per-bin sorts plus O(B·w) for the local ground (w = window).
 
@@ -92,6 +95,15 @@ impl BinFeatures {
     pub fn row(&self, k: usize) -> &[f32] {
         &self.values[k * FEATURE_DIMS..(k + 1) * FEATURE_DIMS]
     }
+}
+
+/// Whether a class is a ground surface a bin can be labelled with: street, sidewalk, grass,
+/// or other ground (KITTI-360's `ground`, the simulator's footways, squares and facade strips).
+pub fn is_ground_class(class: Class) -> bool {
+    matches!(
+        class,
+        Class::Street | Class::Sidewalk | Class::Grass | Class::Other
+    )
 }
 
 fn hsv(rgb: [u8; 3]) -> [f32; 3] {
@@ -213,7 +225,8 @@ pub fn bin_features(
             let best = (0..Class::COUNT).max_by_key(|&c| (hist[c], std::cmp::Reverse(c)));
             truth[k] = best
                 .filter(|&c| hist[c] > 0)
-                .and_then(|c| Class::from_id(c as u8));
+                .and_then(|c| Class::from_id(c as u8))
+                .filter(|&c| is_ground_class(c));
         }
     }
     // Local ground: the lowest bin median within the window (separable sliding minimum).
@@ -346,6 +359,36 @@ mod tests {
         assert!((street[11 + 3] - 1.0).abs() < 1e-6, "red histogram top bin");
         assert_eq!(f.truth[0], Some(Class::Street));
         assert_eq!(f.truth[3], Some(Class::Sidewalk));
+        assert!(f.observed.iter().all(|&o| o));
+    }
+
+    #[test]
+    fn a_bin_whose_lowest_points_are_a_car_has_no_true_class() {
+        let cols = Columns {
+            label: true,
+            ..Columns::default()
+        };
+        let mut cloud = PointCloud::with_columns(cols, Precision::F64, 0);
+        let mut pairs = Vec::new();
+        // Bin 0: car side points from 0.1 m up, no ground seen. Bin 1: other paved ground
+        // under a few car points. Bin 2: a wall base.
+        let mut add = |bin: u32, z: f64, class: Class| {
+            pairs.push((bin, cloud.len() as u32));
+            cloud.push(&PointRecord {
+                position: [f64::from(bin) + 0.5, 0.5, z],
+                label: class.id(),
+                ..PointRecord::default()
+            });
+        };
+        for k in 0..5 {
+            add(0, 0.1 + 0.1 * f64::from(k), Class::Car);
+            add(1, 0.15, Class::Other);
+            add(2, 0.05 * f64::from(k), Class::Building);
+        }
+        add(1, 0.9, Class::Car);
+        let grid = BinGrid::from_pairs(1, 3, 1.0, &pairs);
+        let f = bin_features(&grid, &cloud, [0.0; 3], &FeatureOptions::default());
+        assert_eq!(f.truth, vec![None, Some(Class::Other), None]);
         assert!(f.observed.iter().all(|&o| o));
     }
 }

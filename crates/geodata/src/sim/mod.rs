@@ -10,6 +10,7 @@
 //! - [`scene`]: the world: extruded buildings (with an optional OSM map-error model),
 //!   ground (street at z = 0, 0.15 m kerbs, sidewalks, plazas, grass) and clutter a map
 //!   does not have (parked cars, trees, poles, bicycles, pedestrians, fences).
+//! - [`ground`]: the ground's materials per surface, markings, wet patches and lowered kerbs.
 //! - [`raycast`]: ray casting against the scene with a uniform 2-D grid (Amanatides–Woo
 //!   traversal) and an analytic ground.
 //! - [`sensor`]: a panoramic terrestrial scanner (angular steps, range limit, range noise,
@@ -33,6 +34,7 @@
 //! ```
 
 pub mod dataset;
+pub mod ground;
 pub mod raycast;
 pub mod scene;
 pub mod sensor;

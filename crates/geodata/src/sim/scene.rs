@@ -10,8 +10,16 @@
 //!   buildings the map lacks. Streets and their truth are not displaced.
 //! - **Ground**: the paved driving area at z = 0 (capsules of radius wₛ/2 about each true
 //!   centre line, see [`super::truth`]); everything else 0.15 m higher behind a kerb:
-//!   sidewalks (capsules of radius wₛ/2 + sidewalk width, footways and paths, pedestrian
-//!   areas, and a paved strip along every facade) and grass elsewhere.
+//!   sidewalks (capsules of radius wₛ/2 + sidewalk width about drivable segments, level with
+//!   the street at lowered kerbs and on shared surfaces), other paved ground (footways, paths,
+//!   cycleways, steps, pedestrian areas and a paved strip along every facade) and grass
+//!   elsewhere. Materials, markings and lowered kerbs: [`super::ground`].
+//!
+//!   Labels: **Sidewalk** is only the sidewalk strip of a drivable segment, the ground its
+//!   truth describes (so a streets dataset's bin labels agree with the true geometry of both
+//!   targets); other paved ground is labelled [`Class::Other`] with object id 0, as
+//!   KITTI-360's `ground` class (footways mapped on their own, squares, facade strips), and is
+//!   neither driving area nor a street's sidewalk.
 //! - **Clutter** a map does not have: parked cars along the kerbs, street trees and trees
 //!   on grass, poles, bicycles, pedestrians, and fenced construction sites.
 //!
@@ -19,6 +27,7 @@
 //! segment `s` has [`Scene::street_object`]`(s)`, its sidewalks
 //! [`Scene::sidewalk_object`]`(s)`; clutter objects follow; grass and plazas have id 0.
 
+use super::ground::{GroundModel, GroundOptions, Look};
 use super::raycast::{Caster, Shape};
 use super::truth::{offset_centre_line, street_truth, StreetTruth, TruthOptions};
 use super::{mix64, normal, purpose, stream_rng, SimError};
@@ -287,6 +296,8 @@ pub struct SceneOptions {
     pub building_height_range_m: [f64; 2],
     /// Width of the paved strip along every facade, metres.
     pub facade_path_m: f64,
+    /// Ground materials and lowered kerbs.
+    pub ground: GroundOptions,
     /// Grid cell side of the ray caster, metres.
     pub cell_m: f64,
 }
@@ -300,6 +311,7 @@ impl Default for SceneOptions {
             kerb_m: 0.15,
             building_height_range_m: [8.0, 25.0],
             facade_path_m: 1.5,
+            ground: GroundOptions::plain(),
             cell_m: 4.0,
         }
     }
@@ -514,6 +526,7 @@ pub struct Scene {
     /// Extent of the map (min, max), metres.
     pub bounds: ([f64; 2], [f64; 2]),
     facade_path_m: f64,
+    ground_model: GroundModel,
     plazas: Vec<Plaza>,
     surfaces: Vec<Surface>,
     caster: Caster,
@@ -604,6 +617,7 @@ impl SceneOptions {
         }
         check_non_negative("kerb_m", self.kerb_m)?;
         check_non_negative("facade_path_m", self.facade_path_m)?;
+        self.ground.validate()?;
         let [lo, hi] = self.building_height_range_m;
         if !(lo.is_finite() && hi.is_finite() && lo >= 3.0 && hi >= lo) {
             return Err(SimError::InvalidOption {
@@ -798,6 +812,7 @@ impl Scene {
                     .collect(),
             )
         };
+        let ground_model = GroundModel::new(&segments, &truth, &options.ground, seed);
         let mut scene = Scene {
             frame: map.frame,
             segments,
@@ -808,6 +823,7 @@ impl Scene {
             kerb_m: options.kerb_m,
             bounds: (gmin, gmax),
             facade_path_m: options.facade_path_m,
+            ground_model,
             plazas,
             surfaces: Vec::new(),
             caster: Caster::new(Vec::new(), options.cell_m, (gmin, gmax)),
@@ -1149,6 +1165,7 @@ impl Scene {
     fn ground_class_without_facades(&self, p: [f64; 2]) -> GroundCell {
         let mut street: Option<usize> = None;
         let mut sidewalk: Option<(f64, usize)> = None;
+        let mut other_paving: Option<usize> = None;
         for cap in self.ground.near(p) {
             let dist = point_segment_distance(p, cap.a, cap.b);
             if cap.drivable && dist <= cap.street_r {
@@ -1156,9 +1173,14 @@ impl Scene {
                     street = Some(cap.segment);
                 }
             } else if dist <= cap.sidewalk_r {
-                let excess = dist - cap.street_r;
-                if sidewalk.is_none_or(|(e, s)| excess < e || (excess == e && cap.segment < s)) {
-                    sidewalk = Some((excess, cap.segment));
+                if cap.drivable {
+                    let excess = dist - cap.street_r;
+                    if sidewalk.is_none_or(|(e, s)| excess < e || (excess == e && cap.segment < s))
+                    {
+                        sidewalk = Some((excess, cap.segment));
+                    }
+                } else if other_paving.is_none_or(|s| cap.segment < s) {
+                    other_paving = Some(cap.segment);
                 }
             }
         }
@@ -1171,33 +1193,61 @@ impl Scene {
             };
         }
         if let Some((_, s)) = sidewalk {
+            let lowered = self.ground_model.sidewalk_lowered(s, &self.segments[s], p);
             return GroundCell {
                 class: Class::Sidewalk,
                 object: self.sidewalk_object(s),
-                z: self.kerb_m,
+                z: if lowered { 0.0 } else { self.kerb_m },
                 segment: Some(s),
             };
         }
-        let in_plaza = self.plazas.iter().any(|(ring, lo, hi)| {
-            p[0] >= lo[0]
-                && p[0] <= hi[0]
-                && p[1] >= lo[1]
-                && p[1] <= hi[1]
-                && point_in_ring(p, ring)
-        });
+        let in_plaza = other_paving.is_some()
+            || self.plazas.iter().any(|(ring, lo, hi)| {
+                p[0] >= lo[0]
+                    && p[0] <= hi[0]
+                    && p[1] >= lo[1]
+                    && p[1] <= hi[1]
+                    && point_in_ring(p, ring)
+            });
         GroundCell {
-            class: if in_plaza {
-                Class::Sidewalk
-            } else {
-                Class::Grass
-            },
+            class: if in_plaza { Class::Other } else { Class::Grass },
             object: 0,
             z: self.kerb_m,
-            segment: None,
+            segment: other_paving,
         }
     }
 
-    /// The ground at a point: street, sidewalk (incl. plazas and facade strips) or grass.
+    /// Whether a surface is ground (street, sidewalk, grass, or other paved ground).
+    pub fn is_ground(surface: Surface) -> bool {
+        matches!(
+            surface.class,
+            Class::Street | Class::Sidewalk | Class::Grass
+        ) || (surface.class == Class::Other && surface.object == 0)
+    }
+
+    /// The look (reflectance and colour) of a ground hit, `None` for anything else.
+    pub fn ground_look(&self, hit: &SceneHit) -> Option<Look> {
+        let s = hit.surface;
+        if !Self::is_ground(s) {
+            return None;
+        }
+        let first_sidewalk = self.sidewalk_object(0);
+        let segment = match s.class {
+            Class::Street => s.object.checked_sub(self.street_object(0)),
+            Class::Sidewalk => s.object.checked_sub(first_sidewalk),
+            _ => None,
+        }
+        .map(|i| i as usize)
+        .filter(|&i| i < self.segments.len());
+        let street = segment.map(|i| (i, &self.segments[i], &self.truth[i]));
+        Some(
+            self.ground_model
+                .look(s.class, street, [hit.point[0], hit.point[1]]),
+        )
+    }
+
+    /// The ground at a point: street, sidewalk, other paved ground (footways, plazas, facade
+    /// strips; object 0) or grass.
     pub fn ground_at(&self, p: [f64; 2]) -> GroundCell {
         let mut cell = self.ground_class_without_facades(p);
         if cell.class == Class::Grass && self.facade_path_m > 0.0 {
@@ -1215,7 +1265,7 @@ impl Scene {
                         })
                 });
             if near_facade {
-                cell.class = Class::Sidewalk;
+                cell.class = Class::Other;
             }
         }
         cell
@@ -1247,7 +1297,8 @@ impl Scene {
         ground
     }
 
-    /// The ray's hit with the analytic ground (street at 0, everything else at the kerb height).
+    /// The ray's hit with the analytic ground (streets and lowered sidewalks at 0, everything
+    /// else at the kerb height).
     fn cast_ground(&self, o: [f64; 3], d: [f64; 3], t_max: f64) -> Option<SceneHit> {
         if d[2] >= -1e-12 || o[2] <= self.kerb_m {
             return None;
@@ -1258,6 +1309,8 @@ impl Scene {
             return None;
         }
         let upper = self.ground_at(at(t_kerb));
+        // Raised ground (kerb height) vs street level (streets, lowered sidewalks).
+        let raised = |c: &GroundCell| c.z > 0.5 * self.kerb_m;
         let hit = |t: f64, cell: GroundCell, normal: [f64; 3]| SceneHit {
             t,
             point: [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]],
@@ -1267,7 +1320,7 @@ impl Scene {
                 object: cell.object,
             },
         };
-        if upper.class != Class::Street {
+        if raised(&upper) {
             return Some(hit(t_kerb, upper, [0.0, 0.0, 1.0]));
         }
         let t_street = -o[2] / d[2];
@@ -1275,7 +1328,7 @@ impl Scene {
             return None;
         }
         let lower = self.ground_at(at(t_street));
-        if lower.class == Class::Street {
+        if !raised(&lower) {
             return Some(hit(t_street, lower, [0.0, 0.0, 1.0]));
         }
         // The ray passes the kerb face between the two planes: find the crossing.
@@ -1284,7 +1337,7 @@ impl Scene {
         for _ in 0..12 {
             let mid = 0.5 * (lo + hi);
             let c = self.ground_at(at(mid));
-            if c.class == Class::Street {
+            if !raised(&c) {
                 lo = mid;
             } else {
                 hi = mid;

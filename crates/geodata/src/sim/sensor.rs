@@ -9,6 +9,7 @@
 //! parallel (rayon), each with its own random stream, so the output does not depend on
 //! scheduling. Cost: O(rays · (cells crossed + shapes per cell)).
 
+use super::ground::{class_look, speckled_rgb};
 pub use super::scene::Pose;
 use super::scene::{Scene, SceneHit};
 use super::{normal, purpose, stream_rng, SimError};
@@ -138,40 +139,27 @@ pub struct ScanStats {
     pub points: usize,
 }
 
-/// Reflectance and base colour of a class.
-fn material(class: Class) -> (f64, [i32; 3]) {
-    match class {
-        Class::Building => (0.45, [178, 150, 122]),
-        Class::Street => (0.18, [72, 72, 78]),
-        Class::Sidewalk => (0.35, [152, 150, 148]),
-        Class::Grass => (0.5, [92, 142, 60]),
-        Class::Tree => (0.55, [52, 104, 42]),
-        Class::Car => (0.3, [128, 128, 128]),
-        Class::Pole => (0.4, [118, 118, 124]),
-        Class::Bicycle => (0.3, [46, 46, 52]),
-        Class::Other => (0.4, [196, 96, 52]),
-        Class::Unlabelled => (0.3, [128, 128, 128]),
-    }
-}
-
-fn shade(hit: &SceneHit, d: [f64; 3], rng: &mut impl Rng) -> (f32, [u8; 3]) {
-    let (reflectance, base) = material(hit.surface.class);
-    let cos = -(hit.normal[0] * d[0] + hit.normal[1] * d[1] + hit.normal[2] * d[2]);
-    let intensity = (reflectance * (0.3 + 0.7 * cos.abs()) + 0.03 * normal(rng)).clamp(0.0, 1.0);
-    let tint = match hit.surface.class {
-        Class::Car => {
-            let t = Scene::object_tint(hit.surface.object);
-            [t[0] * 3, t[1] * 3, t[2] * 3]
+/// Intensity and colour of a hit: the ground's look from the scene's ground model, the
+/// class material with a per-object tint for everything else.
+fn shade(scene: &Scene, hit: &SceneHit, d: [f64; 3], rng: &mut impl Rng) -> (f32, [u8; 3]) {
+    let look = scene.ground_look(hit).unwrap_or_else(|| {
+        let mut look = class_look(hit.surface.class);
+        let tint = match hit.surface.class {
+            Class::Car => Scene::object_tint(hit.surface.object).map(|t| t * 3),
+            Class::Building | Class::Bicycle | Class::Other => {
+                Scene::object_tint(hit.surface.object)
+            }
+            _ => [0, 0, 0],
+        };
+        for (c, t) in look.rgb.iter_mut().zip(tint) {
+            *c += t;
         }
-        Class::Building | Class::Bicycle | Class::Other => Scene::object_tint(hit.surface.object),
-        _ => [0, 0, 0],
-    };
-    let mut rgb = [0u8; 3];
-    for k in 0..3 {
-        let v = base[k] + tint[k] + rng.gen_range(-8..=8);
-        rgb[k] = v.clamp(0, 255) as u8;
-    }
-    (intensity as f32, rgb)
+        look
+    });
+    let cos = -(hit.normal[0] * d[0] + hit.normal[1] * d[1] + hit.normal[2] * d[2]);
+    let intensity =
+        (look.reflectance * (0.3 + 0.7 * cos.abs()) + 0.03 * normal(rng)).clamp(0.0, 1.0);
+    (intensity as f32, speckled_rgb(&look, rng))
 }
 
 /// Scans the scene from a pose; points in the sensor frame (see [`ScanFrame::Sensor`]).
@@ -227,7 +215,7 @@ pub fn scan_with(
                 };
                 let drop_draw: f64 = rng.gen();
                 let noise = options.range_noise_m * normal(&mut rng);
-                let (intensity, rgb) = shade(&hit, d, &mut rng);
+                let (intensity, rgb) = shade(scene, &hit, d, &mut rng);
                 if hit.t < options.range_min_m || drop_draw < options.dropout {
                     continue;
                 }

@@ -12,6 +12,9 @@
 //! Widths come from the `width` tag when present (then constant along the way), else from
 //! `lanes`, else from the highway type, seeded per way; both width and offset follow a
 //! seeded AR(1) walk along the way, so neighbouring segments of one way vary smoothly.
+//! Drivable ways have a seeded sidewalk width by type unless tagged `sidewalk=no|none|separate`
+//! (`separate`: the sidewalk is its own footway in the map, paved where the map draws it and
+//! labelled as other paved ground, not as this road's sidewalk; see [`super::scene`]).
 
 use super::{normal, purpose, stream_rng, SimError};
 use crate::osm::model::StreetSegment;
@@ -145,7 +148,9 @@ pub fn street_truth(
             }
             _ => way_rng.gen_range(width_range[0]..=width_range[1]),
         };
-        let sidewalk_tag_none = matches!(way.sidewalk.as_deref(), Some("no" | "none"));
+        // `separate`: the sidewalk is mapped as its own footway, which the scene paves where
+        // the map draws it (as other paved ground); the road itself has none beside it.
+        let sidewalk_tag_none = matches!(way.sidewalk.as_deref(), Some("no" | "none" | "separate"));
         let sidewalk_m = if sidewalk_tag_none || sidewalk_range[1] <= 0.0 {
             0.0
         } else {
