@@ -311,7 +311,7 @@ impl Default for SceneOptions {
             kerb_m: 0.15,
             building_height_range_m: [8.0, 25.0],
             facade_path_m: 1.5,
-            ground: GroundOptions::plain(),
+            ground: GroundOptions::default(),
             cell_m: 4.0,
         }
     }
@@ -1641,7 +1641,12 @@ mod tests {
     #[test]
     fn ground_classes_follow_the_truth() {
         let map = small_map(5);
-        let scene = Scene::build(&map, &SceneOptions::default(), 1).unwrap();
+        // Plain ground: every sidewalk raised by the kerb (no lowered sections).
+        let options = SceneOptions {
+            ground: GroundOptions::plain(),
+            ..SceneOptions::default()
+        };
+        let scene = Scene::build(&map, &options, 1).unwrap();
         let (s, (seg, t)) = scene
             .segments
             .iter()
@@ -1662,6 +1667,49 @@ mod tests {
         let cell = scene.ground_at(side);
         assert_eq!(cell.class, Class::Sidewalk, "segment {s}");
         assert_eq!(cell.z, scene.kerb_m);
+        // With the varied ground the class is the same; the sidewalk is raised unless lowered.
+        let varied = Scene::build(&map, &SceneOptions::default(), 1).unwrap();
+        let cell = varied.ground_at(side);
+        assert_eq!(cell.class, Class::Sidewalk);
+        let lowered = varied.ground_model.sidewalk_lowered(s, seg, side);
+        assert_eq!(cell.z, if lowered { 0.0 } else { varied.kerb_m });
+    }
+
+    #[test]
+    fn other_paved_ground_is_not_a_sidewalk() {
+        let map = small_map(5);
+        let scene = Scene::build(&map, &SceneOptions::default(), 1).unwrap();
+        // Next to a wall, away from every street: the facade strip.
+        let b = &scene.buildings[0];
+        let (a, c) = (b.outer[0], b.outer[1]);
+        let e = [c[0] - a[0], c[1] - a[1]];
+        let len = (e[0] * e[0] + e[1] * e[1]).sqrt();
+        let out = [e[1] / len, -e[0] / len];
+        let p = [
+            0.5 * (a[0] + c[0]) + 0.5 * out[0],
+            0.5 * (a[1] + c[1]) + 0.5 * out[1],
+        ];
+        let cell = scene.ground_at(p);
+        if cell.segment.is_none() && !scene.inside_building(p) {
+            assert_eq!(cell.class, Class::Other);
+            assert_eq!(cell.object, 0);
+        }
+        // Footways are other paved ground too.
+        for (s, (seg, t)) in scene.segments.iter().zip(&scene.truth).enumerate() {
+            if t.drivable || !t.on_ground || seg.length_m < 1.0 {
+                continue;
+            }
+            let [a, b] = offset_centre_line(seg, t);
+            let mid = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+            let cell = scene.ground_at(mid);
+            if cell.segment == Some(s) {
+                assert_eq!(cell.class, Class::Other);
+                assert!(Scene::is_ground(Surface {
+                    class: cell.class,
+                    object: cell.object
+                }));
+            }
+        }
     }
 
     #[test]
