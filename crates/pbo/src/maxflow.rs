@@ -4,6 +4,8 @@
 //! algorithms for energy minimization in vision", PAMI 26(9), 2004,
 //! doi:10.1109/TPAMI.2004.60, with the distance/timestamp heuristics of their reference
 //! implementation and the tree reuse of Kohli & Torr (dynamic graph cuts, ICCV 2005).
+//! A fresh solve first saturates, in one cache-friendly sweep, every path source → i → j →
+//! sink of a single arc (most of the augmenting paths on vision grids), then grows the trees.
 //!
 //! The graph is kept as a compact arc array (CSR: the arcs of node `i` are
 //! `first[i]..first[i + 1]`, `u32` indices, every arc knows its sister), built once at the
@@ -195,6 +197,21 @@ struct Arc<T> {
     sister: u32,
     r_cap: T,
     rev_cap: T,
+}
+
+/// The arc joining the two search trees found by tree growth, with its endpoints.
+#[derive(Debug, Clone, Copy)]
+struct Middle<T> {
+    /// The arc from the source tree to the sink tree.
+    arc: u32,
+    /// Its reverse arc.
+    sister: u32,
+    /// Its tail, in the source tree.
+    tail: u32,
+    /// Its head, in the sink tree.
+    head: u32,
+    /// Its residual capacity.
+    r_cap: T,
 }
 
 /// A directed graph with source and sink terminals, solved by Boykov–Kolmogorov max-flow.
@@ -542,7 +559,77 @@ impl<T: Capacity> Graph<T> {
         self.flow
     }
 
+    /// Saturates the paths source → i → j → sink of one arc between a node with
+    /// residual from the source and a node with residual to the sink, before the search
+    /// trees are grown. One sweep over the nodes in index order; node k settles its edges
+    /// to lower-numbered neighbours only, whose nodes and arc slices were just swept and
+    /// are still cached (on grids the forward neighbours would each be a cache miss).
+    /// Any maximum flow gives the same residual reachability, so the cut and the labels
+    /// do not depend on this order.
+    fn push_terminal_pairs(&mut self) {
+        let eps = self.eps;
+        let n = self.nodes.len();
+        let mut flow = T::ZERO;
+        for k in 0..n {
+            let mut tr_k = self.nodes[k].tr_cap;
+            if tr_k <= eps && tr_k >= -eps {
+                continue;
+            }
+            let (b, e) = (self.first[k] as usize, self.first[k + 1] as usize);
+            for a in b..e {
+                let arc = self.arcs[a];
+                let h = arc.head as usize;
+                if h >= k {
+                    continue;
+                }
+                let tr_h = self.nodes[h].tr_cap;
+                if tr_k > eps {
+                    // source → k → h → sink along arc a.
+                    if tr_h >= -eps || arc.r_cap <= eps {
+                        continue;
+                    }
+                    let mut f = arc.r_cap;
+                    if f > tr_k {
+                        f = tr_k;
+                    }
+                    if f > -tr_h {
+                        f = -tr_h;
+                    }
+                    self.push_flow(a as u32, arc.sister, f);
+                    self.nodes[h].tr_cap = tr_h + f;
+                    tr_k -= f;
+                    flow += f;
+                    if tr_k <= eps {
+                        break;
+                    }
+                } else {
+                    // source → h → k → sink along the sister of a.
+                    if tr_h <= eps || arc.rev_cap <= eps {
+                        continue;
+                    }
+                    let mut f = arc.rev_cap;
+                    if f > tr_h {
+                        f = tr_h;
+                    }
+                    if f > -tr_k {
+                        f = -tr_k;
+                    }
+                    self.push_flow(arc.sister, a as u32, f);
+                    self.nodes[h].tr_cap = tr_h - f;
+                    tr_k += f;
+                    flow += f;
+                    if tr_k >= -eps {
+                        break;
+                    }
+                }
+            }
+            self.nodes[k].tr_cap = tr_k;
+        }
+        self.flow += flow;
+    }
+
     fn init(&mut self) {
+        self.push_terminal_pairs();
         self.queue_first = NONE;
         self.queue_last = NONE;
         self.orphans.clear();
@@ -692,7 +779,7 @@ impl<T: Capacity> Graph<T> {
                 self.grow::<false>(iu, ni)
             };
             self.time = self.time.wrapping_add(1);
-            if middle != NONE {
+            if let Some(middle) = middle {
                 // Keep i active: it may have more paths to the other tree.
                 self.nodes[iu].next = i;
                 current = i;
@@ -704,22 +791,22 @@ impl<T: Capacity> Graph<T> {
         }
     }
 
-    /// Sends `amount` along arc `a`, keeping both residual copies in step.
+    /// Sends `amount` along arc `a` whose sister is `s`, keeping both residual copies in
+    /// step. The caller knows the sister, so the two writes do not wait for each other.
     #[inline]
-    fn push_flow(&mut self, a: usize, amount: T) {
-        let arc = &mut self.arcs[a];
+    fn push_flow(&mut self, a: u32, s: u32, amount: T) {
+        let arc = &mut self.arcs[a as usize];
         arc.r_cap -= amount;
         arc.rev_cap += amount;
-        let s = arc.sister as usize;
-        let sister = &mut self.arcs[s];
+        let sister = &mut self.arcs[s as usize];
         sister.r_cap += amount;
         sister.rev_cap -= amount;
     }
 
     /// Grows the tree of active node `i` (the sink tree if `SINK`) over its residual arcs.
-    /// Returns the arc from the source tree to the sink tree it found, or `NONE`.
+    /// Returns the arc from the source tree to the sink tree it found, if any.
     #[inline]
-    fn grow<const SINK: bool>(&mut self, i: usize, ni: Node<T>) -> u32 {
+    fn grow<const SINK: bool>(&mut self, i: usize, ni: Node<T>) -> Option<Middle<T>> {
         let eps = self.eps;
         let (b, e) = (self.first[i] as usize, self.first[i + 1] as usize);
         let arcs = &self.arcs[b..e];
@@ -747,32 +834,52 @@ impl<T: Capacity> Graph<T> {
                     self.queue_last = j;
                 }
             } else if nj.is_sink != SINK {
-                return if SINK { arc.sister } else { (b + k) as u32 };
+                let here = (b + k) as u32;
+                // Everything augment needs to start walking, without touching the sister.
+                return Some(if SINK {
+                    Middle {
+                        arc: arc.sister,
+                        sister: here,
+                        tail: j,
+                        head: i as u32,
+                        r_cap: r,
+                    }
+                } else {
+                    Middle {
+                        arc: here,
+                        sister: arc.sister,
+                        tail: i as u32,
+                        head: j,
+                        r_cap: r,
+                    }
+                });
             } else if nj.ts <= ni.ts && nj.dist > ni.dist {
                 nj.parent = arc.sister;
                 nj.ts = ni.ts;
                 nj.dist = ni.dist + 1;
             }
         }
-        NONE
+        None
     }
 
     /// Pushes the bottleneck flow along source tree → `middle` → sink tree.
-    fn augment(&mut self, middle: u32) {
+    ///
+    /// Each tree is walked twice, child to parent: once for the bottleneck, once to push.
+    /// The walks read only the child's parent arc (its `rev_cap` mirrors the sister's
+    /// residual); the sister, in the parent's arc slice, is only written.
+    fn augment(&mut self, middle: Middle<T>) {
         let eps = self.eps;
-        let m = self.arcs[middle as usize];
-        let mut bottleneck = m.r_cap;
+        let mut bottleneck = middle.r_cap;
         // Source tree: walk from the tail of `middle` to the source.
-        let mut i = self.arcs[m.sister as usize].head;
+        let mut i = middle.tail;
         loop {
             let a = self.nodes[i as usize].parent;
             if a == TERMINAL {
                 break;
             }
-            let arc = self.arcs[a as usize];
-            let r = arc.rev_cap;
-            if bottleneck > r {
-                bottleneck = r;
+            let arc = &self.arcs[a as usize];
+            if bottleneck > arc.rev_cap {
+                bottleneck = arc.rev_cap;
             }
             i = arc.head;
         }
@@ -781,13 +888,13 @@ impl<T: Capacity> Graph<T> {
             bottleneck = tr;
         }
         // Sink tree.
-        let mut i = m.head;
+        let mut i = middle.head;
         loop {
             let a = self.nodes[i as usize].parent;
             if a == TERMINAL {
                 break;
             }
-            let arc = self.arcs[a as usize];
+            let arc = &self.arcs[a as usize];
             if bottleneck > arc.r_cap {
                 bottleneck = arc.r_cap;
             }
@@ -798,8 +905,8 @@ impl<T: Capacity> Graph<T> {
             bottleneck = tr;
         }
         // Augment.
-        self.push_flow(middle as usize, bottleneck);
-        let mut i = self.arcs[m.sister as usize].head;
+        self.push_flow(middle.arc, middle.sister, bottleneck);
+        let mut i = middle.tail;
         loop {
             let a = self.nodes[i as usize].parent;
             if a == TERMINAL {
@@ -807,8 +914,8 @@ impl<T: Capacity> Graph<T> {
             }
             let arc = self.arcs[a as usize];
             // Flow runs parent → i along the sister of the parent arc.
-            self.push_flow(arc.sister as usize, bottleneck);
-            if self.arcs[a as usize].rev_cap <= eps {
+            self.push_flow(arc.sister, a, bottleneck);
+            if arc.rev_cap - bottleneck <= eps {
                 self.set_orphan_front(i);
             }
             i = arc.head;
@@ -818,15 +925,15 @@ impl<T: Capacity> Graph<T> {
         if n.tr_cap <= eps {
             self.set_orphan_front(i);
         }
-        let mut i = m.head;
+        let mut i = middle.head;
         loop {
             let a = self.nodes[i as usize].parent;
             if a == TERMINAL {
                 break;
             }
             let arc = self.arcs[a as usize];
-            self.push_flow(a as usize, bottleneck);
-            if self.arcs[a as usize].r_cap <= eps {
+            self.push_flow(a, arc.sister, bottleneck);
+            if arc.r_cap - bottleneck <= eps {
                 self.set_orphan_front(i);
             }
             i = arc.head;
