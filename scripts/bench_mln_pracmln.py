@@ -350,6 +350,11 @@ def problem_files(name, args):
             os.path.join(d, "query.db"), None)
 
 
+def same(a, b):
+    """Equal up to float summation noise."""
+    return abs(a - b) <= 1e-6 + 1e-9 * abs(b)
+
+
 def fmt(r):
     if r["status"] == "ok":
         return f"{r['cost']:.4f}", f"{r['seconds']:.2f}"
@@ -407,11 +412,10 @@ def main():
                          hard_violations=s["hard_violations"],
                          answer_atoms_not_unknown=s["answer_atoms_not_unknown"])
             row[method] = r
-        optimal = abs(mine["cost"] - mine["lower_bound"]) <= 1e-6 * max(1.0, abs(mine["cost"]))
+        optimal = same(mine["cost"], mine["lower_bound"])
         w = row.get("WCSPInference")
         if optimal and w and w["status"] == "ok":
-            row["wcsp_equals_proven_optimum"] = abs(w["cost"] - mine["cost"]) <= 1e-6 * max(
-                1.0, abs(mine["cost"]))
+            row["wcsp_equals_proven_optimum"] = same(w["cost"], mine["cost"])
         known = {row[m]["unknown_atoms"] for m in methods if row[m]["status"] == "ok"}
         if known:
             row["same_unknown_atoms"] = known == {mine["ground_atoms"]}
