@@ -4,7 +4,9 @@
 //! writes them to `target/bench-data/`, times urbansem's QPBO and max-flow on them, runs
 //! `scripts/bench_pbo_peers.py` (Kolmogorov's QPBO via `thinqpbo`, BK max-flow via
 //! `PyMaxflow`, installed with pip if missing) on the same files, prints both timings with
-//! the ratio urbansem/peer, and fails if energies, bounds or labelled counts differ.
+//! the ratio urbansem/peer, and fails if energies, bounds or labelled counts differ. The
+//! `--repeat` runs are interleaved rounds (urbansem, then the peers), so that a change of
+//! load on a shared machine hits both sides; the solve's thread CPU time is reported too.
 //!
 //! `urbansem bench mln` runs MAP inference (default QSSR + tabu) on the real MLN sets of
 //! `../shared/data/mln` (LP, RC, KB, ER) and on the generated F&S, −F&S and ID, reports
@@ -43,7 +45,8 @@ pub struct PboBenchArgs {
     /// Print one JSON object instead of the table (peer messages go to stderr).
     #[arg(long)]
     json: bool,
-    /// Runs per solver and instance; the fastest is reported.
+    /// Rounds (each runs urbansem, then the peers, once per solver and instance); the
+    /// fastest run of each side is reported.
     #[arg(long, default_value_t = 3)]
     repeat: usize,
     /// Directory for the instance files and the peers' results.
@@ -71,6 +74,8 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
 struct Outcome {
     total_s: f64,
     solve_s: f64,
+    /// Thread CPU seconds of the solve (None where the platform does not tell).
+    solve_cpu_s: Option<f64>,
     /// QPBO: energy of the labelling (unlabelled as 0); max-flow: the flow value.
     energy: i64,
     /// QPBO: labelled variables; max-flow: nodes on the sink side.
@@ -85,57 +90,89 @@ fn is_submodular(inst: &QuadraticInstance) -> bool {
         .all(|p| i64::from(p.e[0]) + i64::from(p.e[3]) <= i64::from(p.e[1]) + i64::from(p.e[2]))
 }
 
-/// urbansem's QPBO: build + solve (and weak persistencies when submodular, which is what
-/// Kolmogorov's `Solve` labels in that case: every node, free ones as 0).
-fn time_qpbo(inst: &QuadraticInstance, repeat: usize) -> Outcome {
+impl Outcome {
+    /// Keeps the fastest times of `self` and `run` and the answer of `run`.
+    fn best_with(self, run: Outcome) -> Outcome {
+        let cpu = match (self.solve_cpu_s, run.solve_cpu_s) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+        Outcome {
+            total_s: self.total_s.min(run.total_s),
+            solve_s: self.solve_s.min(run.solve_s),
+            solve_cpu_s: cpu,
+            ..run
+        }
+    }
+}
+
+/// CPU time consumed by the calling thread so far, unaffected by time spent waiting for a
+/// core (None off Linux).
+fn thread_cpu_seconds() -> Option<f64> {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::time::{clock_gettime, ClockId};
+        let t = clock_gettime(ClockId::ThreadCPUTime);
+        Some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9)
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        None
+    }
+}
+
+/// Wall and thread CPU seconds of `f`.
+fn timed<R>(f: impl FnOnce() -> R) -> (R, f64, Option<f64>) {
+    let c0 = thread_cpu_seconds();
+    let t0 = Instant::now();
+    let r = f();
+    let wall = t0.elapsed().as_secs_f64();
+    let cpu = thread_cpu_seconds().zip(c0).map(|(c1, c0)| c1 - c0);
+    (r, wall, cpu)
+}
+
+/// urbansem's QPBO, one run: build + solve (and weak persistencies when submodular, which
+/// is what Kolmogorov's `Solve` labels in that case: every node, free ones as 0).
+fn time_qpbo(inst: &QuadraticInstance) -> Outcome {
     let submodular = is_submodular(inst);
-    let mut best = Outcome {
-        total_s: f64::INFINITY,
-        solve_s: f64::INFINITY,
-        ..Outcome::default()
-    };
-    for _ in 0..repeat.max(1) {
-        let t0 = Instant::now();
-        let mut q = inst.to_qpbo::<i32>();
-        q.prepare();
-        let t1 = Instant::now();
+    let t0 = Instant::now();
+    let mut q = inst.to_qpbo::<i32>();
+    q.prepare();
+    let build_s = t0.elapsed().as_secs_f64();
+    let ((), solve_s, solve_cpu_s) = timed(|| {
         q.solve();
         if submodular {
             q.compute_weak_persistencies();
         }
-        let t2 = Instant::now();
-        best.total_s = best.total_s.min((t2 - t0).as_secs_f64());
-        best.solve_s = best.solve_s.min((t2 - t1).as_secs_f64());
-        best.energy = inst.energy(&q.labelling_or_zero());
-        best.count = q.num_labelled() as i64;
-        best.twice_bound = i64::from(q.twice_lower_bound());
+    });
+    Outcome {
+        total_s: build_s + solve_s,
+        solve_s,
+        solve_cpu_s,
+        energy: inst.energy(&q.labelling_or_zero()),
+        count: q.num_labelled() as i64,
+        twice_bound: i64::from(q.twice_lower_bound()),
     }
-    best
 }
 
-/// urbansem's max-flow on the cut form of the energy (build + solve).
-fn time_maxflow(inst: &QuadraticInstance, repeat: usize) -> Option<Outcome> {
-    let mut best = Outcome {
-        total_s: f64::INFINITY,
-        solve_s: f64::INFINITY,
-        ..Outcome::default()
-    };
-    for _ in 0..repeat.max(1) {
-        let t0 = Instant::now();
-        let mut g = inst.to_graph::<i32>()?;
-        g.prepare();
-        let t1 = Instant::now();
-        let flow = g.maxflow(false);
-        let t2 = Instant::now();
-        best.total_s = best.total_s.min((t2 - t0).as_secs_f64());
-        best.solve_s = best.solve_s.min((t2 - t1).as_secs_f64());
-        best.energy = i64::from(flow);
-        best.count = (0..inst.num_vars)
+/// urbansem's max-flow on the cut form of the energy, one run (build + solve).
+fn time_maxflow(inst: &QuadraticInstance) -> Option<Outcome> {
+    let t0 = Instant::now();
+    let mut g = inst.to_graph::<i32>()?;
+    g.prepare();
+    let build_s = t0.elapsed().as_secs_f64();
+    let (flow, solve_s, solve_cpu_s) = timed(|| g.maxflow(false));
+    let energy = i64::from(flow);
+    Some(Outcome {
+        total_s: build_s + solve_s,
+        solve_s,
+        solve_cpu_s,
+        energy,
+        count: (0..inst.num_vars)
             .filter(|&i| g.segment(i) == Segment::Sink)
-            .count() as i64;
-        best.twice_bound = 2 * best.energy;
-    }
-    Some(best)
+            .count() as i64,
+        twice_bound: 2 * energy,
+    })
 }
 
 fn script_path() -> PathBuf {
@@ -149,7 +186,7 @@ fn script_path() -> PathBuf {
     ))
 }
 
-/// Runs the Python peers on `files`; returns their JSON keyed by file path.
+/// Runs the Python peers once on `files`; returns their JSON keyed by file path.
 fn run_peers(args: &PboBenchArgs, files: &[PathBuf]) -> anyhow::Result<Value> {
     let script = script_path();
     let out = args.data_dir.join("peers.json");
@@ -157,7 +194,7 @@ fn run_peers(args: &PboBenchArgs, files: &[PathBuf]) -> anyhow::Result<Value> {
     cmd.arg(&script)
         .args(files)
         .arg("--repeat")
-        .arg(args.repeat.max(1).to_string())
+        .arg("1")
         .arg("--json-out")
         .arg(&out);
     if args.json {
@@ -184,6 +221,7 @@ fn peer_outcome(v: &Value) -> Option<Outcome> {
     Some(Outcome {
         total_s: f("total_s")?,
         solve_s: f("solve_s")?,
+        solve_cpu_s: f("solve_cpu_s"),
         energy: i("energy").or_else(|| i("flow"))?,
         count: i("labelled").or_else(|| i("sink_nodes"))?,
         twice_bound: i("twice_lower_bound").or_else(|| i("flow").map(|x| 2 * x))?,
@@ -254,39 +292,44 @@ fn bench_pbo(args: &PboBenchArgs) -> anyhow::Result<()> {
         t.elapsed().as_secs_f64(),
         args.data_dir.display()
     ));
-    let mut rows = Vec::new();
-    for inst in &instances {
-        let ours = time_qpbo(inst, args.repeat);
-        say(format!(
-            "urbansem qpbo    {}: build+solve {:.3} s, solve {:.3} s",
-            inst.name, ours.total_s, ours.solve_s
-        ));
-        rows.push(Row {
-            instance: inst.name.clone(),
-            n: inst.num_vars,
-            m: inst.pairs.len(),
-            solver: "qpbo",
-            peer_name: "thinqpbo",
-            ours,
-            peer: None,
-        });
-        if let Some(ours) = time_maxflow(inst, args.repeat) {
-            say(format!(
-                "urbansem maxflow {}: build+solve {:.3} s, solve {:.3} s",
-                inst.name, ours.total_s, ours.solve_s
-            ));
-            rows.push(Row {
-                instance: inst.name.clone(),
-                n: inst.num_vars,
-                m: inst.pairs.len(),
-                solver: "maxflow",
-                peer_name: "PyMaxflow",
-                ours,
-                peer: None,
-            });
+    let mut rows: Vec<Row> = Vec::new();
+    let rounds = args.repeat.max(1);
+    for round in 1..=rounds {
+        say(format!("round {round}/{rounds}"));
+        let mut k = 0;
+        for inst in &instances {
+            let runs = [
+                ("qpbo", "thinqpbo", Some(time_qpbo(inst))),
+                ("maxflow", "PyMaxflow", time_maxflow(inst)),
+            ];
+            for (solver, peer_name, run) in runs {
+                let Some(run) = run else { continue };
+                say(format!(
+                    "urbansem {solver:<7} {}: build+solve {:.3} s, solve {:.3} s (CPU {} s)",
+                    inst.name,
+                    run.total_s,
+                    run.solve_s,
+                    fmt_opt(run.solve_cpu_s, 3)
+                ));
+                if let Some(row) = rows.get_mut(k) {
+                    row.ours = row.ours.clone().best_with(run);
+                } else {
+                    rows.push(Row {
+                        instance: inst.name.clone(),
+                        n: inst.num_vars,
+                        m: inst.pairs.len(),
+                        solver,
+                        peer_name,
+                        ours: run,
+                        peer: None,
+                    });
+                }
+                k += 1;
+            }
         }
-    }
-    if !args.no_peers {
+        if args.no_peers {
+            continue;
+        }
         let peers = run_peers(args, &files)?;
         for row in &mut rows {
             let file = instances
@@ -294,15 +337,14 @@ fn bench_pbo(args: &PboBenchArgs) -> anyhow::Result<()> {
                 .zip(&files)
                 .find(|(inst, _)| inst.name == row.instance)
                 .map(|(_, f)| f.display().to_string());
-            let key = if row.solver == "qpbo" {
-                "qpbo"
-            } else {
-                "maxflow"
-            };
-            row.peer = file
+            let run = file
                 .and_then(|f| peers.get(f.as_str()))
-                .and_then(|e| e.get(key))
+                .and_then(|e| e.get(row.solver))
                 .and_then(peer_outcome);
+            row.peer = match (row.peer.take(), run) {
+                (Some(best), Some(run)) => Some(best.best_with(run)),
+                (best, run) => run.or(best),
+            };
         }
     }
     let all_match = rows.iter().all(|r| r.matches() != Some(false));
@@ -320,6 +362,9 @@ fn bench_pbo(args: &PboBenchArgs) -> anyhow::Result<()> {
                     "urbansem_solve_s": r.ours.solve_s,
                     "peer_total_s": r.peer.as_ref().map(|p| p.total_s),
                     "peer_solve_s": r.peer.as_ref().map(|p| p.solve_s),
+                    "urbansem_solve_cpu_s": r.ours.solve_cpu_s,
+                    "peer_solve_cpu_s": r.peer.as_ref().and_then(|p| p.solve_cpu_s),
+                    "ratio_solve_cpu": r.ours.solve_cpu_s.and_then(|c| ratio(c, r.peer.as_ref().and_then(|p| p.solve_cpu_s))),
                     "ratio_total": ratio(r.ours.total_s, r.peer.as_ref().map(|p| p.total_s)),
                     "ratio_solve": ratio(r.ours.solve_s, r.peer.as_ref().map(|p| p.solve_s)),
                     "energy": r.ours.energy,
@@ -367,7 +412,7 @@ fn bench_pbo(args: &PboBenchArgs) -> anyhow::Result<()> {
 fn print_table(rows: &[Row]) {
     println!();
     println!(
-        "{:<22} {:>9} {:>9} {:<8} {:<10} | {:>9} {:>9} {:>6} | {:>9} {:>9} {:>6} | {:>12} {:>9} {:<5}",
+        "{:<22} {:>9} {:>9} {:<8} {:<10} | {:>9} {:>9} {:>6} | {:>9} {:>9} {:>6} {:>6} | {:>12} {:>9} {:<5}",
         "instance",
         "n",
         "m",
@@ -379,6 +424,7 @@ fn print_table(rows: &[Row]) {
         "ours slv",
         "peer slv",
         "ratio",
+        "cpu",
         "energy",
         "count",
         "check"
@@ -386,13 +432,14 @@ fn print_table(rows: &[Row]) {
     for r in rows {
         let pt = r.peer.as_ref().map(|p| p.total_s);
         let ps = r.peer.as_ref().map(|p| p.solve_s);
+        let pc = r.peer.as_ref().and_then(|p| p.solve_cpu_s);
         let check = match r.matches() {
             Some(true) => "ok",
             Some(false) => "DIFF",
             None => "-",
         };
         println!(
-            "{:<22} {:>9} {:>9} {:<8} {:<10} | {:>9.3} {:>9} {:>6} | {:>9.3} {:>9} {:>6} | {:>12} {:>9} {:<5}",
+            "{:<22} {:>9} {:>9} {:<8} {:<10} | {:>9.3} {:>9} {:>6} | {:>9.3} {:>9} {:>6} {:>6} | {:>12} {:>9} {:<5}",
             r.instance,
             r.n,
             r.m,
@@ -404,15 +451,18 @@ fn print_table(rows: &[Row]) {
             r.ours.solve_s,
             fmt_opt(ps, 3),
             fmt_opt(ratio(r.ours.solve_s, ps), 2),
+            fmt_opt(r.ours.solve_cpu_s.and_then(|c| ratio(c, pc)), 2),
             r.ours.energy,
             r.ours.count,
             check
         );
     }
     println!(
-        "times in seconds, fastest of the runs; 'tot' = build + solve, 'slv' = solve with the \
-         graph already built (urbansem: arc array built by prepare(), as the peers build \
-         theirs while terms are added); ratio = urbansem / peer (< 1: urbansem faster). energy: QPBO \
+        "times in seconds, fastest of the interleaved rounds; 'tot' = build + solve, 'slv' = \
+         solve with the graph already built (urbansem: arc array built by prepare(), as the \
+         peers build theirs while terms are added); ratio = urbansem / peer (< 1: urbansem \
+         faster); 'cpu' = the same ratio of the solve's thread CPU time (robust to a loaded \
+         machine). energy: QPBO \
          labelling with unlabelled as 0, or the flow; count: labelled variables, or sink-side \
          nodes. The peers' build runs a Python loop (thinqpbo has no array API), so 'tot' \
          favours urbansem there; 'slv' is the like-for-like number."
