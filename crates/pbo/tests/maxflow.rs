@@ -154,7 +154,47 @@ fn check<T: Capacity>(
             prop_assert_eq!(g.segment(i), Segment::Sink);
         }
     }
+    // The trees are exactly the residual reachability sets (the same for every maximum
+    // flow, so QPBO's labels do not depend on the order in which paths are augmented).
+    let (from_source, to_sink) = residual_reachability(&g, net.n);
+    for i in 0..net.n {
+        prop_assert_eq!(
+            g.tree(i) == Some(Segment::Source),
+            from_source[i],
+            "node {}",
+            i
+        );
+        prop_assert_eq!(g.tree(i) == Some(Segment::Sink), to_sink[i], "node {}", i);
+    }
     Ok(())
+}
+
+/// Nodes reachable from the source and nodes reaching the sink in the residual graph of
+/// `g` after a solve, by fixpoint iteration (brute force).
+fn residual_reachability<T: Capacity>(g: &Graph<T>, n: usize) -> (Vec<bool>, Vec<bool>) {
+    let eps = g.tolerance();
+    let zero = T::default();
+    let mut arcs = Vec::new();
+    for i in 0..n {
+        g.for_each_residual_arc(i, |j, _| arcs.push((i, j)));
+    }
+    let mut from_source: Vec<bool> = (0..n).map(|i| g.tr_residual(i) > eps).collect();
+    let mut to_sink: Vec<bool> = (0..n).map(|i| g.tr_residual(i) < zero - eps).collect();
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for &(i, j) in &arcs {
+            if from_source[i] && !from_source[j] {
+                from_source[j] = true;
+                changed = true;
+            }
+            if to_sink[j] && !to_sink[i] {
+                to_sink[i] = true;
+                changed = true;
+            }
+        }
+    }
+    (from_source, to_sink)
 }
 
 /// Changes applied after a first solve: signed t-weights, capacity increases, new edges.
