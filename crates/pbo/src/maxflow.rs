@@ -199,6 +199,17 @@ struct Arc<T> {
     rev_cap: T,
 }
 
+/// The smallest of three capacities.
+#[inline]
+fn min3<T: PartialOrd>(a: T, b: T, c: T) -> T {
+    let ab = if b < a { b } else { a };
+    if c < ab {
+        c
+    } else {
+        ab
+    }
+}
+
 /// The arc joining the two search trees found by tree growth, with its endpoints.
 #[derive(Debug, Clone, Copy)]
 struct Middle<T> {
@@ -588,13 +599,7 @@ impl<T: Capacity> Graph<T> {
                     if tr_h >= -eps || arc.r_cap <= eps {
                         continue;
                     }
-                    let mut f = arc.r_cap;
-                    if f > tr_k {
-                        f = tr_k;
-                    }
-                    if f > -tr_h {
-                        f = -tr_h;
-                    }
+                    let f = min3(arc.r_cap, tr_k, -tr_h);
                     self.push_flow(a as u32, arc.sister, f);
                     self.nodes[h].tr_cap = tr_h + f;
                     tr_k -= f;
@@ -607,13 +612,7 @@ impl<T: Capacity> Graph<T> {
                     if tr_h <= eps || arc.rev_cap <= eps {
                         continue;
                     }
-                    let mut f = arc.rev_cap;
-                    if f > tr_h {
-                        f = tr_h;
-                    }
-                    if f > -tr_k {
-                        f = -tr_k;
-                    }
+                    let f = min3(arc.rev_cap, tr_h, -tr_k);
                     self.push_flow(arc.sister, a as u32, f);
                     self.nodes[h].tr_cap = tr_h - f;
                     tr_k += f;
