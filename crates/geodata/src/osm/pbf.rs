@@ -483,21 +483,19 @@ fn read_blobs(path: &Path) -> Result<Vec<RawBlob>, OsmError> {
         reader
             .read_exact(&mut data)
             .map_err(|e| fail(format!("reading {data_size} blob bytes: {e}")))?;
+        let blob_offset = offset;
+        offset += 4 + header_len as u64 + data_size as u64;
         let is_header = match kind.as_str() {
             "OSMHeader" => true,
             "OSMData" => false,
-            _ => {
-                offset += 4 + header_len as u64 + data_size as u64;
-                continue;
-            }
+            _ => continue,
         };
         blobs.push(RawBlob {
             index,
-            offset,
+            offset: blob_offset,
             is_header,
             data,
         });
-        offset += 4 + header_len as u64 + data_size as u64;
     }
     Ok(blobs)
 }

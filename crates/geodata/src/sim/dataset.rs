@@ -858,18 +858,9 @@ pub fn write_relations(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::city::{generate_city, CityOptions};
 
     fn map() -> OsmMap {
-        let xml = generate_city(
-            &CityOptions {
-                size_m: 400.0,
-                ..CityOptions::default()
-            },
-            8,
-        )
-        .unwrap();
-        OsmMap::from_xml_str(&xml).unwrap()
+        crate::sim::scene::tests::small_map(8)
     }
 
     fn fast_sensor() -> SensorOptions {

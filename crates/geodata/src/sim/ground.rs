@@ -414,20 +414,11 @@ pub fn speckled_rgb(look: &Look, rng: &mut impl Rng) -> [u8; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::city::{generate_city, CityOptions};
     use crate::osm::OsmMap;
     use crate::sim::truth::{street_truth, TruthOptions};
 
     fn map() -> OsmMap {
-        let xml = generate_city(
-            &CityOptions {
-                size_m: 400.0,
-                ..CityOptions::default()
-            },
-            3,
-        )
-        .unwrap();
-        OsmMap::from_xml_str(&xml).unwrap()
+        crate::sim::scene::tests::small_map(3)
     }
 
     #[test]

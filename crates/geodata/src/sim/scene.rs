@@ -1512,10 +1512,11 @@ impl Clutter<'_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::city::{generate_city, CityOptions};
 
+    /// The embedded procedural city at 400 m, the shared fixture of the simulator tests.
     pub(crate) fn small_map(seed: u64) -> OsmMap {
         let xml = generate_city(
             &CityOptions {

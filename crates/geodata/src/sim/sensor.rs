@@ -260,21 +260,11 @@ pub fn scan_with(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::city::{generate_city, CityOptions};
-    use crate::osm::OsmMap;
     use crate::sim::scene::SceneOptions;
     use crate::sim::truth::segment_coordinates;
 
     fn scene(seed: u64) -> Scene {
-        let xml = generate_city(
-            &CityOptions {
-                size_m: 400.0,
-                ..CityOptions::default()
-            },
-            seed,
-        )
-        .unwrap();
-        let map = OsmMap::from_xml_str(&xml).unwrap();
+        let map = crate::sim::scene::tests::small_map(seed);
         Scene::build(&map, &SceneOptions::default(), seed).unwrap()
     }
 

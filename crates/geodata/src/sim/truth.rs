@@ -222,18 +222,9 @@ pub fn in_strip(segment: &StreetSegment, truth: &StreetTruth, p: [f64; 2]) -> bo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::city::{generate_city, CityOptions};
 
     fn small_map() -> OsmMap {
-        let xml = generate_city(
-            &CityOptions {
-                size_m: 400.0,
-                ..CityOptions::default()
-            },
-            3,
-        )
-        .unwrap();
-        OsmMap::from_xml_str(&xml).unwrap()
+        crate::sim::scene::tests::small_map(3)
     }
 
     #[test]
