@@ -12,11 +12,43 @@
 //!   `Observed`; smoothing rules rewarding three horizontally or vertically consecutive pixels
 //!   that are all on (0.35) or all off (0.3). Horizontal and vertical runs are separate rules
 //!   (closed predicates `Right`, `Down`), so that a run never turns a corner.
+//! - **IE evidence** ([`ie_evidence_from_mfoilp`]): the Cora citation-segmentation evidence
+//!   rebuilt from J. Cussens' mfoilp fact files (the original `evidence.db` is missing from
+//!   every public copy).
+//! - **KB3** ([`kb3`]): a third-order webKB problem built from a labelled webKB evidence set
+//!   as the thesis describes it: page classes and links inferred jointly from the words.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rustc_hash::{FxHashMap, FxHashSet};
 use std::fmt::Write as _;
+use thiserror::Error;
+
+/// A data file the IE or KB3 builder could not read.
+#[derive(Debug, Error)]
+pub enum GenerateError {
+    /// A line that is not a fact of the expected form.
+    #[error("{file}:{line}: expected {expected}, found `{text}`")]
+    BadFact {
+        /// The data file.
+        file: String,
+        /// 1-based line.
+        line: usize,
+        /// What the line should look like.
+        expected: &'static str,
+        /// The line.
+        text: String,
+    },
+    /// A data file without any fact.
+    #[error("{file}: no {expected} facts")]
+    Empty {
+        /// The data file.
+        file: String,
+        /// What was expected.
+        expected: &'static str,
+    },
+}
 
 /// A generated problem: the three files' contents.
 #[derive(Debug, Clone, PartialEq)]
@@ -143,6 +175,378 @@ pub fn image_denoising(side: usize, seed: u64) -> GeneratedMln {
     }
 }
 
+/// Splits `name(a,b,…).` into its arguments (surrounding quotes removed).
+fn fact_args<'a>(line: &'a str, name: &str) -> Option<Vec<&'a str>> {
+    let inner = line
+        .trim()
+        .strip_prefix(name)?
+        .strip_prefix('(')?
+        .strip_suffix('.')?
+        .trim_end()
+        .strip_suffix(')')?;
+    Some(
+        inner
+            .split(',')
+            .map(|a| a.trim().trim_matches('"'))
+            .collect(),
+    )
+}
+
+/// Reads one mfoilp fact file: the argument lists of its `name(…).` lines.
+fn mfoilp_facts<'a>(
+    text: &'a str,
+    file: &str,
+    name: &str,
+    arity: usize,
+    expected: &'static str,
+) -> Result<Vec<Vec<&'a str>>, GenerateError> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        match fact_args(line, name) {
+            Some(args)
+                if args.len() == arity
+                    && args
+                        .iter()
+                        .all(|a| !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric())) =>
+            {
+                out.push(args)
+            }
+            _ => {
+                return Err(GenerateError::BadFact {
+                    file: file.to_owned(),
+                    line: i + 1,
+                    expected,
+                    text: line.to_owned(),
+                })
+            }
+        }
+    }
+    if out.is_empty() {
+        return Err(GenerateError::Empty {
+            file: file.to_owned(),
+            expected,
+        });
+    }
+    Ok(out)
+}
+
+/// mfoilp's `isdate`: a month name, or four characters starting with 18, 19 or 20.
+fn is_date(token: &str) -> bool {
+    const MONTHS: [&str; 12] = [
+        "january",
+        "february",
+        "march",
+        "april",
+        "may",
+        "june",
+        "july",
+        "august",
+        "september",
+        "october",
+        "november",
+        "december",
+    ];
+    MONTHS.contains(&token)
+        || (token.len() == 4 && ["18", "19", "20"].iter().any(|p| token.starts_with(p)))
+}
+
+/// Rebuilds the IE evidence (Tuffy constants: tokens `T<token>`, positions `P<nn>`, citations
+/// `B<id>`) from mfoilp's fact files: `Token` from `tokens`; `IsDate`, `IsDigit` and
+/// `IsAlphaChar` by mfoilp's definitions (month names or 18xx/19xx/20xx; all digits; one
+/// letter); `Next(Pi, Pi+1)` and `LessThan(Pi, Pj)` over the positions 0 … max + 1 (mfoilp's
+/// `next(I, I+1)` and `lessthan`); `SimilarTitle` and `JntInfCandidate` from their files.
+/// Not in any public file, so absent (closed world: false): `Center`, `SimilarVenue`,
+/// `HasPunc`, `HasComma`, `FirstIn`, `LastInitial`, `FirstNonAuthorTitleTkn`, `FollowBy`.
+/// Of these only `Center` occurs in the Tuffy/RockIt IE program (one formula).
+pub fn ie_evidence_from_mfoilp(
+    tokens: &str,
+    similar_titles: &str,
+    candidates: &str,
+) -> Result<String, GenerateError> {
+    let tok = mfoilp_facts(tokens, "tokens", "token", 3, "token(\"word\",pos,bib).")?;
+    let sim = mfoilp_facts(
+        similar_titles,
+        "similartitles",
+        "similartitle",
+        6,
+        "similartitle(bib,pos,pos,bib,pos,pos).",
+    )?;
+    let cand = mfoilp_facts(
+        candidates,
+        "jntinfcandidates",
+        "jntinfcandidate",
+        3,
+        "jntinfcandidate(bib,pos,bib).",
+    )?;
+    let mut out = String::new();
+    let mut words: Vec<&str> = Vec::new();
+    let mut max_pos = 0usize;
+    for a in &tok {
+        let _ = writeln!(out, "Token(T{},P{},B{})", a[0], a[1], a[2]);
+        words.push(a[0]);
+        max_pos = max_pos.max(a[1].parse().unwrap_or(0));
+    }
+    words.sort_unstable();
+    words.dedup();
+    for w in &words {
+        if is_date(w) {
+            let _ = writeln!(out, "IsDate(T{w})");
+        }
+        if w.chars().all(|c| c.is_ascii_digit()) {
+            let _ = writeln!(out, "IsDigit(T{w})");
+        }
+        if w.len() == 1 && w.chars().all(|c| c.is_ascii_alphabetic()) {
+            let _ = writeln!(out, "IsAlphaChar(T{w})");
+        }
+    }
+    let pos = |i: usize| format!("P{i:02}");
+    for i in 0..=max_pos {
+        let _ = writeln!(out, "Next({},{})", pos(i), pos(i + 1));
+        for j in i + 1..=max_pos + 1 {
+            let _ = writeln!(out, "LessThan({},{})", pos(i), pos(j));
+        }
+    }
+    for a in &sim {
+        let _ = writeln!(
+            out,
+            "SimilarTitle(B{},P{},P{},B{},P{},P{})",
+            a[0], a[1], a[2], a[3], a[4], a[5]
+        );
+    }
+    for a in &cand {
+        let _ = writeln!(out, "JntInfCandidate(B{},P{},B{})", a[0], a[1], a[2]);
+    }
+    Ok(out)
+}
+
+/// Options of [`kb3`].
+#[derive(Debug, Clone)]
+pub struct Kb3Options {
+    /// Indicative words per class (`HasWord(W, p) => PageClass(p, C)` formulas).
+    pub words_per_class: usize,
+    /// A word must occur on at least this many pages of the class.
+    pub min_support: usize,
+    /// Sampled false query atoms per true one (the thesis: 1).
+    pub false_per_true: f64,
+}
+
+impl Default for Kb3Options {
+    fn default() -> Self {
+        Kb3Options {
+            words_per_class: 1,
+            min_support: 5,
+            false_per_true: 1.0,
+        }
+    }
+}
+
+/// A KB3 instance: the three inference files and the training database.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Kb3 {
+    /// Program, evidence (`HasWord`) and the canopy query; the program's weights are 0, to
+    /// be learnt from `training`.
+    pub files: GeneratedMln,
+    /// Evidence plus labels: the true `PageClass` and `Linked` atoms.
+    pub training: String,
+}
+
+/// Reads `Pred(a,b)` lines: predicate name and arguments.
+fn simple_atoms<'a>(
+    text: &'a str,
+    file: &str,
+) -> Result<Vec<(&'a str, Vec<&'a str>)>, GenerateError> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with("//") {
+            continue;
+        }
+        let parsed = line.split_once('(').and_then(|(name, rest)| {
+            let args: Vec<&str> = rest.strip_suffix(')')?.split(',').map(str::trim).collect();
+            (!name.is_empty() && args.iter().all(|a| !a.is_empty())).then_some((name, args))
+        });
+        match parsed {
+            Some(a) => out.push(a),
+            None => {
+                return Err(GenerateError::BadFact {
+                    file: file.to_owned(),
+                    line: i + 1,
+                    expected: "a ground atom `Pred(a,b)`",
+                    text: line.to_owned(),
+                })
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Builds KB3 from webKB evidence (`HasWord(word,page)`, `Linked(page,page)`) and labels
+/// (one unary class atom per line, `Person(3468)`), following thesis §3.2.4: the query is
+/// `PageClass(page,class)` and `Linked(page,page)` jointly, from the words alone. Pages are
+/// the labelled ones. Formulas: a prior per class, `HasWord(W, p) => PageClass(p, C)` for the
+/// `words_per_class` words with the highest smoothed log-odds for class C, a link prior,
+/// link symmetry, and the 49 third-order rules `PageClass(p, C1) ^ Linked(p, q) =>
+/// PageClass(q, C2)`. The canopy: every true query atom and, per predicate,
+/// `false_per_true` times as many false ones drawn at random (seeded).
+pub fn kb3(
+    evidence: &str,
+    labels: &str,
+    options: &Kb3Options,
+    seed: u64,
+) -> Result<Kb3, GenerateError> {
+    let ev = simple_atoms(evidence, "evidence")?;
+    let lab = simple_atoms(labels, "labels")?;
+    let mut classes: Vec<&str> = lab.iter().map(|(c, _)| *c).collect();
+    classes.sort_unstable();
+    classes.dedup();
+    let label_set: FxHashSet<(&str, &str)> = lab
+        .iter()
+        .filter_map(|(c, a)| a.first().map(|p| (*c, *p)))
+        .collect();
+    let mut pages: Vec<&str> = label_set.iter().map(|(_, p)| *p).collect();
+    pages.sort_unstable();
+    pages.dedup();
+    if pages.is_empty() {
+        return Err(GenerateError::Empty {
+            file: "labels".into(),
+            expected: "class",
+        });
+    }
+    let page_set: FxHashSet<&str> = pages.iter().copied().collect();
+    let mut words_of: FxHashMap<&str, Vec<&str>> = FxHashMap::default();
+    let mut links: Vec<(&str, &str)> = Vec::new();
+    for (name, args) in &ev {
+        match (*name, args.as_slice()) {
+            ("HasWord", [w, p]) if page_set.contains(p) => words_of.entry(*p).or_default().push(*w),
+            ("Linked", [p, q]) if p != q && page_set.contains(p) && page_set.contains(q) => {
+                links.push((*p, *q))
+            }
+            _ => {}
+        }
+    }
+    links.sort_unstable();
+    links.dedup();
+    for ws in words_of.values_mut() {
+        ws.sort_unstable();
+        ws.dedup();
+    }
+    // Indicative words: smoothed log-odds of the class given the word.
+    let mut formulas = String::new();
+    let n_pages = pages.len() as f64;
+    for c in &classes {
+        let in_class: FxHashSet<&str> = pages
+            .iter()
+            .copied()
+            .filter(|p| label_set.contains(&(*c, *p)))
+            .collect();
+        let mut with: FxHashMap<&str, (usize, usize)> = FxHashMap::default();
+        for p in &pages {
+            for w in words_of.get(p).map_or(&[][..], |v| &v[..]) {
+                let e = with.entry(*w).or_default();
+                if in_class.contains(p) {
+                    e.0 += 1;
+                } else {
+                    e.1 += 1;
+                }
+            }
+        }
+        let nc = in_class.len() as f64;
+        let mut scored: Vec<(f64, &str)> = with
+            .iter()
+            .filter(|(_, counts)| counts.0 >= options.min_support)
+            .map(|(&w, &(a, b))| {
+                let odds =
+                    ((a as f64 + 1.0) / (nc + 2.0)) / ((b as f64 + 1.0) / (n_pages - nc + 2.0));
+                (odds.ln(), w)
+            })
+            .collect();
+        scored.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(y.1)));
+        for (_, w) in scored.iter().take(options.words_per_class) {
+            let _ = writeln!(formulas, "0 HasWord(W{w}, p) => PageClass(p, {c})");
+        }
+    }
+    let mut program = String::from(
+        "// KB3: third-order webKB (thesis §3.2.4), generated by urbansem; weights to be learnt\n\
+         *HasWord(word, page)\nPageClass(page, class)\nLinked(page, page)\n\n",
+    );
+    for c in &classes {
+        let _ = writeln!(program, "0 PageClass(p, {c})");
+    }
+    program += &formulas;
+    program += "0 Linked(p, q)\n0 Linked(p, q) => Linked(q, p)\n";
+    for c1 in &classes {
+        for c2 in &classes {
+            let _ = writeln!(
+                program,
+                "0 PageClass(p, {c1}) ^ Linked(p, q) => PageClass(q, {c2})"
+            );
+        }
+    }
+    let mut evidence_out = String::new();
+    for p in &pages {
+        for w in words_of.get(p).map_or(&[][..], |v| &v[..]) {
+            let _ = writeln!(evidence_out, "HasWord(W{w}, P{p})");
+        }
+    }
+    // Labels and the canopy.
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut true_class: Vec<String> = Vec::new();
+    let mut false_class: Vec<String> = Vec::new();
+    for p in &pages {
+        for c in &classes {
+            let atom = format!("PageClass(P{p}, {c})");
+            if label_set.contains(&(*c, *p)) {
+                true_class.push(atom);
+            } else {
+                false_class.push(atom);
+            }
+        }
+    }
+    let link_set: FxHashSet<(&str, &str)> = links.iter().copied().collect();
+    let true_links: Vec<String> = links
+        .iter()
+        .map(|(p, q)| format!("Linked(P{p}, P{q})"))
+        .collect();
+    let want_links = (true_links.len() as f64 * options.false_per_true).round() as usize;
+    let mut false_links: FxHashSet<(usize, usize)> = FxHashSet::default();
+    let max_false = pages.len() * (pages.len() - 1) - links.len();
+    while false_links.len() < want_links.min(max_false) {
+        let (i, j) = (rng.gen_range(0..pages.len()), rng.gen_range(0..pages.len()));
+        if i != j && !link_set.contains(&(pages[i], pages[j])) {
+            false_links.insert((i, j));
+        }
+    }
+    let mut false_links: Vec<(usize, usize)> = false_links.into_iter().collect();
+    false_links.sort_unstable();
+    false_class.shuffle(&mut rng);
+    let want_class = (true_class.len() as f64 * options.false_per_true).round() as usize;
+    false_class.truncate(want_class);
+    false_class.sort_unstable();
+    let mut query = String::new();
+    let mut training = evidence_out.clone();
+    for a in true_class.iter().chain(&true_links) {
+        let _ = writeln!(query, "{a}");
+        let _ = writeln!(training, "{a}");
+    }
+    for a in &false_class {
+        let _ = writeln!(query, "{a}");
+    }
+    for (i, j) in false_links {
+        let _ = writeln!(query, "Linked(P{}, P{})", pages[i], pages[j]);
+    }
+    Ok(Kb3 {
+        files: GeneratedMln {
+            program,
+            evidence: evidence_out,
+            query,
+        },
+        training,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,5 +585,74 @@ mod tests {
         assert_eq!(p.atoms.len(), 36);
         // Runs of three: 6 rows · 4 + 6 columns · 4, each with an on- and an off-rule.
         assert_eq!(p.higher_order_factors(), 2 * 48);
+    }
+
+    #[test]
+    fn ie_evidence_follows_mfoilp_definitions() {
+        let ev = ie_evidence_from_mfoilp(
+            "token(\"may\",00,2001).\ntoken(\"1994\",01,2001).\ntoken(\"x\",02,2001).\ntoken(\"neural\",00,2002).\n",
+            "similartitle(2001,00,01,2002,00,00).\n",
+            "jntinfcandidate(2001,02,2002).\n",
+        )
+        .unwrap();
+        for line in [
+            "Token(Tmay,P00,B2001)",
+            "IsDate(Tmay)",
+            "IsDate(T1994)",
+            "IsDigit(T1994)",
+            "IsAlphaChar(Tx)",
+            "Next(P02,P03)",
+            "LessThan(P00,P03)",
+            "SimilarTitle(B2001,P00,P01,B2002,P00,P00)",
+            "JntInfCandidate(B2001,P02,B2002)",
+        ] {
+            assert!(ev.lines().any(|l| l == line), "missing {line}");
+        }
+        assert!(!ev.contains("IsDate(Tneural)") && !ev.contains("Next(P03"));
+        let e = ie_evidence_from_mfoilp("token(\"a b\",00,1).\n", "x", "y").unwrap_err();
+        assert!(e.to_string().starts_with("tokens:1: expected"), "{e}");
+    }
+
+    #[test]
+    fn kb3_lists_true_atoms_and_as_many_false_ones() {
+        let mut evidence = String::new();
+        for p in 0..12 {
+            for w in 0..4 {
+                if (p + w) % 3 != 0 {
+                    let _ = writeln!(evidence, "HasWord({w},{p})");
+                }
+            }
+            let _ = writeln!(evidence, "Linked({p},{})", (p + 1) % 12);
+        }
+        let labels: String = (0..12)
+            .map(|p| format!("{}({p})\n", if p % 2 == 0 { "Course" } else { "Student" }))
+            .collect();
+        let options = Kb3Options {
+            min_support: 1,
+            ..Kb3Options::default()
+        };
+        let k = kb3(&evidence, &labels, &options, 3).unwrap();
+        assert_eq!(k, kb3(&evidence, &labels, &options, 3).unwrap());
+        // 12 true classes + 12 false, 12 true links + 12 false.
+        assert_eq!(k.files.query.lines().count(), 48);
+        assert!(
+            grounded(&k.files).factors.is_empty(),
+            "weights are 0 before learning"
+        );
+        let unit = GeneratedMln {
+            program: k.files.program.replace("\n0 ", "\n1 "),
+            ..k.files.clone()
+        };
+        assert_eq!(grounded(&unit).atoms.len(), 48);
+        assert_eq!(
+            k.training
+                .lines()
+                .filter(|l| l.starts_with("PageClass"))
+                .count(),
+            12
+        );
+        // 2 priors, 2 word rules, 2 link rules, 4 third-order rules.
+        let prog = parse_program(&k.files.program, "kb3.mln").unwrap();
+        assert_eq!(prog.formulas.len(), 10);
     }
 }

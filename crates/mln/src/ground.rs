@@ -127,6 +127,8 @@ pub struct GroundFactor {
     pub weight: f64,
     /// Whether it comes from a hard formula.
     pub hard: bool,
+    /// Index of the program formula it grounds (into `Program::formulas`).
+    pub formula: usize,
     /// Clauses (disjunctions of literals over atom variables) whose conjunction is the formula.
     pub clauses: Vec<Vec<Literal>>,
 }
@@ -221,6 +223,55 @@ impl GroundProblem {
             program.predicates[a.predicate].name,
             args.join(",")
         )
+    }
+
+    /// The same ground problem with the soft factors of formula i weighted by `weights[i]`
+    /// (hard factors keep [`GroundProblem::hard_weight`], raised if the new soft weights
+    /// need it); the cost polynomial is rebuilt. The evidence-decided part
+    /// (`constant_violated_weight`) is left as grounded. Used by weight learning, which
+    /// grounds once with unit weights.
+    pub fn with_formula_weights(&self, weights: &[f64]) -> GroundProblem {
+        let weight_of = |f: &GroundFactor| weights.get(f.formula).copied().unwrap_or(f.weight);
+        let soft_total: f64 = self
+            .factors
+            .iter()
+            .filter(|f| !f.hard)
+            .map(|f| weight_of(f).abs())
+            .sum();
+        let hard_weight = self.hard_weight.max((soft_total + 1.0) * 1.0e3);
+        let factors: Vec<GroundFactor> = self
+            .factors
+            .iter()
+            .filter_map(|f| {
+                let weight = if f.hard { hard_weight } else { weight_of(f) };
+                (weight != 0.0).then(|| GroundFactor {
+                    weight,
+                    ..f.clone()
+                })
+            })
+            .collect();
+        GroundProblem {
+            constants: self.constants.clone(),
+            atoms: self.atoms.clone(),
+            cost: cost_polynomial(self.atoms.len(), &factors),
+            factors,
+            hard_weight,
+            constant_violated_weight: self.constant_violated_weight,
+            constant_hard_violations: self.constant_hard_violations,
+        }
+    }
+
+    /// Per formula of the program (`formulas` of them), the number of its soft ground
+    /// factors that hold under `x` (n_i(x) of the MLN's log-linear form, less the
+    /// groundings decided by evidence, which do not depend on `x`).
+    pub fn true_counts(&self, formulas: usize, x: &[bool]) -> Vec<f64> {
+        let mut n = vec![0.0; formulas];
+        for f in self.factors.iter().filter(|f| !f.hard) {
+            if let Some(c) = n.get_mut(f.formula) {
+                *c += f64::from(u8::from(f.is_true(x)));
+            }
+        }
+        n
     }
 }
 
@@ -520,7 +571,7 @@ pub fn ground(
     let mut factors = Vec::new();
     let mut constant_violated_weight = 0.0;
     let mut constant_hard_violations = 0;
-    for (formula, result) in program.formulas.iter().zip(per_formula) {
+    for (formula_index, (formula, result)) in program.formulas.iter().zip(per_formula).enumerate() {
         let g = result?;
         let (weight, hard) = match formula.weight {
             Weight::Soft(w) => (w, false),
@@ -563,15 +614,12 @@ pub fn ground(
             factors.push(GroundFactor {
                 weight,
                 hard,
+                formula: formula_index,
                 clauses,
             });
         }
     }
-    let mut cost = Polynomial::new(atoms.len());
-    for f in &factors {
-        add_factor_polynomial(&mut cost, f);
-    }
-    cost.simplify(1e-12);
+    let cost = cost_polynomial(atoms.len(), &factors);
     Ok(GroundProblem {
         constants: consts.names,
         atoms,
@@ -581,6 +629,16 @@ pub fn ground(
         constant_violated_weight,
         constant_hard_violations,
     })
+}
+
+/// Σ −w·[F] over the factors as one simplified polynomial in `n` atoms.
+fn cost_polynomial(n: usize, factors: &[GroundFactor]) -> Polynomial {
+    let mut cost = Polynomial::new(n);
+    for f in factors {
+        add_factor_polynomial(&mut cost, f);
+    }
+    cost.simplify(1e-12);
+    cost
 }
 
 /// Adds −w·Π_C (1 − Π_{l∈C} l̄) to the cost.

@@ -7,6 +7,7 @@
 //! - [`parse`]: programs (`.mln`), evidence (`.db`) and queries, with file:line:col errors.
 //! - [`ground`]: join-based grounding with evidence simplification → the cost polynomial.
 //! - [`infer`]: MAP inference (QPBO/QSSR, MaxWalkSAT on formulas or monomials).
+//! - [`learn`]: discriminative weight learning (voted perceptron on MAP counts).
 //! - [`walksat`]: MaxWalkSAT over weighted conjunctive factors.
 //! - [`wcnf`]: the ground problem as weighted partial MaxSAT for exact solvers.
 //! - [`generate`]: seeded generators of the thesis' F&S, −F&S and ID problems.
@@ -14,6 +15,7 @@
 pub mod generate;
 pub mod ground;
 pub mod infer;
+pub mod learn;
 pub mod parse;
 pub mod walksat;
 pub mod wcnf;

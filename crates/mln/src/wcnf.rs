@@ -207,6 +207,7 @@ mod tests {
                 .map(|(cs, w, hard)| GroundFactor {
                     weight: if hard { 1e3 } else { f64::from(w) / 2.0 },
                     hard,
+                    formula: 0,
                     clauses: cs
                         .into_iter()
                         .map(|c| c.into_iter().map(|(v, s)| Literal::new(v, s)).collect())

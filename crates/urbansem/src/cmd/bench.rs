@@ -9,7 +9,8 @@
 //! load on a shared machine hits both sides; the solve's thread CPU time is reported too.
 //!
 //! `urbansem bench mln` runs MAP inference (default QSSR + tabu) on the real MLN sets of
-//! `../shared/data/mln` (LP, RC, KB, ER) and on the generated F&S, −F&S and ID, reports
+//! `../shared/data/mln` (LP, RC, KB, ER; IE with its evidence rebuilt from mfoilp's facts)
+//! and on the generated F&S, −F&S, ID and KB3 (weights learnt first by `mln::learn`), reports
 //! sizes, persistencies, cost, bound and seconds per phase (fastest of `--repeat` runs),
 //! re-scores Tuffy's shipped MAP answers with the same evaluator, and quotes Tuffy's logged
 //! run time (another machine) and the issue's time target (thesis Table 3.5 / 10).
@@ -481,7 +482,7 @@ pub struct MlnBenchArgs {
     /// Runs per set; the fastest is reported (the answer is the same for a seed).
     #[arg(long, default_value_t = 3)]
     repeat: usize,
-    /// Only these sets (comma-separated): lp, rc, kb, er, fs, neg-fs, id.
+    /// Only these sets (comma-separated): ie, lp, rc, kb, er, fs, neg-fs, id, kb3.
     #[arg(long, value_delimiter = ',')]
     sets: Vec<String>,
     /// MAP methods to run per set (comma-separated): qpbo, maxwalksat, maxwalksat-monomials.
@@ -496,6 +497,10 @@ pub struct MlnBenchArgs {
     /// Seed of the generated problems and of inference.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Also run the qpbo method with probing once per set and quadratizer (Table 3.4's step
+    /// 3: `persistent_fraction_probe`, `seconds_probe_run`).
+    #[arg(long)]
+    probe: bool,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -521,11 +526,23 @@ struct MlnSet {
     tuffy_log: Option<&'static str>,
     /// The issue's time target in seconds (thesis Table 3.5 / 10).
     target_s: f64,
+    /// The weights are learnt first (`urbansem mln learn` on `training.db` → `learnt.mln`).
+    learn: bool,
 }
 
 use super::mln as mln_cmd;
 
-const MLN_SETS: [MlnSet; 7] = [
+const MLN_SETS: [MlnSet; 9] = [
+    MlnSet {
+        name: "ie",
+        dir: "ie",
+        program: "prog.mln",
+        generated: Some(mln_cmd::Problem::Ie),
+        reference: Some("ie/reference_outputs/tuffy_map_output_from_xeggora.db"),
+        tuffy_log: Some("ie/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 2.2,
+        learn: false,
+    },
     MlnSet {
         name: "lp",
         dir: "lp/rockit",
@@ -534,6 +551,7 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: Some("lp/reference_outputs/tuffy_map_output_from_xeggora.db"),
         tuffy_log: Some("lp/reference_outputs/tuffy_run_log_from_xeggora.txt"),
         target_s: 0.9,
+        learn: false,
     },
     MlnSet {
         name: "rc",
@@ -543,6 +561,7 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: None,
         tuffy_log: Some("rc/reference_outputs/tuffy_run_log_from_xeggora.txt"),
         target_s: 0.9,
+        learn: false,
     },
     MlnSet {
         name: "kb",
@@ -552,6 +571,7 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: Some("kb/reference_outputs/tuffy_map_output_from_mlcnn.txt"),
         tuffy_log: None,
         target_s: 0.6,
+        learn: false,
     },
     MlnSet {
         name: "er",
@@ -561,6 +581,7 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: Some("er/reference_outputs/tuffy_map_output_from_xeggora.db"),
         tuffy_log: Some("er/reference_outputs/tuffy_run_log_from_xeggora.txt"),
         target_s: 10.0,
+        learn: false,
     },
     MlnSet {
         name: "fs",
@@ -570,6 +591,7 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: None,
         tuffy_log: None,
         target_s: 0.6,
+        learn: false,
     },
     MlnSet {
         name: "neg-fs",
@@ -579,6 +601,7 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: None,
         tuffy_log: None,
         target_s: 1.2,
+        learn: false,
     },
     MlnSet {
         name: "id",
@@ -588,6 +611,17 @@ const MLN_SETS: [MlnSet; 7] = [
         reference: None,
         tuffy_log: None,
         target_s: 0.5,
+        learn: false,
+    },
+    MlnSet {
+        name: "kb3",
+        dir: "kb3",
+        program: "learnt.mln",
+        generated: Some(mln_cmd::Problem::Kb3),
+        reference: None,
+        tuffy_log: None,
+        target_s: 5.7,
+        learn: true,
     },
 ];
 
@@ -624,9 +658,9 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
         .filter(|s| !MLN_SETS.iter().any(|m| m.name == s.as_str()))
         .collect();
     if !unknown.is_empty() {
-        bail!("unknown MLN set(s) {unknown:?}: expected lp, rc, kb, er, fs, neg-fs, id");
+        bail!("unknown MLN set(s) {unknown:?}: expected ie, lp, rc, kb, er, fs, neg-fs, id, kb3");
     }
-    let mut rows = Vec::new();
+    let mut rows: Vec<Value> = Vec::new();
     for set in MLN_SETS
         .iter()
         .filter(|m| args.sets.is_empty() || args.sets.iter().any(|s| s == m.name))
@@ -634,7 +668,7 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
         let dir = match set.generated {
             Some(problem) => {
                 let out = args.data_dir.join(set.dir);
-                mln_cmd::write_generated(problem, None, args.seed, &out)?;
+                mln_cmd::write_generated(problem, None, args.seed, &args.data, &out)?;
                 out
             }
             None => args.data.join(set.dir),
@@ -645,6 +679,28 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
             queries: None,
             query_file: Some(dir.join("query.db")),
         };
+        let mut learning = Value::Null;
+        if set.learn {
+            let t = Instant::now();
+            let training_args = mln_cmd::ProblemArgs {
+                program: dir.join("prog.mln"),
+                evidence: vec![dir.join("training.db")],
+                queries: None,
+                query_file: Some(dir.join("query.db")),
+            };
+            let mut options = mln::learn::LearnOptions::default();
+            options.infer.walksat.seed = args.seed;
+            let (training, learnt) =
+                mln_cmd::learn_program(&training_args, &options, &problem_args.program)
+                    .with_context(|| format!("learning the weights of set {}", set.name))?;
+            learning = serde_json::json!({
+                "labels": training.labels,
+                "epochs": learnt.epochs.len(),
+                "errors_start": learnt.epochs.first().map(|e| e.errors),
+                "errors_learnt": learnt.final_errors,
+                "seconds": t.elapsed().as_secs_f64(),
+            });
+        }
         let runs: Vec<(mln::infer::Method, Quadratizer)> = args
             .methods
             .iter()
@@ -720,6 +776,21 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
                 }
             }
             let Some(mut row) = best else { continue };
+            row["learning"] = learning.clone();
+            if args.probe && *method == mln::infer::Method::Qpbo {
+                let (_, problem, _, _, _) = mln_cmd::load_and_ground(&problem_args)?;
+                let t = Instant::now();
+                let r = map_inference(
+                    &problem,
+                    &InferOptions {
+                        probe: true,
+                        ..options.clone()
+                    },
+                );
+                row["persistent_fraction_probe"] = serde_json::json!(r.persistent_fraction);
+                row["cost_probe_run"] = serde_json::json!(r.scores.cost);
+                row["seconds_probe_run"] = serde_json::json!(t.elapsed().as_secs_f64());
+            }
             let tuffy_s = match set.tuffy_log {
                 Some(rel) => {
                     let path = args.data.join(rel);
@@ -754,15 +825,15 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:<7} {:<22} {:>7} {:>8} {:>6} {:>7} | {:>13} {:>13} {:>10} {:>13} | {:>7} {:>7} {:>6} {:>8} {:>7}",
-        "set", "method (1st QPBO %)", "atoms", "factors", "h.o.", "pers %", "cost", "Tuffy cost", "diff", "bound",
+        "{:<7} {:<22} {:>7} {:>8} {:>6} {:>7} {:>7} | {:>13} {:>13} {:>10} {:>13} | {:>7} {:>7} {:>6} {:>8} {:>7}",
+        "set", "method (1st QPBO %)", "atoms", "factors", "h.o.", "pers %", "probe %", "cost", "Tuffy cost", "diff", "bound",
         "ground", "total", "target", "/target", "Tuffy s"
     );
     for r in &rows {
         let f = |v: &Value| v.as_f64();
         let secs = &r["seconds"];
         println!(
-            "{:<7} {:<22} {:>7} {:>8} {:>6} {:>7.2} | {:>13.2} {:>13} {:>10} {:>13} | {:>7.3} {:>7.3} {:>6.1} {:>8.2} {:>7}",
+            "{:<7} {:<22} {:>7} {:>8} {:>6} {:>7.2} {:>7} | {:>13.2} {:>13} {:>10} {:>13} | {:>7.3} {:>7.3} {:>6.1} {:>8.2} {:>7}",
             r["set"].as_str().unwrap_or("?"),
             format!(
                 "{}{}",
@@ -781,6 +852,7 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
             r["ground_factors"].as_u64().unwrap_or(0),
             r["higher_order_factors"].as_u64().unwrap_or(0),
             100.0 * f(&r["persistent_fraction"]).unwrap_or(0.0),
+            fmt_opt(f(&r["persistent_fraction_probe"]).map(|p| 100.0 * p), 2),
             f(&r["cost"]).unwrap_or(f64::NAN),
             fmt_opt(f(&r["reference"]["cost"]), 2),
             fmt_opt(f(&r["cost_minus_reference"]), 2),
@@ -796,7 +868,7 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
         "cost = −Σ w·[ground formula true] over soft groundings with unknown atoms (lower is \
          better); Tuffy cost = Tuffy's shipped MAP answer scored by the same evaluator; diff = \
          ours − Tuffy (< 0: ours better); bound = QPBO/QSSR lower bound (= cost: proven optimal); \
-         1st QPBO % = atoms labelled by the first QPBO round, pers % = after all QSSR rounds; seconds are the fastest of the runs, parse + ground + solve; target = thesis Table 3.5 \
+         1st QPBO % = atoms labelled by the first QPBO round, pers % = after all QSSR rounds, probe % = after QSSR with probing (--probe; Table 3.4's steps 1-3); seconds are the fastest of the runs, parse + ground + solve; target = thesis Table 3.5 \
          time / 10; Tuffy s = Tuffy's logged run time on its authors' machine (PostgreSQL \
          grounding included), not measured here."
     );

@@ -20,6 +20,38 @@ pub enum MlnCommand {
     Generate(GenerateArgs),
     /// Score another engine's MAP answer (its true query atoms, one per line) with our evaluator.
     Score(ScoreArgs),
+    /// Learn the soft weights discriminatively (voted perceptron on MAP counts).
+    Learn(LearnArgs),
+}
+
+/// Options of `urbansem mln learn`.
+#[derive(Args)]
+pub struct LearnArgs {
+    /// Program, training database (evidence plus labels: every atom of a query predicate in
+    /// it is a label; unlisted ones are false) and query.
+    #[command(flatten)]
+    pub problem: ProblemArgs,
+    /// Write the program with the learnt weights here.
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Perceptron epochs (one MAP inference each).
+    #[arg(long, default_value_t = 30)]
+    pub epochs: usize,
+    /// Base learning rate (per formula divided by its number of ground factors).
+    #[arg(long, default_value_t = 1.0)]
+    pub rate: f64,
+    /// Gaussian prior strength (1/σ² per grounding; 0: none).
+    #[arg(long, default_value_t = 0.0)]
+    pub l2: f64,
+    /// Start from the program's weights instead of 0.
+    #[arg(long)]
+    pub warm_start: bool,
+    /// Seed of every random step of MAP inference.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The ground problem's inputs, shared by `infer` and `score`.
@@ -63,6 +95,10 @@ pub enum Problem {
     NegFs,
     /// Image denoising with triple smoothing rules.
     Id,
+    /// IE: Tuffy's program with its evidence rebuilt from mfoilp's facts (<data>/ie).
+    Ie,
+    /// KB3: third-order webKB from <data>/kb/mlcnn (weights 0; also writes training.db).
+    Kb3,
 }
 
 /// Options of `urbansem mln generate`.
@@ -80,6 +116,9 @@ pub struct GenerateArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+    /// Folder of the MLN benchmark sets (ie, kb3 read their facts from it).
+    #[arg(long, default_value = "../shared/data/mln")]
+    pub data: PathBuf,
 }
 
 /// Options of `urbansem mln infer`.
@@ -154,7 +193,26 @@ pub fn run(command: MlnCommand) -> anyhow::Result<()> {
         MlnCommand::Infer(args) => infer(&args),
         MlnCommand::Generate(args) => generate(&args),
         MlnCommand::Score(args) => score(&args),
+        MlnCommand::Learn(args) => learn(&args),
     }
+}
+
+/// Reads the evidence files and the query (`-q` list or query file) of a program.
+fn read_evidence_and_query(
+    args: &ProblemArgs,
+    program: &mln::parse::Program,
+) -> anyhow::Result<(Vec<mln::parse::EvidenceAtom>, Vec<mln::parse::Atom>)> {
+    let mut evidence = Vec::new();
+    for e in &args.evidence {
+        evidence
+            .extend(read_evidence(e, program).with_context(|| format!("reading {}", e.display()))?);
+    }
+    let query = match (args.queries.as_deref(), args.query_file.as_deref()) {
+        (Some(list), _) => parse_query_predicates(list, program)?,
+        (None, Some(f)) => read_query(f, program).context("reading the query file")?,
+        (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
+    };
+    Ok((evidence, query))
 }
 
 /// Reads program, evidence and query and grounds them (shared by infer, score and
@@ -170,15 +228,7 @@ pub(crate) fn load_and_ground(
 )> {
     let t0 = Instant::now();
     let program = read_program(&args.program).context("reading the program")?;
-    let mut evidence = Vec::new();
-    for e in &args.evidence {
-        evidence.extend(read_evidence(e, &program).context("reading evidence")?);
-    }
-    let query = match (args.queries.as_deref(), args.query_file.as_deref()) {
-        (Some(list), _) => parse_query_predicates(list, &program)?,
-        (None, Some(f)) => read_query(f, &program).context("reading the query file")?,
-        (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
-    };
+    let (evidence, query) = read_evidence_and_query(args, &program)?;
     let parse_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let evidence_label = args
@@ -253,7 +303,7 @@ pub(crate) fn read_answer(
 }
 
 fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
-    write_generated(args.problem, args.size, args.seed, &args.out)?;
+    write_generated(args.problem, args.size, args.seed, &args.data, &args.out)?;
     println!(
         "wrote prog.mln, evidence.db and query.db to {}",
         args.out.display()
@@ -261,15 +311,53 @@ fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Generates a synthetic problem (default size: the thesis') into `out`.
+/// Reads a data file with its path in the error.
+fn read_data(path: &std::path::Path) -> anyhow::Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))
+}
+
+/// Generates a synthetic problem (default size: the thesis') into `out`; IE and KB3 read
+/// their facts from the data folder `data`.
 pub(crate) fn write_generated(
     problem: Problem,
     size: Option<usize>,
     seed: u64,
+    data: &std::path::Path,
     out: &std::path::Path,
 ) -> anyhow::Result<()> {
-    use mln::generate::{friends_smokers, image_denoising, FriendsSmokersOptions};
+    use mln::generate::{
+        friends_smokers, ie_evidence_from_mfoilp, image_denoising, kb3, FriendsSmokersOptions,
+        GeneratedMln, Kb3Options,
+    };
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let g = match problem {
+        Problem::Ie => {
+            let facts = data.join("ie/partial-evidence-mfoilp");
+            GeneratedMln {
+                program: read_data(&data.join("ie/tuffy/prog.mln"))?,
+                evidence: ie_evidence_from_mfoilp(
+                    &read_data(&facts.join("tokens"))?,
+                    &read_data(&facts.join("similartitles"))?,
+                    &read_data(&facts.join("jntinfcandidates"))?,
+                )
+                .with_context(|| format!("in {}", facts.display()))?,
+                query: read_data(&data.join("ie/tuffy/query.db"))?,
+            }
+        }
+        Problem::Kb3 => {
+            let dir = data.join("kb/mlcnn");
+            let k = kb3(
+                &read_data(&dir.join("evidence.db"))?,
+                &read_data(&dir.join("labels.db"))?,
+                &Kb3Options::default(),
+                seed,
+            )
+            .with_context(|| format!("in {}", dir.display()))?;
+            let path = out.join("training.db");
+            std::fs::write(&path, &k.training)
+                .with_context(|| format!("writing {}", path.display()))?;
+            k.files
+        }
         Problem::Fs | Problem::NegFs => friends_smokers(
             &FriendsSmokersOptions {
                 persons: size.unwrap_or(200),
@@ -280,7 +368,6 @@ pub(crate) fn write_generated(
         ),
         Problem::Id => image_denoising(size.unwrap_or(90), seed),
     };
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     for (name, text) in [
         ("prog.mln", &g.program),
         ("evidence.db", &g.evidence),
@@ -288,6 +375,79 @@ pub(crate) fn write_generated(
     ] {
         let path = out.join(name);
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Learns the weights of `args.problem` and writes the program with them; returns the
+/// learnt weights (also used by `bench mln` for KB3).
+pub(crate) fn learn_program(
+    args: &ProblemArgs,
+    options: &mln::learn::LearnOptions,
+    output: &std::path::Path,
+) -> anyhow::Result<(mln::learn::Training, mln::learn::Learnt)> {
+    let source = read_data(&args.program)?;
+    let program = mln::parse::parse_program(&source, &args.program.display().to_string())
+        .context("reading the program")?;
+    let (database, query) = read_evidence_and_query(args, &program)?;
+    let label = args
+        .evidence
+        .first()
+        .map_or_else(|| "(no database)".to_owned(), |p| p.display().to_string());
+    let training = mln::learn::training_problem(&program, &database, &label, &query)
+        .context("setting up the training problem")?;
+    let learnt = mln::learn::learn_weights(&program, &training, options);
+    let text = mln::learn::with_weights(&source, &program, &learnt.weights);
+    std::fs::write(output, text).with_context(|| format!("writing {}", output.display()))?;
+    Ok((training, learnt))
+}
+
+fn learn(args: &LearnArgs) -> anyhow::Result<()> {
+    let t0 = Instant::now();
+    let mut options = mln::learn::LearnOptions {
+        epochs: args.epochs,
+        learning_rate: args.rate,
+        l2: args.l2,
+        start_from_program: args.warm_start,
+        ..mln::learn::LearnOptions::default()
+    };
+    options.infer.walksat.seed = args.seed;
+    let (training, learnt) = learn_program(&args.problem, &options, &args.output)?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let first_errors = learnt.epochs.first().map_or(0, |e| e.errors);
+    if args.json {
+        let out = json!({
+            "program": args.problem.program.display().to_string(),
+            "output": args.output.display().to_string(),
+            "ground_atoms": training.problem.atoms.len(),
+            "ground_factors": training.problem.factors.len(),
+            "labels": training.labels,
+            "labels_unused": training.labels_unused,
+            "true_atoms": training.truth.iter().filter(|&&v| v).count(),
+            "epochs": learnt.epochs.iter().map(|e| json!({"errors": e.errors, "count_gap": e.count_gap})).collect::<Vec<_>>(),
+            "errors_start": first_errors,
+            "errors_learnt": learnt.final_errors,
+            "weights": learnt.weights,
+            "seconds": seconds,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "{}: {} unknown atoms ({} true in the labels), {} ground formulas; {} labels ({} not unknown atoms)",
+            args.problem.program.display(),
+            training.problem.atoms.len(),
+            training.truth.iter().filter(|&&v| v).count(),
+            training.problem.factors.len(),
+            training.labels,
+            training.labels_unused
+        );
+        println!(
+            "training errors   {} (MAP under the starting weights) -> {} (MAP under the learnt weights), {} epochs",
+            first_errors,
+            learnt.final_errors,
+            learnt.epochs.len()
+        );
+        println!("wrote {} in {seconds:.2} s", args.output.display());
     }
     Ok(())
 }

@@ -1,0 +1,521 @@
+//! Discriminative weight learning: the voted perceptron on MAP counts.
+//!
+//! Singla & Domingos, "Discriminative training of Markov logic networks", AAAI 2005: the
+//! gradient of the conditional log-likelihood of the query atoms y given the evidence x with
+//! respect to the weight of formula i is n_i(x, y) − E_w[n_i(x, Y)], with n_i the number of
+//! true groundings; the perceptron replaces the expectation by the counts in the MAP state
+//! y_w (found here by [`map_inference`], so QSSR and tabu search on our PBMLN), steps
+//! `w_i += η_i (n_i(y) − n_i(y_w)) − η_i λ w_i` and returns the average of the epochs'
+//! weights (the "voted" perceptron). Counts of formulas differ by orders of magnitude, so the
+//! step of formula i is η / gᵢ with gᵢ its number of ground factors (Lowd & Domingos, ECML
+//! 2007, §3: per-weight learning rates); λ is a Gaussian prior's 1/σ² per grounding.
+//!
+//! The training database holds the evidence and the labels: every atom of a query predicate
+//! in it is a label (true, or false with `!`); unlisted atoms of query predicates are false,
+//! as in inference's canopy convention. The program is grounded once with unit weights
+//! (hard formulas stay hard, Tuffy's fixed `@w` weights stay fixed), and each epoch only
+//! re-weights the ground factors ([`GroundProblem::with_formula_weights`]) and runs MAP.
+//!
+//! Cost per epoch: one MAP inference on the ground problem plus one pass over its factors.
+//!
+//! ```
+//! use mln::learn::{learn_weights, training_problem, LearnOptions};
+//! use mln::parse::{parse_evidence, parse_program, parse_query_predicates};
+//! let p = parse_program("E(item)\nQ(item)\n0 E(x) => Q(x)\n0 Q(x)\n", "t.mln").unwrap();
+//! let db = parse_evidence("E(A)\nE(B)\nQ(A)\nQ(B)\n!Q(C)\nE(D)\n", "t.db", &p).unwrap();
+//! let q = parse_query_predicates("Q", &p).unwrap();
+//! let training = training_problem(&p, &db, "t.db", &q).unwrap();
+//! let learnt = learn_weights(&p, &training, &LearnOptions::default());
+//! assert!(learnt.weights[0].unwrap() > 0.0);
+//! ```
+
+use crate::ground::{ground, GroundError, GroundOptions, GroundProblem};
+use crate::infer::{map_inference, InferOptions};
+use crate::parse::{Atom, EvidenceAtom, Program, Term, Weight};
+use rustc_hash::{FxHashMap, FxHashSet};
+use thiserror::Error;
+
+/// Why training data could not be set up.
+#[derive(Debug, Error)]
+pub enum LearnError {
+    /// Grounding the program failed.
+    #[error(transparent)]
+    Ground(#[from] GroundError),
+    /// Unknown atoms of a predicate that has no labels (a hidden, open-world predicate).
+    #[error("{path}: {atoms} unknown atoms of `{predicate}`, which is open-world but not a query predicate: learning needs labels for every unknown atom (mark it closed with `*` or add it to the query predicates)")]
+    HiddenPredicate {
+        /// Program file.
+        path: String,
+        /// The predicate.
+        predicate: String,
+        /// Its unknown atoms.
+        atoms: usize,
+    },
+    /// The training database has no atom of a query predicate.
+    #[error("{path}: no atom of a query predicate ({predicates}): the training database must list the labels")]
+    NoLabels {
+        /// Training database.
+        path: String,
+        /// The query predicates.
+        predicates: String,
+    },
+}
+
+/// The ground training problem: unit-weight factors and the labelled truth.
+#[derive(Debug, Clone)]
+pub struct Training {
+    /// The program grounded with unit soft weights (fixed weights kept).
+    pub problem: GroundProblem,
+    /// The label of every unknown atom of `problem`.
+    pub truth: Vec<bool>,
+    /// Labels given in the database (true and false).
+    pub labels: usize,
+    /// Labels that are not unknown atoms of the ground problem (outside the canopy, or in
+    /// no grounding that evidence leaves open).
+    pub labels_unused: usize,
+}
+
+/// Splits a training database into evidence and labels (the atoms of query predicates).
+pub fn split_labels(
+    database: &[EvidenceAtom],
+    query: &[Atom],
+) -> (Vec<EvidenceAtom>, Vec<EvidenceAtom>) {
+    let query_preds: FxHashSet<usize> = query.iter().map(|a| a.predicate).collect();
+    database
+        .iter()
+        .cloned()
+        .partition(|a| !query_preds.contains(&a.predicate))
+}
+
+/// The program with every learnable soft weight set to 1 (hard and fixed ones kept).
+fn unit_weight_program(program: &Program) -> Program {
+    let mut unit = program.clone();
+    for f in &mut unit.formulas {
+        if !f.fixed_weight && matches!(f.weight, Weight::Soft(_)) {
+            f.weight = Weight::Soft(1.0);
+        }
+    }
+    unit
+}
+
+/// Grounds a training database (evidence + labels, see the module doc) for learning.
+pub fn training_problem(
+    program: &Program,
+    database: &[EvidenceAtom],
+    database_path: &str,
+    query: &[Atom],
+) -> Result<Training, LearnError> {
+    let (evidence, labels) = split_labels(database, query);
+    let query_preds: FxHashSet<usize> = query.iter().map(|a| a.predicate).collect();
+    if labels.is_empty() {
+        let mut names: Vec<&str> = query_preds
+            .iter()
+            .map(|&p| program.predicates[p].name.as_str())
+            .collect();
+        names.sort_unstable();
+        return Err(LearnError::NoLabels {
+            path: database_path.to_owned(),
+            predicates: names.join(", "),
+        });
+    }
+    // Labels name constants too: list them as ground query atoms where the predicate is
+    // queried in full (a canopy stays as given).
+    let queried_in_full: FxHashSet<usize> = query
+        .iter()
+        .filter(|a| a.args.iter().any(|t| matches!(t, Term::Var(_))))
+        .map(|a| a.predicate)
+        .collect();
+    let mut query = query.to_vec();
+    query.extend(
+        labels
+            .iter()
+            .filter(|l| queried_in_full.contains(&l.predicate))
+            .map(|l| Atom {
+                predicate: l.predicate,
+                args: l.args.iter().cloned().map(Term::Const).collect(),
+            }),
+    );
+    let unit = unit_weight_program(program);
+    let problem = ground(
+        &unit,
+        &evidence,
+        database_path,
+        &query,
+        &GroundOptions::default(),
+    )?;
+    let mut hidden: FxHashMap<usize, usize> = FxHashMap::default();
+    for a in &problem.atoms {
+        if !query_preds.contains(&a.predicate) {
+            *hidden.entry(a.predicate).or_default() += 1;
+        }
+    }
+    if let Some((&p, &atoms)) = hidden.iter().min_by_key(|(&p, _)| p) {
+        return Err(LearnError::HiddenPredicate {
+            path: program.path.clone(),
+            predicate: program.predicates[p].name.clone(),
+            atoms,
+        });
+    }
+    let const_ids: FxHashMap<&str, u32> = problem
+        .constants
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (c.as_str(), i as u32))
+        .collect();
+    let atom_ids: FxHashMap<(usize, &[u32]), usize> = problem
+        .atoms
+        .iter()
+        .enumerate()
+        .map(|(i, a)| ((a.predicate, &a.args[..]), i))
+        .collect();
+    let mut truth = vec![false; problem.atoms.len()];
+    let mut labels_unused = 0;
+    for l in &labels {
+        let args: Option<Vec<u32>> = l
+            .args
+            .iter()
+            .map(|c| const_ids.get(c.as_str()).copied())
+            .collect();
+        match args.and_then(|args| atom_ids.get(&(l.predicate, &args[..])).copied()) {
+            Some(i) => truth[i] = l.value,
+            None => labels_unused += 1,
+        }
+    }
+    Ok(Training {
+        problem,
+        truth,
+        labels: labels.len(),
+        labels_unused,
+    })
+}
+
+/// Options of [`learn_weights`].
+#[derive(Debug, Clone)]
+pub struct LearnOptions {
+    /// Perceptron epochs (one MAP inference each).
+    pub epochs: usize,
+    /// Base step η; formula i steps η / (its ground factors) per unit of count difference.
+    pub learning_rate: f64,
+    /// Gaussian prior: 1/σ² per grounding, pulling each weight towards 0.
+    pub l2: f64,
+    /// Start from the program's weights (else from 0).
+    pub start_from_program: bool,
+    /// MAP inference in each epoch (its `walksat.seed` seeds every random step).
+    pub infer: InferOptions,
+}
+
+impl Default for LearnOptions {
+    fn default() -> Self {
+        LearnOptions {
+            epochs: 30,
+            learning_rate: 1.0,
+            l2: 0.0,
+            start_from_program: false,
+            infer: InferOptions {
+                tabu_moves: 5_000,
+                ..InferOptions::default()
+            },
+        }
+    }
+}
+
+/// What one epoch saw: the MAP state under the epoch's starting weights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpochStats {
+    /// Unknown atoms whose MAP value differs from the label.
+    pub errors: usize,
+    /// Σ_i |n_i(y) − n_i(y_w)| over learnable formulas.
+    pub count_gap: f64,
+}
+
+/// Learnt weights and the learning curve.
+#[derive(Debug, Clone)]
+pub struct Learnt {
+    /// Per formula of the program: the learnt soft weight (fixed ones as given); `None`
+    /// for hard formulas.
+    pub weights: Vec<Option<f64>>,
+    /// Per epoch (under the epoch's weights before its step).
+    pub epochs: Vec<EpochStats>,
+    /// Errors of the MAP state under the returned (averaged) weights.
+    pub final_errors: usize,
+    /// Ground factors per formula.
+    pub groundings: Vec<usize>,
+}
+
+/// The per-formula weights to ground with: learnable ones from `w`, fixed ones as given.
+fn effective(program: &Program, w: &[f64]) -> Vec<f64> {
+    program
+        .formulas
+        .iter()
+        .zip(w)
+        .map(|(f, &wi)| match f.weight {
+            Weight::Soft(given) if f.fixed_weight => given,
+            _ => wi,
+        })
+        .collect()
+}
+
+/// Voted-perceptron weight learning (see the module doc) on one training problem.
+pub fn learn_weights(program: &Program, training: &Training, options: &LearnOptions) -> Learnt {
+    let k = program.formulas.len();
+    let learnable: Vec<bool> = program
+        .formulas
+        .iter()
+        .map(|f| matches!(f.weight, Weight::Soft(_)) && !f.fixed_weight)
+        .collect();
+    let mut groundings = vec![0usize; k];
+    for f in training.problem.factors.iter().filter(|f| !f.hard) {
+        groundings[f.formula] += 1;
+    }
+    let truth_counts = training.problem.true_counts(k, &training.truth);
+    let mut w: Vec<f64> = program
+        .formulas
+        .iter()
+        .map(|f| match f.weight {
+            Weight::Soft(given) if options.start_from_program || f.fixed_weight => given,
+            _ => 0.0,
+        })
+        .collect();
+    let errors_of = |x: &[bool]| {
+        x.iter()
+            .zip(&training.truth)
+            .filter(|(a, b)| a != b)
+            .count()
+    };
+    let map_under = |w: &[f64]| {
+        let p = training
+            .problem
+            .with_formula_weights(&effective(program, w));
+        map_inference(&p, &options.infer).assignment
+    };
+    let mut sum = vec![0.0; k];
+    let mut epochs = Vec::new();
+    let total = options.epochs.max(1);
+    for epoch in 0..total {
+        let y = map_under(&w);
+        let counts = training.problem.true_counts(k, &y);
+        let mut gap = 0.0;
+        for i in (0..k).filter(|&i| learnable[i]) {
+            let g = truth_counts[i] - counts[i];
+            gap += g.abs();
+            let step = options.learning_rate / groundings[i].max(1) as f64;
+            w[i] += step * g - step * options.l2 * w[i];
+        }
+        epochs.push(EpochStats {
+            errors: errors_of(&y),
+            count_gap: gap,
+        });
+        for (s, wi) in sum.iter_mut().zip(&w) {
+            *s += wi;
+        }
+        if gap == 0.0 && options.l2 == 0.0 {
+            // A fixed point: the remaining epochs would add the same weights.
+            let rest = (total - epoch - 1) as f64;
+            for (s, wi) in sum.iter_mut().zip(&w) {
+                *s += rest * wi;
+            }
+            break;
+        }
+    }
+    let averaged: Vec<f64> = sum.iter().map(|s| s / total as f64).collect();
+    let averaged = effective(program, &averaged);
+    let final_errors = errors_of(&map_under(&averaged));
+    Learnt {
+        weights: program
+            .formulas
+            .iter()
+            .zip(&averaged)
+            .map(|(f, &wi)| matches!(f.weight, Weight::Soft(_)).then_some(wi))
+            .collect(),
+        epochs,
+        final_errors,
+        groundings,
+    }
+}
+
+/// Errors of the MAP state under the given per-formula weights (hard formulas ignored).
+pub fn map_errors(training: &Training, weights: &[f64], infer: &InferOptions) -> usize {
+    let p = training.problem.with_formula_weights(weights);
+    map_inference(&p, infer)
+        .assignment
+        .iter()
+        .zip(&training.truth)
+        .filter(|(a, b)| a != b)
+        .count()
+}
+
+/// The program's source text with the soft weights of its formulas replaced (formula i is
+/// on line `program.formulas[i].line`; a leading weight is replaced, an absent one added;
+/// hard formulas and fixed `@w` weights are left as written).
+pub fn with_weights(source: &str, program: &Program, weights: &[Option<f64>]) -> String {
+    let mut lines: Vec<String> = source.lines().map(str::to_owned).collect();
+    for (f, w) in program.formulas.iter().zip(weights) {
+        let (Some(w), false) = (w, f.fixed_weight) else {
+            continue;
+        };
+        let Some(line) = f.line.checked_sub(1).and_then(|i| lines.get_mut(i)) else {
+            continue;
+        };
+        let body = line.trim_start();
+        let first = body.split_whitespace().next().unwrap_or("");
+        let rest = if !first.is_empty() && first.parse::<f64>().is_ok() {
+            body[first.len()..].trim_start()
+        } else {
+            body
+        };
+        *line = format!("{w:.6} {rest}");
+    }
+    let mut out = lines.join("\n");
+    out.push('\n');
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parse::{parse_evidence, parse_program, parse_query_predicates};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Items with a hidden label Q and three noisy observations: E1 agrees with Q 90 % of
+    /// the time, E2 70 %, E3 15 % (mostly the opposite).
+    fn noisy_copies(items: usize, seed: u64) -> (Program, Vec<EvidenceAtom>) {
+        let program = parse_program(
+            "E1(item)\nE2(item)\nE3(item)\nQ(item)\n\
+             0 E1(x) <=> Q(x)\n0 E2(x) <=> Q(x)\n0 E3(x) <=> Q(x)\n0 Q(x)\n",
+            "noisy.mln",
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut db = String::new();
+        for i in 0..items {
+            let q = rng.gen_bool(0.5);
+            db += &format!("{}Q(I{i})\n", if q { "" } else { "!" });
+            for (e, agree) in [("E1", 0.9), ("E2", 0.7), ("E3", 0.15)] {
+                let v = if rng.gen_bool(agree) { q } else { !q };
+                if v {
+                    db += &format!("{e}(I{i})\n");
+                }
+            }
+        }
+        let database = parse_evidence(&db, "noisy.db", &program).unwrap();
+        (program, database)
+    }
+
+    #[test]
+    fn labels_are_split_from_evidence_and_mapped_to_atoms() {
+        let (program, db) = noisy_copies(20, 1);
+        let q = parse_query_predicates("Q", &program).unwrap();
+        let (evidence, labels) = split_labels(&db, &q);
+        assert_eq!(labels.len(), 20);
+        assert!(evidence.iter().all(|a| a.predicate != 3));
+        let t = training_problem(&program, &db, "noisy.db", &q).unwrap();
+        assert_eq!(t.problem.atoms.len(), 20);
+        assert_eq!(t.labels_unused, 0);
+        assert_eq!(
+            t.truth.iter().filter(|&&v| v).count(),
+            labels.iter().filter(|a| a.value).count()
+        );
+    }
+
+    #[test]
+    fn perceptron_recovers_sign_and_order_of_the_observations() {
+        let (program, db) = noisy_copies(300, 7);
+        let q = parse_query_predicates("Q", &program).unwrap();
+        let t = training_problem(&program, &db, "noisy.db", &q).unwrap();
+        let learnt = learn_weights(&program, &t, &LearnOptions::default());
+        let w: Vec<f64> = learnt.weights.iter().map(|w| w.unwrap()).collect();
+        assert!(w[0] > w[1] && w[1] > 0.0 && w[2] < 0.0, "weights {w:?}");
+        // The learnt weights predict the labels better than zero weights, and about as well
+        // as the best single observation (E1, 10 % noise) allows.
+        let zero = map_errors(&t, &[0.0; 4], &LearnOptions::default().infer);
+        assert!(
+            learnt.final_errors < zero,
+            "{} vs {zero}",
+            learnt.final_errors
+        );
+        assert!(
+            learnt.final_errors <= 300 / 10 + 15,
+            "{}",
+            learnt.final_errors
+        );
+    }
+
+    #[test]
+    fn collective_rule_gets_a_positive_weight() {
+        // Linked items share their label; only half of the items have an observation.
+        let program = parse_program(
+            "Obs(item)\nLink(item,item)\nQ(item)\n\
+             0 Obs(x) => Q(x)\n0 Q(x) ^ Link(x,y) => Q(y)\n0 Q(x)\n",
+            "collective.mln",
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut db = String::new();
+        for group in 0..40 {
+            let q = rng.gen_bool(0.5);
+            for k in 0..4 {
+                let i = group * 4 + k;
+                if q {
+                    db += &format!("Q(I{i})\n");
+                    if k == 0 {
+                        db += &format!("Obs(I{i})\n");
+                    }
+                }
+                if k > 0 {
+                    db += &format!("Link(I{},I{i})\nLink(I{i},I{})\n", i - 1, i - 1);
+                }
+            }
+        }
+        let database = parse_evidence(&db, "c.db", &program).unwrap();
+        let q = parse_query_predicates("Q", &program).unwrap();
+        let t = training_problem(&program, &database, "c.db", &q).unwrap();
+        let learnt = learn_weights(&program, &t, &LearnOptions::default());
+        let w: Vec<f64> = learnt.weights.iter().map(|w| w.unwrap()).collect();
+        assert!(w[0] > 0.0 && w[1] > 0.0 && w[2] < 0.0, "weights {w:?}");
+        assert_eq!(learnt.final_errors, 0, "weights {w:?}");
+    }
+
+    #[test]
+    fn hidden_open_predicate_and_missing_labels_are_errors() {
+        let program = parse_program(
+            "*E(item)\nH(item)\nQ(item)\n0 E(x) ^ H(x) => Q(x)\n",
+            "h.mln",
+        )
+        .unwrap();
+        let db = parse_evidence("E(A)\nQ(A)\n", "h.db", &program).unwrap();
+        let q = parse_query_predicates("Q", &program).unwrap();
+        let e = training_problem(&program, &db, "h.db", &q).unwrap_err();
+        assert!(
+            matches!(e, LearnError::HiddenPredicate { ref predicate, .. } if predicate == "H"),
+            "{e}"
+        );
+        let db = parse_evidence("E(A)\n", "h.db", &program).unwrap();
+        let e = training_problem(&program, &db, "h.db", &q).unwrap_err();
+        assert!(
+            e.to_string().contains("no atom of a query predicate (Q)"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn weights_are_written_back_into_the_source() {
+        let source =
+            "// c\nE(item)\nQ(item)\n1.5 E(x) => Q(x)\nQ(x) ^ E(x)\n@2 Q(x)\nE(x) => !Q(x).\n";
+        let program = parse_program(source, "w.mln").unwrap();
+        let text = with_weights(source, &program, &[Some(-0.25), Some(3.0), Some(9.0), None]);
+        let back = parse_program(&text, "w2.mln").unwrap();
+        let weights: Vec<Weight> = back.formulas.iter().map(|f| f.weight).collect();
+        assert_eq!(
+            weights,
+            [
+                Weight::Soft(-0.25),
+                Weight::Soft(3.0),
+                Weight::Soft(2.0),
+                Weight::Hard
+            ]
+        );
+        assert!(back.formulas[2].fixed_weight);
+        assert!(text.starts_with("// c\n"));
+    }
+}
