@@ -340,6 +340,18 @@ impl<V> AtomMap<V> {
         }
     }
 
+    /// Inserts by slice: allocates a key only for atoms of arity > 2.
+    fn insert_slice(&mut self, args: &[u32], value: V) {
+        match Self::pack(args) {
+            Some(key) => {
+                self.packed.insert(key, value);
+            }
+            None => {
+                self.long.insert(args.into(), value);
+            }
+        }
+    }
+
     fn insert(&mut self, args: Box<[u32]>, value: V) {
         match Self::pack(&args) {
             Some(key) => {
@@ -566,7 +578,8 @@ pub fn ground(
         .collect();
 
     // Intern atoms in formula order (deterministic), build factors and the polynomial.
-    let mut atom_ids: FxHashMap<(usize, Box<[u32]>), u32> = FxHashMap::default();
+    // Per predicate: constant ids → atom variable (packed keys, see `AtomMap`).
+    let mut atom_ids: Vec<AtomMap<u32>> = vec![AtomMap::default(); np];
     let mut atoms: Vec<GroundAtom> = Vec::new();
     let mut factors = Vec::new();
     let mut constant_violated_weight = 0.0;
@@ -593,16 +606,15 @@ pub fn ground(
                 .map(|c| {
                     c.into_iter()
                         .map(|(pred, args, positive)| {
-                            let key = (pred, args);
-                            let id = match atom_ids.get(&key) {
+                            let id = match atom_ids[pred].get(&args) {
                                 Some(&id) => id,
                                 None => {
                                     let id = atoms.len() as u32;
+                                    atom_ids[pred].insert_slice(&args, id);
                                     atoms.push(GroundAtom {
                                         predicate: pred,
-                                        args: key.1.clone(),
+                                        args,
                                     });
-                                    atom_ids.insert(key, id);
                                     id
                                 }
                             };
