@@ -122,88 +122,44 @@ fn is_building(tags: &[(String, String)]) -> Option<&str> {
     tag(tags, "building").filter(|v| *v != "no")
 }
 
-/// Node table: ids in ascending order with their WGS84 positions, searched through a small
-/// first-level table of every 64th id. Lookups of a way's nodes, whose ids are usually
-/// close, then stay in cache, which a hash map would defeat. Positions are projected when a
-/// kept way asks for them (in the parallel way pass), so nodes that no building or street
-/// uses (points of interest, landuse, water) are never projected.
-pub(crate) struct NodeTable {
-    /// Node ids, ascending and unique.
-    ids: Vec<i64>,
-    /// `ids[64 k]` for every k.
-    block_first: Vec<i64>,
-    /// (latitude, longitude) in degrees, parallel to `ids`.
-    lat_lon: Vec<[f64; 2]>,
+/// Node table: the nodes as read, found by id through a hash index. Positions are projected
+/// when a kept way asks for them (in the parallel way pass), so nodes that no building or
+/// street uses (points of interest, landuse, water) are never projected.
+pub(crate) struct NodeTable<'a> {
+    /// The nodes as read, in file order.
+    nodes: &'a [RawNode],
+    /// Index into `nodes` per node id; of equal ids the last in the file wins.
+    index_by_id: rustc_hash::FxHashMap<i64, u32>,
     projector: crate::projection::BoxProjector,
 }
 
-/// Ids per block of the node table's first level.
-const NODE_BLOCK: usize = 64;
-
-impl NodeTable {
-    /// Sorts the nodes by id (files are usually sorted already); of equal ids the last wins.
-    fn new(nodes: &[RawNode], frame: &LocalFrame, bbox_lonlat: [f64; 4]) -> Self {
-        let sorted = nodes.windows(2).all(|w| w[0].id < w[1].id);
-        let (ids, lat_lon) = if sorted {
-            (
-                nodes.iter().map(|n| n.id).collect::<Vec<_>>(),
-                nodes.iter().map(|n| [n.lat, n.lon]).collect(),
-            )
-        } else {
-            let mut order: Vec<usize> = (0..nodes.len()).collect();
-            order.sort_by_key(|&i| nodes[i].id);
-            let mut ids = Vec::with_capacity(nodes.len());
-            let mut lat_lon = Vec::with_capacity(nodes.len());
-            for (k, &i) in order.iter().enumerate() {
-                let n = nodes[i];
-                if order.get(k + 1).is_some_and(|&j| nodes[j].id == n.id) {
-                    continue;
-                }
-                ids.push(n.id);
-                lat_lon.push([n.lat, n.lon]);
-            }
-            (ids, lat_lon)
-        };
+impl<'a> NodeTable<'a> {
+    /// Indexes the nodes by id (node ids in references are rarely consecutive, so a hash
+    /// lookup beats a search of the sorted ids).
+    fn new(nodes: &'a [RawNode], frame: &LocalFrame, bbox_lonlat: [f64; 4]) -> Self {
+        let mut index_by_id = rustc_hash::FxHashMap::default();
+        index_by_id.reserve(nodes.len());
+        for (k, node) in nodes.iter().enumerate() {
+            // More than 2^32 nodes cannot be held in memory as RawNodes anyway.
+            index_by_id.insert(node.id, k as u32);
+        }
         NodeTable {
-            block_first: ids.iter().step_by(NODE_BLOCK).copied().collect(),
-            ids,
-            lat_lon,
+            nodes,
+            index_by_id,
             projector: crate::projection::BoxProjector::new(*frame, bbox_lonlat),
         }
     }
 
-    /// Index of a node id in `ids`, if the file has it.
-    fn index_of(&self, id: i64) -> Option<usize> {
-        let block = self.block_first.partition_point(|&first| first <= id);
-        let start = block.checked_sub(1)? * NODE_BLOCK;
-        let end = (start + NODE_BLOCK).min(self.ids.len());
-        let k = self.ids.get(start..end)?.binary_search(&id).ok()?;
-        Some(start + k)
+    /// Local position of a node id, if the file has it.
+    fn local(&self, id: i64) -> Option<[f64; 2]> {
+        let k = *self.index_by_id.get(&id)?;
+        let node = self.nodes.get(k as usize)?;
+        Some(self.projector.to_local(node.lat, node.lon))
     }
 
-    fn local_at(&self, index: usize) -> Option<[f64; 2]> {
-        let [lat, lon] = *self.lat_lon.get(index)?;
-        Some(self.projector.to_local(lat, lon))
-    }
-
-    /// Local positions of all `refs`, or `None` if any is missing. Consecutive references
-    /// are usually consecutive ids, so the neighbours of the last hit are tried first.
+    /// Local positions of all `refs`, or `None` if any is missing.
     fn project(&self, refs: &[i64]) -> Option<Vec<[f64; 2]>> {
-        let mut out = Vec::with_capacity(refs.len());
-        let mut last = usize::MAX;
-        for &id in refs {
-            let next = last.wrapping_add(1);
-            let k = if self.ids.get(next) == Some(&id) {
-                next
-            } else if self.ids.get(last) == Some(&id) {
-                last
-            } else {
-                self.index_of(id)?
-            };
-            last = k;
-            out.push(self.local_at(k)?);
-        }
-        Some(out)
+        refs.iter().map(|&id| self.local(id)).collect()
     }
 }
 
@@ -233,6 +189,9 @@ enum WayOutcome {
     Both(Building, HighwayWay),
     Nothing,
 }
+
+/// Ways per parallel task when building outlines and highways.
+const WAY_CHUNK: usize = 2048;
 
 #[derive(Default)]
 struct WayCounts {
@@ -422,36 +381,36 @@ impl OsmMap {
         };
         let nodes = NodeTable::new(&raw.nodes, &frame, bbox_lonlat);
 
-        // Per rayon split: the split's buildings and highways in way order, and its counts;
-        // splits are joined left to right, so the output keeps the file's way order.
-        type Split = (Vec<Building>, Vec<HighwayWay>, WayCounts);
-        let (mut buildings, highways, counts) = raw
+        // Chunks of ways in parallel, each into its own buildings, highways and counts; the
+        // chunks are joined in order, so the output keeps the file's way order.
+        type Chunk = (Vec<Building>, Vec<HighwayWay>, WayCounts);
+        let chunks: Vec<Chunk> = raw
             .ways
-            .par_iter()
-            .fold(
-                || (Vec::new(), Vec::new(), WayCounts::default()),
-                |(mut bs, mut hs, mut c): Split, w| {
-                    match build_way(w, &nodes, &mut c) {
-                        WayOutcome::Building(b) => bs.push(b),
-                        WayOutcome::Highway(h) => hs.push(h),
+            .par_chunks(WAY_CHUNK)
+            .map(|ways| {
+                let mut chunk: Chunk = (Vec::new(), Vec::new(), WayCounts::default());
+                for w in ways {
+                    match build_way(w, &nodes, &mut chunk.2) {
+                        WayOutcome::Building(b) => chunk.0.push(b),
+                        WayOutcome::Highway(h) => chunk.1.push(h),
                         WayOutcome::Both(b, h) => {
-                            bs.push(b);
-                            hs.push(h);
+                            chunk.0.push(b);
+                            chunk.1.push(h);
                         }
                         WayOutcome::Nothing => {}
                     }
-                    (bs, hs, c)
-                },
-            )
-            .reduce(
-                || (Vec::new(), Vec::new(), WayCounts::default()),
-                |(mut bs, mut hs, mut c): Split, (b2, h2, c2): Split| {
-                    bs.extend(b2);
-                    hs.extend(h2);
-                    c.add(&c2);
-                    (bs, hs, c)
-                },
-            );
+                }
+                chunk
+            })
+            .collect();
+        let mut buildings = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum());
+        let mut highways = Vec::with_capacity(chunks.iter().map(|c| c.1.len()).sum());
+        let mut counts = WayCounts::default();
+        for (bs, hs, c) in chunks {
+            buildings.extend(bs);
+            highways.extend(hs);
+            counts.add(&c);
+        }
         stats.building_ways += counts.building_ways;
         stats.open_building_ways += counts.open_building_ways;
         stats.highway_ways += counts.highway_ways;

@@ -41,6 +41,17 @@ impl<'a> Message<'a> {
     }
 
     fn varint(&mut self) -> DecodeResult<u64> {
+        // Fast path: one- and two-byte varints (most deltas and indices), not at the very end.
+        if let Some(&[b0, b1, ..]) = self.buf.get(self.pos..) {
+            if b0 < 0x80 {
+                self.pos += 1;
+                return Ok(u64::from(b0));
+            }
+            if b1 < 0x80 {
+                self.pos += 2;
+                return Ok(u64::from(b0 & 0x7f) | u64::from(b1) << 7);
+            }
+        }
         let mut value = 0u64;
         for shift in (0..64).step_by(7) {
             let Some(&byte) = self.buf.get(self.pos) else {
@@ -95,6 +106,11 @@ fn zigzag(v: u64) -> i64 {
     ((v >> 1) as i64) ^ -((v & 1) as i64)
 }
 
+/// Number of varints in a packed field (bytes without the continuation bit end a varint).
+fn varint_count(bytes: &[u8]) -> usize {
+    bytes.iter().filter(|&&b| b < 0x80).count()
+}
+
 /// Decodes a packed repeated varint field, calling `f` per value.
 fn packed(bytes: &[u8], mut f: impl FnMut(u64)) -> DecodeResult<()> {
     let mut m = Message::new(bytes);
@@ -106,6 +122,7 @@ fn packed(bytes: &[u8], mut f: impl FnMut(u64)) -> DecodeResult<()> {
 
 /// Decodes a packed, delta-coded sint64 field into absolute values.
 fn packed_delta(bytes: &[u8], out: &mut Vec<i64>) -> DecodeResult<()> {
+    out.reserve(varint_count(bytes));
     let mut last = 0i64;
     packed(bytes, |v| {
         last = last.wrapping_add(zigzag(v));
@@ -143,25 +160,35 @@ impl Block<'_> {
             })
     }
 
-    /// The kept tags among parallel key and value index lists.
-    fn kept_tags(&self, keys: &[u64], vals: &[u64]) -> DecodeResult<Vec<(String, String)>> {
-        if keys.len() != vals.len() {
-            return Err(format!(
-                "{} tag keys but {} tag values",
-                keys.len(),
-                vals.len()
-            ));
-        }
+    /// The kept tags among the packed key and value index lists of one element, decoded in
+    /// lockstep (no intermediate index vectors).
+    fn kept_tags(&self, keys: &[u8], vals: &[u8]) -> DecodeResult<Vec<(String, String)>> {
+        let (mut k, mut v) = (Message::new(keys), Message::new(vals));
         let mut tags = Vec::new();
-        for (&k, &v) in keys.iter().zip(vals) {
-            let key = self.string(k)?;
-            let value = self.string(v)?;
-            if self.kept.get(k as usize).copied().unwrap_or(false) {
+        while k.pos < keys.len() {
+            if v.pos >= vals.len() {
+                return Err(format!(
+                    "{} tag keys but {} tag values",
+                    varint_count(keys),
+                    varint_count(vals)
+                ));
+            }
+            let (key_index, value_index) = (k.varint()?, v.varint()?);
+            let key = self.string(key_index)?;
+            let value = self.string(value_index)?;
+            if self.kept.get(key_index as usize).copied().unwrap_or(false) {
                 tags.push((
                     String::from_utf8_lossy(key).into_owned(),
                     String::from_utf8_lossy(value).into_owned(),
                 ));
             }
+        }
+        if v.pos < vals.len() {
+            return Err(format!(
+                "{} tag keys but {} tag values",
+                varint_count(keys),
+                varint_count(vals)
+            ));
         }
         Ok(tags)
     }
@@ -260,13 +287,13 @@ fn read_dense(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()
 }
 
 fn read_way(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> {
-    let (mut id, mut keys, mut vals, mut refs) = (0, Vec::new(), Vec::new(), Vec::new());
+    let (mut id, mut keys, mut vals, mut refs): (_, &[u8], &[u8], _) = (0, &[], &[], Vec::new());
     let mut m = Message::new(data);
     while let Some((number, field)) = m.next_field()? {
         match (number, field) {
             (1, Field::Varint(v)) => id = v as i64,
-            (2, Field::Bytes(b)) => packed(b, |v| keys.push(v))?,
-            (3, Field::Bytes(b)) => packed(b, |v| vals.push(v))?,
+            (2, Field::Bytes(b)) => keys = b,
+            (3, Field::Bytes(b)) => vals = b,
             (8, Field::Bytes(b)) => packed_delta(b, &mut refs)?,
             _ => {}
         }
@@ -274,20 +301,20 @@ fn read_way(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> 
     part.ways.push(RawWay {
         id,
         refs,
-        tags: block.kept_tags(&keys, &vals)?,
+        tags: block.kept_tags(keys, vals)?,
     });
     Ok(())
 }
 
 fn read_relation(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> {
-    let (mut id, mut keys, mut vals) = (0, Vec::new(), Vec::new());
+    let (mut id, mut keys, mut vals): (_, &[u8], &[u8]) = (0, &[], &[]);
     let (mut roles, mut member_ids, mut types) = (Vec::new(), Vec::new(), Vec::new());
     let mut m = Message::new(data);
     while let Some((number, field)) = m.next_field()? {
         match (number, field) {
             (1, Field::Varint(v)) => id = v as i64,
-            (2, Field::Bytes(b)) => packed(b, |v| keys.push(v))?,
-            (3, Field::Bytes(b)) => packed(b, |v| vals.push(v))?,
+            (2, Field::Bytes(b)) => keys = b,
+            (3, Field::Bytes(b)) => vals = b,
             (8, Field::Bytes(b)) => packed(b, |v| roles.push(v))?,
             (9, Field::Bytes(b)) => packed_delta(b, &mut member_ids)?,
             (10, Field::Bytes(b)) => packed(b, |v| types.push(v))?,
@@ -312,7 +339,7 @@ fn read_relation(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult
     part.relations.push(RawRelation {
         id,
         way_members,
-        tags: block.kept_tags(&keys, &vals)?,
+        tags: block.kept_tags(keys, vals)?,
     });
     Ok(())
 }
@@ -567,6 +594,31 @@ mod tests {
         let mut out = Vec::new();
         packed_delta(&bytes, &mut out).unwrap();
         assert_eq!(out, vec![1, 2, 1, 151]);
+    }
+
+    #[test]
+    fn kept_tags_decode_in_lockstep_and_reject_unequal_lists() {
+        let strings: Vec<&[u8]> = vec![b"", b"building", b"yes", b"source", b"survey"];
+        let block = Block {
+            kept: strings.iter().map(|s| is_kept_key(s)).collect(),
+            strings,
+            granularity: 100,
+            lat_offset: 0,
+            lon_offset: 0,
+        };
+        let (mut keys, mut vals) = (Vec::new(), Vec::new());
+        for (k, v) in [(3u64, 4u64), (1, 2)] {
+            varint(k, &mut keys);
+            varint(v, &mut vals);
+        }
+        let tags = block.kept_tags(&keys, &vals).unwrap();
+        assert_eq!(tags, vec![("building".to_string(), "yes".to_string())]);
+        assert!(block.kept_tags(&keys, &vals[..1]).is_err());
+        assert!(block.kept_tags(&keys[..1], &vals).is_err());
+        varint(9, &mut keys);
+        varint(2, &mut vals);
+        let err = block.kept_tags(&keys, &vals).unwrap_err();
+        assert!(err.contains("string index 9"), "{err}");
     }
 
     /// The element tables as osmpbf (a generic protobuf decoder) reads them.
