@@ -223,19 +223,30 @@ fn read_block(data: &[u8], part: &mut RawData) -> DecodeResult<()> {
     }
     block.kept = block.strings.iter().map(|s| is_kept_key(s)).collect();
     for group in groups {
+        let mut ways = Vec::new();
         let mut g = Message::new(group);
         while let Some((number, field)) = g.next_field()? {
             match (number, field) {
                 (1, Field::Bytes(node)) => read_node(node, &block, part)?,
                 (2, Field::Bytes(dense)) => read_dense(dense, &block, part)?,
-                (3, Field::Bytes(way)) => read_way(way, &block, part)?,
+                (3, Field::Bytes(way)) => ways.push(way),
                 (4, Field::Bytes(relation)) => read_relation(relation, &block, part)?,
                 _ => {}
             }
         }
+        // A block may hold all the file's ways: decode them in parallel, in order.
+        let decoded: Vec<RawWay> = ways
+            .par_iter()
+            .with_min_len(WAYS_PER_TASK)
+            .map(|way| read_way(way, &block))
+            .collect::<DecodeResult<_>>()?;
+        part.ways.extend(decoded);
     }
     Ok(())
 }
+
+/// Ways per parallel decoding task inside one block.
+const WAYS_PER_TASK: usize = 1024;
 
 fn read_node(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> {
     let (mut id, mut lat, mut lon) = (0, 0, 0);
@@ -257,16 +268,34 @@ fn read_node(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()>
 }
 
 fn read_dense(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> {
-    let (mut ids, mut lats, mut lons) = (Vec::new(), Vec::new(), Vec::new());
+    let mut columns: [Option<&[u8]>; 3] = [None; 3];
     let mut m = Message::new(data);
     while let Some((number, field)) = m.next_field()? {
-        match (number, field) {
-            (1, Field::Bytes(b)) => packed_delta(b, &mut ids)?,
-            (8, Field::Bytes(b)) => packed_delta(b, &mut lats)?,
-            (9, Field::Bytes(b)) => packed_delta(b, &mut lons)?,
-            _ => {}
+        let column = match number {
+            1 => 0,
+            8 => 1,
+            9 => 2,
+            _ => continue,
+        };
+        let Field::Bytes(bytes) = field else {
+            return Err(format!("dense nodes: field {number} is not a packed list"));
+        };
+        if columns[column].replace(bytes).is_some() {
+            return Err(format!("dense nodes: packed field {number} appears twice"));
         }
     }
+    let [id_bytes, lat_bytes, lon_bytes] = columns.map(|c| c.unwrap_or_default());
+    // The three columns are independent: decode them in parallel (one block may hold all
+    // the file's nodes).
+    let decode = |bytes: &[u8]| {
+        let mut out = Vec::new();
+        packed_delta(bytes, &mut out).map(|()| out)
+    };
+    let (ids, (lats, lons)) = rayon::join(
+        || decode(id_bytes),
+        || rayon::join(|| decode(lat_bytes), || decode(lon_bytes)),
+    );
+    let (ids, lats, lons) = (ids?, lats?, lons?);
     if ids.len() != lats.len() || ids.len() != lons.len() {
         return Err(format!(
             "dense nodes: {} ids, {} latitudes, {} longitudes",
@@ -286,7 +315,7 @@ fn read_dense(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()
     Ok(())
 }
 
-fn read_way(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> {
+fn read_way(data: &[u8], block: &Block) -> DecodeResult<RawWay> {
     let (mut id, mut keys, mut vals, mut refs): (_, &[u8], &[u8], _) = (0, &[], &[], Vec::new());
     let mut m = Message::new(data);
     while let Some((number, field)) = m.next_field()? {
@@ -298,12 +327,11 @@ fn read_way(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> 
             _ => {}
         }
     }
-    part.ways.push(RawWay {
+    Ok(RawWay {
         id,
         refs,
         tags: block.kept_tags(keys, vals)?,
-    });
-    Ok(())
+    })
 }
 
 fn read_relation(data: &[u8], block: &Block, part: &mut RawData) -> DecodeResult<()> {
