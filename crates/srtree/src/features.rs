@@ -20,7 +20,17 @@
 //!   (street or sidewalk class in the map); the heights of both boxes;
 //! - support: a's lowest cell above the median height of b's cells within 2.5 m of a's
 //!   footprint centre (5 m if there are none), and the fraction of 8 compass sectors
-//!   around a's footprint centre in which b has a cell within 4 m.
+//!   around a's footprint centre in which b has a cell within 4 m;
+//! - contact: from a's contact point (the mean of its cells within [`CONTACT_SLICE_M`] of
+//!   its lowest one — a tree's trunk foot rather than its crown's centre) the top-view
+//!   distance to b's nearest cell, how much farther that is than the nearest ground
+//!   surface of the scene, b's share of the scene's ground cells within
+//!   [`CONTACT_RADIUS_M`], a's bottom above b's cells there, and whether b is the nearest
+//!   ground surface ([`SubjectContext`] carries the scene's part);
+//! - occlusion: the fraction of a's lateral edges (azimuth extremes of its cells) at which
+//!   b hides a (b has nearer cells at that azimuth, [`edges_occluded_by`]), and the same of
+//!   b's edges by a: what a human reads as "partly hidden behind" where the visible
+//!   azimuth extents no longer overlap.
 //!
 //! Cost per pair: O(|a| log |hull b| + |b|) with objects subsampled to at most
 //! [`MAX_FEATURE_CELLS`] cells for the hull tests.
@@ -31,7 +41,7 @@ use crate::SrtreeError;
 use geodata::classes::Class;
 
 /// Names of the features, in vector order.
-pub const FEATURE_NAMES: [&str; 36] = [
+pub const FEATURE_NAMES: [&str; 43] = [
     "centroid_distance",
     "box_distance_min",
     "box_distance_max",
@@ -68,10 +78,29 @@ pub const FEATURE_NAMES: [&str; 36] = [
     "height_b",
     "a_bottom_above_b_ground_nearby",
     "b_sectors_around_a",
+    "contact_distance_to_b",
+    "contact_distance_beyond_nearest_ground",
+    "b_share_of_ground_near_contact",
+    "a_bottom_above_b_near_contact",
+    "b_is_nearest_ground_to_contact",
+    "a_edges_occluded_by_b",
+    "b_edges_occluded_by_a",
 ];
 
 /// Number of features.
 pub const FEATURE_COUNT: usize = FEATURE_NAMES.len();
+
+/// Cells at most this far above an object's lowest cell form its contact region, metres.
+pub const CONTACT_SLICE_M: f64 = 0.3;
+
+/// Radius about the contact point within which ground cells are counted, metres.
+pub const CONTACT_RADIUS_M: f64 = 1.0;
+
+/// Azimuth window about an object's lateral edge in which an occluder is looked for, radians.
+pub const OCCLUSION_WINDOW_RAD: f64 = 0.03;
+
+/// How much nearer than the occluded object an occluder must be, metres.
+pub const OCCLUSION_DEPTH_M: f64 = 0.5;
 
 /// Objects are subsampled to at most this many cells for the hull and azimuth features.
 pub const MAX_FEATURE_CELLS: usize = 600;
@@ -94,6 +123,9 @@ pub struct ViewObject {
     pub footprint_cells: Vec<[f64; 3]>,
     /// Lowest cell centre height in the view frame.
     pub bottom: f64,
+    /// Contact point: mean of the cells within [`CONTACT_SLICE_M`] of the lowest one
+    /// (where a thing touches what supports it: a tree's trunk foot, a car's underside).
+    pub contact: [f64; 3],
     /// Centroid in the view frame.
     pub centroid: [f64; 3],
     /// Box corners in the view frame.
@@ -146,10 +178,18 @@ impl ViewObject {
             .fold(f64::INFINITY, f64::min);
         let hulls = [(1, 2), (0, 2), (0, 1)]
             .map(|(i, j)| convex_hull(cells.iter().map(|p| [p[i], p[j]]).collect()));
+        let bottom = all.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min);
+        let slice: Vec<&[f64; 3]> = all
+            .iter()
+            .filter(|p| p[2] <= bottom + CONTACT_SLICE_M)
+            .collect();
+        let m = slice.len().max(1) as f64;
+        let contact = [0, 1, 2].map(|k| slice.iter().map(|p| p[k]).sum::<f64>() / m);
         ViewObject {
             id,
             class,
-            bottom: all.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min),
+            bottom,
+            contact,
             footprint_cells: all.clone(),
             cells,
             centroid,
@@ -255,8 +295,90 @@ fn overlap_of_narrower(a: [f64; 2], b: [f64; 2]) -> f64 {
     (overlap / narrower).min(1.0)
 }
 
-/// The feature vector of the ordered pair (a, b).
-pub fn pair_features(a: &ViewObject, b: &ViewObject, tol_m: f64) -> [f64; FEATURE_COUNT] {
+/// Horizontal distance from `a`'s contact point to `b`'s nearest cell, metres (capped at 50).
+pub fn contact_distance(a: &ViewObject, b: &ViewObject) -> f64 {
+    b.footprint_cells
+        .iter()
+        .map(|q| (q[0] - a.contact[0]).hypot(q[1] - a.contact[1]))
+        .fold(f64::INFINITY, f64::min)
+        .min(50.0)
+}
+
+/// What the pair features of a subject need to know about the rest of its scene: the
+/// ground surfaces near its contact point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SubjectContext {
+    /// Smallest [`contact_distance`] to any ground surface of the scene (50 if none).
+    pub nearest_ground_m: f64,
+    /// Ground cells of the scene within [`CONTACT_RADIUS_M`] of the contact point.
+    pub ground_cells_near: usize,
+}
+
+impl SubjectContext {
+    /// The context of `objects[a]` among `objects`.
+    pub fn new(objects: &[ViewObject], a: usize) -> SubjectContext {
+        let mut out = SubjectContext {
+            nearest_ground_m: 50.0,
+            ground_cells_near: 0,
+        };
+        let Some(subject) = objects.get(a) else {
+            return out;
+        };
+        for (g, o) in objects.iter().enumerate() {
+            if g == a || !is_ground(o.class) {
+                continue;
+            }
+            out.nearest_ground_m = out.nearest_ground_m.min(contact_distance(subject, o));
+            out.ground_cells_near += cells_near_contact(subject, o);
+        }
+        out
+    }
+}
+
+fn cells_near_contact(a: &ViewObject, b: &ViewObject) -> usize {
+    b.footprint_cells
+        .iter()
+        .filter(|q| (q[0] - a.contact[0]).hypot(q[1] - a.contact[1]) <= CONTACT_RADIUS_M)
+        .count()
+}
+
+/// Fraction (0, ½, 1) of the two lateral edges of `a`'s cells (their lowest and highest
+/// azimuth) at which `b` has a cell within [`OCCLUSION_WINDOW_RAD`] of the edge's azimuth
+/// and at least [`OCCLUSION_DEPTH_M`] nearer than `a`'s cells there: `a`'s visible extent
+/// ends there because `b` hides the rest, so `a` continues behind `b`.
+pub fn edges_occluded_by(a: &ViewObject, b: &ViewObject) -> f64 {
+    let az = |p: &[f64; 3]| p[1].atan2(p[0]);
+    let range = |p: &[f64; 3]| p[0].hypot(p[1]);
+    let mut occluded = 0;
+    for edge in a.cells_azimuth {
+        let near_edge = |p: &&[f64; 3]| (az(p) - edge).abs() <= OCCLUSION_WINDOW_RAD;
+        let a_range = a
+            .footprint_cells
+            .iter()
+            .filter(near_edge)
+            .map(range)
+            .fold(f64::INFINITY, f64::min);
+        if !a_range.is_finite() {
+            continue;
+        }
+        if b.footprint_cells
+            .iter()
+            .filter(near_edge)
+            .any(|p| range(p) + OCCLUSION_DEPTH_M <= a_range)
+        {
+            occluded += 1;
+        }
+    }
+    f64::from(occluded) / 2.0
+}
+
+/// The feature vector of the ordered pair (a, b); `context` is `a`'s [`SubjectContext`].
+pub fn pair_features(
+    a: &ViewObject,
+    b: &ViewObject,
+    context: &SubjectContext,
+    tol_m: f64,
+) -> [f64; FEATURE_COUNT] {
     let mut f = [0.0; FEATURE_COUNT];
     let d3 = |p: [f64; 3], q: [f64; 3]| {
         ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
@@ -332,6 +454,32 @@ pub fn pair_features(a: &ViewObject, b: &ViewObject, tol_m: f64) -> [f64; FEATUR
         (a.bottom - near_z[near_z.len() / 2]).clamp(-5.0, 5.0)
     };
     f[35] = sectors.iter().filter(|&&s| s).count() as f64 / 8.0;
+    let contact_m = contact_distance(a, b);
+    f[36] = contact_m;
+    f[37] = (contact_m - context.nearest_ground_m).clamp(0.0, 50.0);
+    let near = cells_near_contact(a, b);
+    f[38] = if context.ground_cells_near > 0 {
+        near as f64 / context.ground_cells_near as f64
+    } else {
+        0.0
+    };
+    let mut near_z: Vec<f64> = b
+        .footprint_cells
+        .iter()
+        .filter(|q| (q[0] - a.contact[0]).hypot(q[1] - a.contact[1]) <= CONTACT_RADIUS_M)
+        .map(|q| q[2])
+        .collect();
+    f[39] = if near_z.is_empty() || !a.bottom.is_finite() {
+        1.0
+    } else {
+        near_z.sort_by(f64::total_cmp);
+        (a.bottom - near_z[near_z.len() / 2]).clamp(-1.0, 1.0)
+    };
+    f[40] = f64::from(u8::from(
+        is_ground(b.class) && contact_m <= context.nearest_ground_m,
+    ));
+    f[41] = edges_occluded_by(a, b);
+    f[42] = edges_occluded_by(b, a);
     f
 }
 
@@ -441,20 +589,116 @@ mod tests {
     fn left_and_behind_features_have_the_right_signs() {
         let left = object(1, 10.0, 5.0, Class::Car);
         let right = object(2, 10.0, -5.0, Class::Car);
-        let f = pair_features(&left, &right, 0.05);
+        let none = SubjectContext {
+            nearest_ground_m: 50.0,
+            ground_cells_near: 0,
+        };
+        let f = pair_features(&left, &right, &none, 0.05);
         assert!(f[19] > 0.0, "a's right boundary is left of b's left one");
         assert_eq!(f[22], 0.0);
         assert!((f[0] - 10.0).abs() < 1e-9);
         assert!((f[4] - 10.0).abs() < 1e-9);
         let far = object(3, 20.0, 0.0, Class::Car);
         let near = object(4, 8.0, 0.0, Class::Car);
-        let f = pair_features(&far, &near, 0.05);
+        let f = pair_features(&far, &near, &none, 0.05);
         assert!(f[22] > 0.99 && f[25] > 11.0 && f[26] > 11.0);
         assert!(
             f[12] > 0.99,
             "far is hidden behind near in the y-z projection"
         );
         assert_eq!([f[28], f[29], f[30]], [1.0, 1.0, 0.0]);
+    }
+
+    /// A vertical plate of cells from azimuth `az0` to `az1` (radians) at `range_m`.
+    fn plate(id: u32, range_m: f64, az0: f64, az1: f64) -> ViewObject {
+        let vp = Viewpoint {
+            position: [0.0, 0.0, 0.0],
+            yaw_rad: 0.0,
+        };
+        let cells: Vec<[f64; 3]> = (0..=40)
+            .flat_map(|i| {
+                let az = az0 + (az1 - az0) * f64::from(i) / 40.0;
+                (0..5).map(move |k| [range_m * az.cos(), range_m * az.sin(), 0.2 * f64::from(k)])
+            })
+            .collect();
+        let bbox = OrientedBox {
+            centre: [range_m, 0.5 * range_m * (az0 + az1), 0.5],
+            half_extents: [0.1, 0.5 * range_m * (az1 - az0), 0.5],
+            yaw_rad: 0.0,
+        };
+        ViewObject::new(id, Class::Building, &cells, &bbox, &vp)
+    }
+
+    #[test]
+    fn occlusion_edges_need_a_nearer_neighbour_at_the_edge() {
+        // The far plate's visible part ends where the near one begins (it continues behind).
+        let far = plate(1, 20.0, 0.0, 0.2);
+        let near = plate(2, 10.0, 0.2, 0.4);
+        assert_eq!(edges_occluded_by(&far, &near), 0.5);
+        assert_eq!(
+            edges_occluded_by(&near, &far),
+            0.0,
+            "the far plate hides nothing"
+        );
+        // A nearer plate away from the edges hides neither edge.
+        let aside = plate(3, 10.0, 0.3, 0.4);
+        assert_eq!(edges_occluded_by(&far, &aside), 0.0);
+        // Both edges hidden: the far plate seen through a gap between two near ones.
+        let left = plate(4, 10.0, -0.2, 0.0);
+        let mut both = near.clone();
+        both.footprint_cells
+            .extend(left.footprint_cells.iter().copied());
+        assert_eq!(edges_occluded_by(&far, &both), 1.0);
+    }
+
+    #[test]
+    fn contact_point_is_the_foot_and_picks_the_nearest_ground() {
+        let vp = Viewpoint {
+            position: [0.0, 0.0, 0.0],
+            yaw_rad: 0.0,
+        };
+        // A "tree": trunk cells at (10, 0), crown cells spread towards (10, -3).
+        let mut cells: Vec<[f64; 3]> = (0..20).map(|k| [10.0, 0.0, 0.1 * f64::from(k)]).collect();
+        cells.extend((0..40).map(|k| [10.0, -0.075 * f64::from(k), 3.0]));
+        let bbox = OrientedBox {
+            centre: [10.0, -1.5, 1.5],
+            half_extents: [0.5, 1.5, 1.5],
+            yaw_rad: 0.0,
+        };
+        let tree = ViewObject::new(1, Class::Tree, &cells, &bbox, &vp);
+        assert!((tree.contact[0] - 10.0).abs() < 1e-9 && tree.contact[1].abs() < 1e-9);
+        let ground = |id, y0: f64, y1: f64, class| {
+            let cells: Vec<[f64; 3]> = (0..20)
+                .flat_map(|i| {
+                    (0..20).map(move |j| {
+                        [
+                            8.0 + 0.2 * f64::from(i),
+                            y0 + (y1 - y0) * f64::from(j) / 19.0,
+                            0.0,
+                        ]
+                    })
+                })
+                .collect();
+            let bbox = OrientedBox {
+                centre: [10.0, 0.5 * (y0 + y1), 0.0],
+                half_extents: [2.0, 0.5 * (y1 - y0).abs(), 0.05],
+                yaw_rad: 0.0,
+            };
+            ViewObject::new(id, class, &cells, &bbox, &vp)
+        };
+        // The sidewalk under the trunk, the street under the crown.
+        let objects = vec![
+            tree,
+            ground(2, -0.5, 1.5, Class::Sidewalk),
+            ground(3, -4.0, -0.7, Class::Street),
+        ];
+        let context = SubjectContext::new(&objects, 0);
+        let on_sidewalk = pair_features(&objects[0], &objects[1], &context, 0.05);
+        let on_street = pair_features(&objects[0], &objects[2], &context, 0.05);
+        assert_eq!((on_sidewalk[40], on_street[40]), (1.0, 0.0));
+        assert!(on_sidewalk[38] > on_street[38]);
+        assert_eq!(on_sidewalk[37], 0.0);
+        assert!(on_street[37] > 0.5);
     }
 
     #[test]
