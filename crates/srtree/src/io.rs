@@ -3,13 +3,17 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 8 | magic `SRTREE\0\n` |
-//! | 8 | 4 | format version `u32` (= 1) |
+//! | 8 | 4 | format version `u32` (= 2; version 1 files are refused, rebuild them) |
 //! | 12 | 8 | resolution, metres `f64` |
 //! | 20 | 1 | ray casting flag `u8` (0 or 1) |
 //! | 21 | 16 | log-odds hit, miss, min, max `f32` ×4 |
 //! | 37 | 8 | maximum ray length, metres `f64` |
 //! | 45 | 8 | cell count n `u64` |
-//! | 53 | 68·n | cells: key `i32`×3, hits `u32`, log-odds `f32`, colour sum `u32`×3, colour count `u32`, class histogram `u16`×10, object `u32`, object votes `u32`, label `u8`, 3 zero bytes |
+//! | 53 | 32·n | cells: key `i32`×3, hits `u32`, log-odds `f32`, object `u32`, histogram reference `u32`, object votes `u16`, label `u8`, 1 zero byte |
+//! | | 8 | full histograms m `u64` |
+//! | | 20·m | full histograms: class counts `u16`×10 |
+//! | | 8 | colour sums c `u64` (0, or n: one per cell) |
+//! | | 16·c | colour sums: `u32`×3 and coloured points `u32` |
 //! | | 4 | Dirichlet classes K `u32` (0: no model) |
 //! | | 8 | smoothing `f64` (only if K > 0) |
 //! | | K·(1 + 8K) | per class: present `u8`, then K concentrations `f64` if present |
@@ -17,14 +21,19 @@
 //! | | L | relation graph, UTF-8 JSON ([`crate::graph::RelationGraph`]) |
 //! | | 8 | FNV-1a 64-bit checksum of every byte before it |
 //!
-//! The R-tree and the hash index are not stored: [`read_map`] rebuilds them (bulk load).
-//! Every read checks lengths, values (finite log-odds, known labels, unique keys, positive
-//! concentrations) and the checksum, and names the byte offset of what is wrong.
+//! A histogram reference with its top bit set indexes the full histograms (cells that saw
+//! two classes or more); otherwise it is `class << 16 | count` for a cell whose labelled
+//! points all had one class (count 0: none labelled).
+//!
+//! The R-tree is not stored: [`read_map`] packs it anew (one run, cells in Morton order).
+//! Every read checks lengths, values (finite log-odds, known labels, keys within the
+//! grid, unique keys, histogram references in range, positive concentrations) and the
+//! checksum, and names the byte offset of what is wrong.
 
 use crate::dirichlet::{Dirichlet, DirichletModel};
 use crate::error::{io_err, Result, SrtreeError};
 use crate::graph::RelationGraph;
-use crate::map::{Cell, MapOptions, SrMap};
+use crate::map::{histogram_ref_valid, Cell, ColourSum, Histogram, MapOptions, SrMap, KEY_LIMIT};
 use geodata::classes::Class;
 use rustc_hash::FxHashSet;
 use std::path::Path;
@@ -32,9 +41,13 @@ use std::path::Path;
 /// The magic bytes at the start of every map file.
 pub const MAGIC: &[u8; 8] = b"SRTREE\0\n";
 /// The format version written and read.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Bytes of one cell record.
-pub const CELL_BYTES: usize = 68;
+pub const CELL_BYTES: usize = 32;
+/// Bytes of one full histogram.
+const HISTOGRAM_BYTES: usize = 2 * Class::COUNT;
+/// Bytes of one colour sum.
+const COLOUR_BYTES: usize = 16;
 
 fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
@@ -69,16 +82,25 @@ pub fn encode_map(map: &SrMap) -> Vec<u8> {
         }
         out.extend_from_slice(&c.hits.to_le_bytes());
         out.extend_from_slice(&c.log_odds.to_le_bytes());
-        for s in c.rgb_sum {
-            out.extend_from_slice(&s.to_le_bytes());
-        }
-        out.extend_from_slice(&c.rgb_count.to_le_bytes());
-        for h in c.histogram {
-            out.extend_from_slice(&h.to_le_bytes());
-        }
         out.extend_from_slice(&c.object.to_le_bytes());
+        out.extend_from_slice(&c.histogram_ref.to_le_bytes());
         out.extend_from_slice(&c.object_votes.to_le_bytes());
-        out.extend_from_slice(&[c.label, 0, 0, 0]);
+        out.extend_from_slice(&[c.label, 0]);
+    }
+    let table = map.histogram_table();
+    out.extend_from_slice(&(table.len() as u64).to_le_bytes());
+    for h in table {
+        for v in h {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let colours = map.colour_sums();
+    out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
+    for c in colours {
+        for v in c.sum {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&c.count.to_le_bytes());
     }
     match map.dirichlet() {
         None => out.extend_from_slice(&0u32.to_le_bytes()),
@@ -160,6 +182,18 @@ impl<'a> Reader<'a> {
     }
     fn f64(&mut self, what: &'static str) -> Result<f64> {
         Ok(f64::from_le_bytes(self.array(what)?))
+    }
+    /// Checks that `count` records of `size` bytes fit in the rest of the file.
+    fn check_fits(&self, count: u64, size: usize, what: &'static str) -> Result<()> {
+        if count > ((self.bytes.len() - self.pos) / size) as u64 {
+            return Err(SrtreeError::Truncated {
+                path: self.path.to_path_buf(),
+                offset: self.bytes.len(),
+                what,
+                len: self.bytes.len(),
+            });
+        }
+        Ok(())
     }
     fn malformed(&self, offset: usize, message: String) -> SrtreeError {
         SrtreeError::Malformed {
@@ -263,28 +297,30 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
     }
     let _ = at;
     let mut cells = Vec::with_capacity(n as usize);
+    let mut refs_at = Vec::with_capacity(n as usize);
     let mut seen = FxHashSet::default();
     for _ in 0..n {
         let at = r.pos;
         let key = [r.i32("cell key")?, r.i32("cell key")?, r.i32("cell key")?];
         let hits = r.u32("hits")?;
         let log_odds = r.f32("log-odds")?;
-        let rgb_sum = [r.u32("colour")?, r.u32("colour")?, r.u32("colour")?];
-        let rgb_count = r.u32("colour count")?;
-        let mut histogram = [0u16; Class::COUNT];
-        for h in &mut histogram {
-            *h = r.u16("histogram")?;
-        }
         let object = r.u32("object")?;
-        let object_votes = r.u32("object votes")?;
-        let tail = r.array::<4>("label")?;
+        let histogram_ref = r.u32("histogram reference")?;
+        let object_votes = r.u16("object votes")?;
+        let tail = r.array::<2>("label")?;
         let label = tail[0];
+        if key.iter().any(|k| k.abs() > KEY_LIMIT) {
+            return Err(r.malformed(
+                at,
+                format!("cell key {key:?} outside the grid (|key| ≤ {KEY_LIMIT})"),
+            ));
+        }
         if !log_odds.is_finite() {
             return Err(r.malformed(at, format!("cell {key:?} has log-odds {log_odds}")));
         }
         if Class::from_id(label).is_none() {
             return Err(r.malformed(
-                at + 64,
+                at + 30,
                 format!(
                     "cell {key:?} has label {label}, expected < {}",
                     Class::COUNT
@@ -294,17 +330,56 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
         if !seen.insert(key) {
             return Err(r.malformed(at, format!("cell key {key:?} appears twice")));
         }
+        refs_at.push(at + 24);
         cells.push(Cell {
             key,
             hits,
             log_odds,
-            rgb_sum,
-            rgb_count,
-            histogram,
             object,
+            histogram_ref,
             object_votes,
             label,
         });
+    }
+    drop(seen);
+    let m = r.u64("full histogram count")?;
+    r.check_fits(m, HISTOGRAM_BYTES, "full histograms")?;
+    let mut table: Vec<Histogram> = Vec::with_capacity(m as usize);
+    for _ in 0..m {
+        let mut h = [0u16; Class::COUNT];
+        for v in &mut h {
+            *v = r.u16("histogram")?;
+        }
+        table.push(h);
+    }
+    for (c, &at) in cells.iter().zip(&refs_at) {
+        if !histogram_ref_valid(c.histogram_ref, table.len()) {
+            return Err(r.malformed(
+                at,
+                format!(
+                    "cell {:?} has histogram reference {:#x}: not a class < {} nor one of {} full histograms",
+                    c.key,
+                    c.histogram_ref,
+                    Class::COUNT,
+                    table.len()
+                ),
+            ));
+        }
+    }
+    let at = r.pos;
+    let c = r.u64("colour sum count")?;
+    if c != 0 && c != n {
+        return Err(r.malformed(
+            at,
+            format!("{c} colour sums for {n} cells, expected 0 or {n}"),
+        ));
+    }
+    r.check_fits(c, COLOUR_BYTES, "colour sums")?;
+    let mut colours = Vec::with_capacity(c as usize);
+    for _ in 0..c {
+        let sum = [r.u32("colour")?, r.u32("colour")?, r.u32("colour")?];
+        let count = r.u32("colour count")?;
+        colours.push(ColourSum { sum, count });
     }
     let at = r.pos;
     let k = r.u32("Dirichlet class count")? as usize;
@@ -366,7 +441,7 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
             ),
         ));
     }
-    SrMap::from_parts(options, cells, dirichlet, relations)
+    SrMap::from_parts(options, cells, table, colours, dirichlet, relations)
 }
 
 /// Reads a map file.
@@ -394,10 +469,8 @@ mod tests {
             .cells()
             .iter()
             .map(|c| {
-                (
-                    c.histogram.to_vec(),
-                    crate::dirichlet::majority(&c.histogram).unwrap_or(0),
-                )
+                let h = map.histogram(c);
+                (h.to_vec(), crate::dirichlet::majority(&h).unwrap_or(0))
             })
             .collect();
         let model = DirichletModel::fit(
@@ -423,6 +496,9 @@ mod tests {
         let bytes = encode_map(&map);
         let back = decode_map(&bytes, Path::new("x.srt")).unwrap();
         assert_eq!(back.cells(), map.cells());
+        assert_eq!(back.histogram_table(), map.histogram_table());
+        assert_eq!(back.colour_sums(), map.colour_sums());
+        assert!(!map.histogram_table().is_empty() && !map.colour_sums().is_empty());
         assert_eq!(back.dirichlet(), map.dirichlet());
         assert_eq!(back.relations, map.relations);
         assert_eq!(back.options(), map.options());
@@ -465,15 +541,47 @@ mod tests {
             decode_map(&version, p),
             Err(SrtreeError::UnsupportedVersion { version: 9, .. })
         ));
-        // A bad label with a valid checksum is a Malformed error naming its offset.
+        // Bad values with a valid checksum are Malformed errors naming their offset.
+        let resum = |mut b: Vec<u8>| {
+            let n = b.len();
+            let sum = fnv1a(&b[..n - 8]);
+            b[n - 8..].copy_from_slice(&sum.to_le_bytes());
+            b
+        };
         let mut label = bytes.clone();
-        label[53 + 64] = 42;
-        let n = label.len();
-        let sum = fnv1a(&label[..n - 8]);
-        label[n - 8..].copy_from_slice(&sum.to_le_bytes());
-        let err = decode_map(&label, p).unwrap_err();
+        label[53 + 30] = 42;
+        let err = decode_map(&resum(label), p).unwrap_err();
         assert!(
-            matches!(err, SrtreeError::Malformed { offset: 117, .. }),
+            matches!(err, SrtreeError::Malformed { offset: 83, .. }),
+            "{err}"
+        );
+        let mut reference = bytes.clone();
+        reference[53 + 32 + 24..53 + 32 + 28].copy_from_slice(&(u32::MAX).to_le_bytes());
+        let err = decode_map(&resum(reference), p).unwrap_err();
+        assert!(
+            matches!(err, SrtreeError::Malformed { offset: 109, .. }),
+            "{err}"
+        );
+        let mut key = bytes.clone();
+        key[53..57].copy_from_slice(&(1i32 << 21).to_le_bytes());
+        let err = decode_map(&resum(key), p).unwrap_err();
+        assert!(
+            matches!(err, SrtreeError::Malformed { offset: 53, .. }),
+            "{err}"
+        );
+        // A version 1 file is refused with the version named.
+        let mut old = bytes.clone();
+        old[8..12].copy_from_slice(&1u32.to_le_bytes());
+        let err = decode_map(&old, p).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                SrtreeError::UnsupportedVersion {
+                    version: 1,
+                    supported: 2,
+                    ..
+                }
+            ),
             "{err}"
         );
         assert!(matches!(

@@ -185,7 +185,7 @@ pub fn scored_cells(sequences: &[Sequence], resolution_m: f64) -> Result<Vec<Seq
     let histograms = |(map, cells): PartCells| -> Vec<ScoredCell> {
         cells
             .iter()
-            .filter_map(|(k, t)| map.cell_at_key(*k).map(|c| (c.histogram.to_vec(), *t)))
+            .filter_map(|(k, t)| map.cell_at_key(*k).map(|c| (map.histogram(c).to_vec(), *t)))
             .collect()
     };
     sequences

@@ -1,24 +1,38 @@
 //! The SRTree map: fixed-resolution occupancy cells kept only where occupied, indexed by an
 //! R-tree (thesis §3.3.1, after RMAP).
 //!
-//! A point at `p` falls into the cell with integer key `⌊p / resolution⌋`. Each cell keeps
-//! its hit count, an occupancy log-odds (OctoMap's sensor model: +0.85 per hit, −0.4 per
-//! miss, clamped to [−2, 3.5]), the sum of the colours inserted, a class-count histogram
-//! and the majority object id (Boyer–Moore vote: exact whenever one id holds more than half
-//! of the cell's points). The cell label is the Dirichlet choice of [`crate::dirichlet`]
-//! when the map has a model, else the histogram's majority.
+//! A point at `p` falls into the cell with integer key `⌊p / resolution⌋` (each component
+//! within ±[`KEY_LIMIT`]). Each cell keeps its hit count, an occupancy log-odds (OctoMap's
+//! sensor model: +0.85 per hit, −0.4 per miss, clamped to [−2, 3.5]), a class-count
+//! histogram and the majority object id (Boyer–Moore vote: exact whenever one id holds
+//! more than half of the cell's points, votes saturate at 65 535); the sum of the colours
+//! inserted is kept in a column of its own that exists only once a coloured point arrived.
+//! The cell label is the Dirichlet choice of [`crate::dirichlet`] when the map has a
+//! model, else the histogram's majority.
 //!
-//! The cells live in a vector; a hash index maps keys to cells for insertion, and an
-//! R-tree ([`rstar`], inner nodes are minimum bounding cuboids of ≤ [`NODE_CAPACITY`]
-//! children) over the cell centres answers the spatial queries. A batch that adds more
-//! cells than a quarter of the map re-bulk-loads the tree (OMT packing, O(n log n));
-//! smaller batches are inserted one by one (O(log n) each).
+//! **Memory.** A cell record is 32 bytes ([`Cell`]). A histogram holding one class lives in
+//! the record (class and count); a cell that has seen two classes or more points to a
+//! shared table of full histograms (20 bytes each). There is no hash index between
+//! insertions: the cells are stored sorted by the Morton code of their keys, in runs, and
+//! each run carries a packed R-tree ([`NODE_CAPACITY`] children per node, minimum bounding
+//! cuboids of integer keys, ≈ 1.6 bytes per cell). A key is found by binary search.
+//! [`SrMap::memory`] counts every byte the map holds (allocated capacities).
 //!
-//! Free-space ray casting (optional, per batch as OctoMap's `insertPointCloud`): every
+//! **Insertion.** One batch (a cloud, or [`SrMap::insert_scans`]' list of scans) sorts
+//! its points by (cell code, scan, point), finds each cell once (binary search, or created
+//! in Morton order) and applies its points in insertion order: the result equals inserting
+//! point by point, scan by scan. With ray casting the same is done scan by scan, and a
+//! hash index of all cells lives during the batch for the rays' lookups. O(p log p) for p
+//! points, no allocation per point. The batch's new cells form a new run; a
+//! run is merged with the one before it while that one is less than twice its size
+//! (Bentley–Saxe logarithmic method: O(log n) runs, each cell re-sorted O(log n) times),
+//! so a batch adding more than a third of the map re-packs the whole tree.
+//!
+//! Free-space ray casting (optional, per scan as OctoMap's `insertPointCloud`): every
 //! cell traversed by the ray from the sensor origin to a point (3-D DDA, Amanatides & Woo
-//! 1987), except the cells hit in this batch, gets one miss per batch. Only cells that
+//! 1987), except the cells hit in this scan, gets one miss per scan. Only cells that
 //! exist are updated: free space is never stored. Queries return occupied cells only
-//! (log-odds > 0).
+//! (log-odds > 0). Cell ids (positions in [`SrMap::cells`]) hold until the next insertion.
 //!
 //! ```
 //! use geodata::cloud::{Columns, PointCloud, PointRecord, Precision};
@@ -34,31 +48,23 @@
 //! # Ok::<(), srtree::SrtreeError>(())
 //! ```
 
+mod packed;
+
 use crate::dirichlet::{majority, DirichletModel};
 use crate::error::{Result, SrtreeError};
 use geodata::classes::Class;
 use geodata::cloud::PointCloud;
+use packed::{morton, unmorton, KeyBox, PackedTree, Visit};
 use rayon::prelude::*;
-use rstar::primitives::GeomWithData;
-use rstar::{RTree, RTreeParams, AABB};
 use rustc_hash::FxHashMap;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
 
 /// Largest number of children of an R-tree node (M of the thesis).
 pub const NODE_CAPACITY: usize = 16;
 
-/// R-tree parameters: nodes of 8 to [`NODE_CAPACITY`] children, R* insertion.
-#[derive(Debug, Clone, Copy)]
-pub struct CellTreeParams;
-
-impl RTreeParams for CellTreeParams {
-    const MIN_SIZE: usize = 6;
-    const MAX_SIZE: usize = NODE_CAPACITY;
-    const REINSERTION_COUNT: usize = 4;
-    type DefaultInsertionStrategy = rstar::RStarInsertionStrategy;
-}
-
-/// A leaf entry of the R-tree: a cell centre and the cell's index.
-pub type CellEntry = GeomWithData<[f32; 3], u32>;
+/// Largest |key| component the grid accepts (keys are 21-bit in the Morton code).
+pub const KEY_LIMIT: i32 = (1 << 20) - 1;
 
 /// Options of a map.
 #[derive(Debug, Clone, PartialEq)]
@@ -93,8 +99,14 @@ impl Default for MapOptions {
     }
 }
 
-/// One occupied cell.
-#[derive(Debug, Clone, PartialEq)]
+/// A class histogram with all counts.
+pub type Histogram = [u16; Class::COUNT];
+
+/// Flag of [`Cell::histogram_ref`]: the low 31 bits index the map's histogram table.
+const POOLED: u32 = 1 << 31;
+
+/// One occupied cell (32 bytes).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Cell {
     /// Integer cell coordinates: the cell spans `[key·r, (key+1)·r)` per axis.
     pub key: [i32; 3],
@@ -102,19 +114,18 @@ pub struct Cell {
     pub hits: u32,
     /// Occupancy log-odds.
     pub log_odds: f32,
-    /// Sum of the colours of the points with colour.
-    pub rgb_sum: [u32; 3],
-    /// Points with colour.
-    pub rgb_count: u32,
-    /// Points per class id (halved together when one count would overflow).
-    pub histogram: [u16; Class::COUNT],
     /// Majority object id candidate (0: none).
     pub object: u32,
-    /// Boyer–Moore vote counter of `object`.
-    pub object_votes: u32,
+    /// The class histogram: [`POOLED`] | index into the map's histogram table, or (one
+    /// class only) `class << 16 | count` (count 0: no labelled point yet).
+    pub(crate) histogram_ref: u32,
+    /// Boyer–Moore vote counter of `object` (saturating).
+    pub object_votes: u16,
     /// Chosen class id.
     pub label: u8,
 }
+
+const _: () = assert!(std::mem::size_of::<Cell>() == 32);
 
 impl Cell {
     fn empty(key: [i32; 3]) -> Cell {
@@ -122,23 +133,11 @@ impl Cell {
             key,
             hits: 0,
             log_odds: 0.0,
-            rgb_sum: [0; 3],
-            rgb_count: 0,
-            histogram: [0; Class::COUNT],
             object: 0,
+            histogram_ref: 0,
             object_votes: 0,
             label: 0,
         }
-    }
-
-    /// Mean colour of the points with colour (grey if none had colour).
-    pub fn mean_rgb(&self) -> [u8; 3] {
-        if self.rgb_count == 0 {
-            return [128; 3];
-        }
-        let n = u64::from(self.rgb_count);
-        self.rgb_sum
-            .map(|s| ((u64::from(s) + n / 2) / n).min(255) as u8)
     }
 
     /// Occupancy probability from the log-odds.
@@ -156,16 +155,6 @@ impl Cell {
         Class::from_id(self.label).unwrap_or(Class::Unlabelled)
     }
 
-    fn add_label(&mut self, label: u8) {
-        let i = usize::from(label).min(Class::COUNT - 1);
-        if self.histogram[i] == u16::MAX {
-            for h in &mut self.histogram {
-                *h /= 2;
-            }
-        }
-        self.histogram[i] += 1;
-    }
-
     fn add_object(&mut self, id: u32) {
         if self.object_votes == 0 {
             self.object = id;
@@ -178,6 +167,90 @@ impl Cell {
     }
 }
 
+/// The full histogram of a cell's `histogram_ref`.
+pub(crate) fn expand_histogram(table: &[Histogram], r: u32) -> Histogram {
+    if r & POOLED != 0 {
+        return table[(r & !POOLED) as usize];
+    }
+    let mut h = [0; Class::COUNT];
+    let count = (r & 0xffff) as u16;
+    if count > 0 {
+        h[((r >> 16) & 0xff) as usize] = count;
+    }
+    h
+}
+
+/// Whether a stored `histogram_ref` is valid for a table of `table_len` histograms.
+pub(crate) fn histogram_ref_valid(r: u32, table_len: usize) -> bool {
+    if r & POOLED != 0 {
+        ((r & !POOLED) as usize) < table_len
+    } else {
+        r >> 16 < Class::COUNT as u32
+    }
+}
+
+/// One more point of class `label` (ids ≥ COUNT count as the last class); a count at
+/// `u16::MAX` halves the whole histogram first.
+fn add_label(table: &mut Vec<Histogram>, r: &mut u32, label: u8) {
+    let i = usize::from(label).min(Class::COUNT - 1);
+    if *r & POOLED == 0 {
+        let count = *r & 0xffff;
+        let class = ((*r >> 16) & 0xff) as usize;
+        if count == 0 || class == i {
+            let count = if count == u32::from(u16::MAX) {
+                count / 2
+            } else {
+                count
+            };
+            *r = (i as u32) << 16 | (count + 1);
+            return;
+        }
+        let mut h = [0u16; Class::COUNT];
+        h[class] = count as u16;
+        assert!(table.len() < POOLED as usize, "histogram table overflow");
+        *r = POOLED | table.len() as u32;
+        table.push(h);
+    }
+    let h = &mut table[(*r & !POOLED) as usize];
+    if h[i] == u16::MAX {
+        for v in h.iter_mut() {
+            *v /= 2;
+        }
+    }
+    h[i] += 1;
+}
+
+/// Colour sum of a cell's coloured points.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct ColourSum {
+    /// Sum per channel.
+    pub sum: [u32; 3],
+    /// Points with colour.
+    pub count: u32,
+}
+
+impl ColourSum {
+    fn add(&mut self, rgb: [u8; 3]) {
+        if self.count >= 1 << 24 {
+            self.sum = self.sum.map(|s| s / 2);
+            self.count /= 2;
+        }
+        for (sum, v) in self.sum.iter_mut().zip(rgb) {
+            *sum += u32::from(v);
+        }
+        self.count += 1;
+    }
+
+    fn mean(&self) -> [u8; 3] {
+        if self.count == 0 {
+            return [128; 3];
+        }
+        let n = u64::from(self.count);
+        self.sum
+            .map(|s| ((u64::from(s) + n / 2) / n).min(255) as u8)
+    }
+}
+
 /// What one insertion did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct InsertStats {
@@ -185,26 +258,30 @@ pub struct InsertStats {
     pub points: usize,
     /// Cells created.
     pub new_cells: usize,
-    /// Cells updated (created ones included).
+    /// Cell updates by endpoints, summed over scans (created cells included).
     pub touched_cells: usize,
     /// Rays cast.
     pub rays: usize,
     /// Free-space updates applied to existing cells.
     pub misses: usize,
-    /// Whether the R-tree was bulk-loaded anew.
+    /// Whether the whole R-tree was packed anew.
     pub bulk_loaded: bool,
 }
 
-/// Bytes used by the map, by part.
+/// Bytes held by the map, by part (allocated capacities, not lengths).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct MemoryReport {
     /// Cells stored.
     pub cells: usize,
     /// Bytes of the cell records.
     pub cell_bytes: usize,
-    /// Bytes of the key → cell hash index (estimate from its capacity).
+    /// Bytes of the table of full histograms (cells with two classes or more).
+    pub histogram_bytes: usize,
+    /// Bytes of the colour sums (0 when no coloured point was inserted).
+    pub colour_bytes: usize,
+    /// Bytes of a key → cell index (0: keys are found by binary search).
     pub index_bytes: usize,
-    /// Bytes of the R-tree (leaf entries plus inner nodes, estimated).
+    /// Bytes of the R-tree nodes and runs.
     pub tree_bytes: usize,
     /// Total bytes.
     pub total_bytes: usize,
@@ -212,23 +289,72 @@ pub struct MemoryReport {
     pub bytes_per_cell: f64,
 }
 
+/// A run of cells sorted by Morton code, with its packed R-tree.
+#[derive(Debug, Clone, Default)]
+struct Run {
+    start: usize,
+    end: usize,
+    tree: PackedTree,
+}
+
 /// The semantic R-tree map.
 #[derive(Debug, Clone)]
 pub struct SrMap {
     options: MapOptions,
     cells: Vec<Cell>,
-    index: FxHashMap<[i32; 3], u32>,
-    tree: RTree<CellEntry, CellTreeParams>,
+    histograms: Vec<Histogram>,
+    /// One per cell once a coloured point was inserted (`coloured`), else empty.
+    colours: Vec<ColourSum>,
+    coloured: bool,
+    runs: Vec<Run>,
     dirichlet: Option<DirichletModel>,
-    /// Per cell: touched in the current batch (all false between batches; reused so a
-    /// batch costs O(its points), not O(map)).
-    stamp: Vec<bool>,
     /// The spatial relation graph inferred over the map's objects.
     pub relations: crate::graph::RelationGraph,
 }
 
-/// Largest |key| the grid accepts (keeps cell arithmetic far from i32 overflow).
-const KEY_LIMIT: f64 = 1.0e9;
+/// State of one insertion batch: with ray casting (which looks up every traversed cell) a
+/// hash index of all cells, and per cell the last scan that hit it.
+struct Batch {
+    index: FxHashMap<u64, u32>,
+    hashed: bool,
+    /// Per cell (with ray casting only), the last scan that hit it.
+    last_scan: Vec<u32>,
+}
+
+/// A best-first search entry of [`SrMap::nearest_cells`].
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    d2: f64,
+    /// Cell id, or node index.
+    id: u32,
+    /// `None` for a cell, else (run, level) of a node.
+    node: Option<(u32, u32)>,
+}
+
+impl Candidate {
+    fn rank(&self) -> (f64, bool, u32) {
+        (self.d2, self.node.is_some(), self.id)
+    }
+}
+
+impl PartialEq for Candidate {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Candidate {}
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Candidate {
+    /// Reversed: the nearest candidate is the heap's maximum.
+    fn cmp(&self, other: &Self) -> Ordering {
+        let (a, b) = (self.rank(), other.rank());
+        b.0.total_cmp(&a.0).then(b.1.cmp(&a.1)).then(b.2.cmp(&a.2))
+    }
+}
 
 impl SrMap {
     /// An empty map.
@@ -255,31 +381,33 @@ impl SrMap {
         Ok(SrMap {
             options,
             cells: Vec::new(),
-            index: FxHashMap::default(),
-            tree: RTree::new_with_params(),
+            histograms: Vec::new(),
+            colours: Vec::new(),
+            coloured: false,
+            runs: Vec::new(),
             dirichlet: None,
-            stamp: Vec::new(),
             relations: Default::default(),
         })
     }
 
-    /// A map from stored parts (used by the file reader).
+    /// A map from stored parts (used by the file reader, which has checked the keys and
+    /// histogram references); the cells are re-packed into one run.
     pub(crate) fn from_parts(
         options: MapOptions,
         cells: Vec<Cell>,
+        histograms: Vec<Histogram>,
+        colours: Vec<ColourSum>,
         dirichlet: Option<DirichletModel>,
         relations: crate::graph::RelationGraph,
     ) -> Result<SrMap> {
         let mut map = SrMap::new(options)?;
-        map.index = cells
-            .iter()
-            .enumerate()
-            .map(|(i, c)| (c.key, i as u32))
-            .collect();
         map.cells = cells;
+        map.histograms = histograms;
+        map.coloured = !colours.is_empty();
+        map.colours = colours;
         map.dirichlet = dirichlet;
         map.relations = relations;
-        map.rebuild_tree();
+        map.index_new_cells(0);
         Ok(map)
     }
 
@@ -308,15 +436,53 @@ impl SrMap {
         &self.cells
     }
 
-    /// The cell with this key, if stored.
+    /// The table of full histograms (for the file writer).
+    pub(crate) fn histogram_table(&self) -> &[Histogram] {
+        &self.histograms
+    }
+
+    /// The colour sums, empty or one per cell (for the file writer).
+    pub(crate) fn colour_sums(&self) -> &[ColourSum] {
+        &self.colours
+    }
+
+    /// The class histogram of a cell of this map.
+    pub fn histogram(&self, cell: &Cell) -> Histogram {
+        expand_histogram(&self.histograms, cell.histogram_ref)
+    }
+
+    /// Mean colour of the coloured points of cell `id` (grey if none had colour).
+    pub fn mean_rgb(&self, id: u32) -> [u8; 3] {
+        self.colours
+            .get(id as usize)
+            .copied()
+            .unwrap_or_default()
+            .mean()
+    }
+
+    /// Id of the cell with this Morton code, by binary search in each run.
+    fn find(&self, code: u64) -> Option<u32> {
+        self.runs.iter().find_map(|run| {
+            self.cells[run.start..run.end]
+                .binary_search_by_key(&code, |c| morton(c.key))
+                .ok()
+                .map(|i| (run.start + i) as u32)
+        })
+    }
+
+    /// The cell with this key, if stored. O(log² n).
     pub fn cell_at_key(&self, key: [i32; 3]) -> Option<&Cell> {
-        self.index.get(&key).map(|&i| &self.cells[i as usize])
+        if key.iter().any(|k| k.abs() > KEY_LIMIT) {
+            return None;
+        }
+        self.find(morton(key)).map(|i| &self.cells[i as usize])
     }
 
     /// The key of the cell containing a point.
     pub fn key_of(&self, p: [f64; 3]) -> [i32; 3] {
         let r = self.options.resolution_m;
-        p.map(|v| (v / r).floor().clamp(-KEY_LIMIT, KEY_LIMIT) as i32)
+        let limit = f64::from(KEY_LIMIT);
+        p.map(|v| floor_i32((v / r).clamp(-limit, limit)))
     }
 
     /// Centre of a cell, metres.
@@ -334,91 +500,28 @@ impl SrMap {
     pub fn set_dirichlet(&mut self, model: Option<DirichletModel>) {
         self.dirichlet = model;
         let model = self.dirichlet.as_ref();
+        let table = &self.histograms;
         self.cells
             .par_iter_mut()
-            .for_each(|c| c.label = choose_label(model, &c.histogram));
+            .for_each(|c| c.label = choose_label(model, &expand_histogram(table, c.histogram_ref)));
     }
 
-    fn entry(&self, i: usize) -> CellEntry {
-        let c = self.centre(self.cells[i].key);
-        GeomWithData::new(c.map(|v| v as f32), i as u32)
-    }
-
-    fn rebuild_tree(&mut self) {
-        let entries: Vec<CellEntry> = (0..self.cells.len()).map(|i| self.entry(i)).collect();
-        self.tree = RTree::bulk_load_with_params(entries);
-    }
-
-    /// Inserts a cloud (its `label`, `rgb` and `object` columns when present); with
-    /// ray casting on and an `origin` (the sensor position), traversed cells get a miss.
-    pub fn insert_cloud(
-        &mut self,
-        cloud: &PointCloud,
-        origin: Option<[f64; 3]>,
-    ) -> Result<InsertStats> {
-        let old_len = self.cells.len();
-        let mut stats = self.update_cells(cloud, origin)?;
-        stats.bulk_loaded = self.index_new_cells(old_len);
-        Ok(stats)
-    }
-
-    /// Inserts scans one after the other (each a batch of its own, with its sensor origin
-    /// for ray casting), and indexes the new cells once at the end, as OctoMap's lazy
-    /// evaluation defers its inner nodes, then releases the cell vector's spare capacity.
-    /// Returns the summed statistics.
-    pub fn insert_scans(
-        &mut self,
-        scans: &[(&PointCloud, Option<[f64; 3]>)],
-    ) -> Result<InsertStats> {
-        let old_len = self.cells.len();
-        let mut total = InsertStats::default();
-        for (cloud, origin) in scans {
-            let s = self.update_cells(cloud, *origin)?;
-            total.points += s.points;
-            total.new_cells += s.new_cells;
-            total.touched_cells += s.touched_cells;
-            total.rays += s.rays;
-            total.misses += s.misses;
-        }
-        total.bulk_loaded = self.index_new_cells(old_len);
-        // A batch of scans is the whole map or a large part: drop the growth slack.
-        self.cells.shrink_to_fit();
-        Ok(total)
-    }
-
-    /// Adds the cells from `old_len` on to the R-tree: a bulk load when they are more than
-    /// a quarter of the old map, else one insertion each. Returns whether it bulk-loaded.
-    fn index_new_cells(&mut self, old_len: usize) -> bool {
-        let new_cells = self.cells.len() - old_len;
-        if new_cells == 0 {
-            return false;
-        }
-        if new_cells * 4 > old_len {
-            self.rebuild_tree();
-            return true;
-        }
-        for i in old_len..self.cells.len() {
-            let e = self.entry(i);
-            self.tree.insert(e);
-        }
-        false
-    }
-
-    /// Endpoint, ray and label updates of one batch; the R-tree is left to the caller.
-    fn update_cells(
-        &mut self,
-        cloud: &PointCloud,
-        origin: Option<[f64; 3]>,
-    ) -> Result<InsertStats> {
+    /// Checks every position (finite, inside the grid) and the origin.
+    fn check_scan(&self, cloud: &PointCloud, origin: Option<[f64; 3]>) -> Result<()> {
         cloud.check_columns()?;
-        let r = self.options.resolution_m;
-        let limit_m = KEY_LIMIT * r;
-        // Keys in parallel, checking every position.
-        let keys: Vec<[i32; 3]> = cloud
+        if u32::try_from(cloud.len()).is_err() {
+            return Err(SrtreeError::InvalidOption {
+                name: "cloud",
+                value: cloud.len() as f64,
+                expected: "at most 2³² − 1 points per cloud",
+            });
+        }
+        let limit_m = f64::from(KEY_LIMIT) * self.options.resolution_m;
+        cloud
             .positions
             .par_iter()
             .enumerate()
-            .map(|(index, p)| {
+            .try_for_each(|(index, p)| {
                 if !p.iter().all(|v| v.is_finite()) {
                     return Err(SrtreeError::NonFinite {
                         index,
@@ -432,93 +535,225 @@ impl SrMap {
                         limit_m,
                     });
                 }
-                Ok(p.map(|v| (v / r).floor() as i32))
-            })
-            .collect::<Result<_>>()?;
-        let mut stats = InsertStats {
-            points: keys.len(),
-            ..InsertStats::default()
-        };
-        let old_len = self.cells.len();
-        // Endpoint updates, one pass (hash lookups dominate; the cells touched are recorded
-        // once through a batch stamp).
-        let mut touched: Vec<u32> = Vec::new();
-        let mut stamp = std::mem::take(&mut self.stamp);
-        stamp.resize(old_len, false);
-        let labels = cloud.label.as_deref();
-        let rgbs = cloud.rgb.as_deref();
-        let objects = cloud.object.as_deref();
-        let hit = self.options.log_odds_hit;
-        let max = self.options.log_odds_max;
-        for (i, key) in keys.iter().enumerate() {
-            let next = self.cells.len() as u32;
-            let ci = *self.index.entry(*key).or_insert(next);
-            if ci == next {
-                self.cells.push(Cell::empty(*key));
-                stamp.push(false);
-            }
-            let cell = &mut self.cells[ci as usize];
-            if !stamp[ci as usize] {
-                stamp[ci as usize] = true;
-                touched.push(ci);
-                // One hit per batch and cell, as OctoMap's insertPointCloud.
-                cell.log_odds = (cell.log_odds + hit).min(max);
-            }
-            cell.hits = cell.hits.saturating_add(1);
-            if let Some(l) = labels {
-                cell.add_label(l[i]);
-            }
-            if let Some(c) = rgbs {
-                if cell.rgb_count >= 1 << 24 {
-                    cell.rgb_sum = cell.rgb_sum.map(|s| s / 2);
-                    cell.rgb_count /= 2;
-                }
-                for (sum, v) in cell.rgb_sum.iter_mut().zip(c[i]) {
-                    *sum += u32::from(v);
-                }
-                cell.rgb_count += 1;
-            }
-            if let Some(o) = objects {
-                if o[i] != 0 {
-                    cell.add_object(o[i]);
-                }
+                Ok(())
+            })?;
+        if let Some(o) = origin.filter(|_| self.options.ray_casting) {
+            if let Some(&bad) = o.iter().find(|v| !(v.is_finite() && v.abs() < limit_m)) {
+                return Err(SrtreeError::InvalidOption {
+                    name: "origin",
+                    value: bad,
+                    expected: "a finite sensor origin inside the grid",
+                });
             }
         }
-        stats.new_cells = self.cells.len() - old_len;
-        stats.touched_cells = touched.len();
-        if let (true, Some(origin)) = (self.options.ray_casting, origin) {
-            let (rays, misses) = self.cast_rays(origin, &cloud.positions, &stamp);
-            stats.rays = rays;
-            stats.misses = misses;
-        }
-        for &ci in &touched {
-            stamp[ci as usize] = false;
-        }
-        self.stamp = stamp;
-        // Labels of the touched cells.
-        let model = self.dirichlet.as_ref();
-        let cells = &mut self.cells;
-        let new_labels: Vec<(u32, u8)> = touched
-            .par_iter()
-            .map(|&ci| (ci, choose_label(model, &cells[ci as usize].histogram)))
-            .collect();
-        for (ci, l) in new_labels {
-            cells[ci as usize].label = l;
-        }
-        Ok(stats)
+        Ok(())
     }
 
-    /// Free-space updates: one miss per batch for every existing cell a ray traverses
-    /// before its endpoint, unless the cell was hit in this batch. Returns (rays, misses).
+    /// Inserts a cloud (its `label`, `rgb` and `object` columns when present); with
+    /// ray casting on and an `origin` (the sensor position), traversed cells get a miss.
+    pub fn insert_cloud(
+        &mut self,
+        cloud: &PointCloud,
+        origin: Option<[f64; 3]>,
+    ) -> Result<InsertStats> {
+        self.insert_scans(&[(cloud, origin)])
+    }
+
+    /// Inserts scans one after the other (each with its sensor origin for ray casting) in
+    /// one batch: the new cells are indexed once at the end, as OctoMap's lazy evaluation
+    /// defers its inner nodes. Every scan is checked first: on error the map is unchanged.
+    /// Returns the summed statistics.
+    pub fn insert_scans(
+        &mut self,
+        scans: &[(&PointCloud, Option<[f64; 3]>)],
+    ) -> Result<InsertStats> {
+        for (cloud, origin) in scans {
+            self.check_scan(cloud, *origin)?;
+        }
+        let old_len = self.cells.len();
+        let points: usize = scans.iter().map(|(c, _)| c.len()).sum();
+        if old_len.saturating_add(points) >= u32::MAX as usize {
+            return Err(SrtreeError::InvalidOption {
+                name: "points",
+                value: points as f64,
+                expected: "fewer than 2³² cells plus new points in one map",
+            });
+        }
+        let rays = self.options.ray_casting && scans.iter().any(|(_, o)| o.is_some());
+        let mut batch = Batch {
+            index: if rays {
+                self.cells
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| (morton(c.key), i as u32))
+                    .collect()
+            } else {
+                FxHashMap::default()
+            },
+            hashed: rays,
+            last_scan: if rays { vec![0; old_len] } else { Vec::new() },
+        };
+        let clouds: Vec<&PointCloud> = scans.iter().map(|(c, _)| *c).collect();
+        let mut total = InsertStats {
+            points: clouds.iter().map(|c| c.len()).sum(),
+            ..InsertStats::default()
+        };
+        if clouds.iter().any(|c| c.rgb.is_some()) && !self.coloured {
+            self.coloured = true;
+            self.colours = vec![ColourSum::default(); self.cells.len()];
+        }
+        if rays {
+            // Scan by scan: the misses of a scan must see the hits of the scans before it.
+            for (s, (cloud, origin)) in scans.iter().enumerate() {
+                let scan = s as u32 + 1;
+                let order = self.sorted_points(&clouds[s..=s], scan);
+                total.touched_cells +=
+                    self.update_endpoints(&clouds[s..=s], scan, &order, &mut batch);
+                if let Some(origin) = origin {
+                    let (rays, misses) = self.cast_rays(*origin, &cloud.positions, scan, &batch);
+                    total.rays += rays;
+                    total.misses += misses;
+                }
+            }
+        } else {
+            // Hits only commute between cells: all points at once, sorted by cell and then
+            // in insertion order, so new cells come out in Morton order.
+            let order = self.sorted_points(&clouds, 1);
+            total.touched_cells += self.update_endpoints(&clouds, 1, &order, &mut batch);
+        }
+        drop(batch);
+        total.new_cells = self.cells.len() - old_len;
+        total.bulk_loaded = self.index_new_cells(old_len);
+        Ok(total)
+    }
+
+    /// (cell code, scan, point) of every point of `clouds` (scan numbers from `first`),
+    /// sorted: by cell, then in insertion order.
+    fn sorted_points(&self, clouds: &[&PointCloud], first: u32) -> Vec<Item> {
+        const CHUNK: usize = 1 << 16;
+        let r = self.options.resolution_m;
+        let mut order = vec![(0u64, 0u32, 0u32); clouds.iter().map(|c| c.len()).sum()];
+        // (output slice, positions, scan, index of the first point), filled in parallel.
+        let mut parts = Vec::new();
+        let mut rest = order.as_mut_slice();
+        for (s, cloud) in clouds.iter().enumerate() {
+            for (c, positions) in cloud.positions.chunks(CHUNK).enumerate() {
+                let (out, tail) = rest.split_at_mut(positions.len());
+                parts.push((out, positions, first + s as u32, c * CHUNK));
+                rest = tail;
+            }
+        }
+        parts
+            .into_par_iter()
+            .for_each(|(out, positions, scan, base)| {
+                for (i, (o, p)) in out.iter_mut().zip(positions).enumerate() {
+                    *o = (morton(p.map(|v| floor_i32(v / r))), scan, (base + i) as u32);
+                }
+            });
+        radix_sort_by_code(&mut order);
+        order
+    }
+
+    /// Endpoint updates of sorted points (see [`SrMap::sorted_points`]; `clouds[s]` is scan
+    /// `first + s`): each cell is looked up once and gets one hit per scan, then its points
+    /// are applied in insertion order. Returns the (cell, scan) pairs touched.
+    fn update_endpoints(
+        &mut self,
+        clouds: &[&PointCloud],
+        first: u32,
+        order: &[(u64, u32, u32)],
+        batch: &mut Batch,
+    ) -> usize {
+        let (hit, max) = (self.options.log_odds_hit, self.options.log_odds_max);
+        let distinct = order.chunk_by(|a, b| a.0 == b.0).count();
+        self.cells.reserve(distinct);
+        if batch.hashed {
+            batch.last_scan.reserve(distinct);
+        }
+        if self.coloured {
+            self.colours.reserve(distinct);
+        }
+        let labelled = clouds.iter().any(|c| c.label.is_some());
+        // Taken out while the cells are borrowed; put back below.
+        let model = self.dirichlet.take();
+        let mut touched = 0;
+        for points in order.chunk_by(|a, b| a.0 == b.0) {
+            let ci = self.cell_for_code(points[0].0, batch) as usize;
+            let cell = &mut self.cells[ci];
+            let mut scan = 0;
+            for &(_, s, i) in points {
+                if s != scan {
+                    // One hit per scan and cell, as OctoMap's insertPointCloud.
+                    scan = s;
+                    touched += 1;
+                    cell.log_odds = (cell.log_odds + hit).min(max);
+                }
+                let cloud = clouds[(s - first) as usize];
+                let i = i as usize;
+                cell.hits = cell.hits.saturating_add(1);
+                if let Some(l) = &cloud.label {
+                    add_label(&mut self.histograms, &mut cell.histogram_ref, l[i]);
+                }
+                if let Some(o) = &cloud.object {
+                    if o[i] != 0 {
+                        cell.add_object(o[i]);
+                    }
+                }
+                if let Some(c) = &cloud.rgb {
+                    self.colours[ci].add(c[i]);
+                }
+            }
+            if batch.hashed {
+                batch.last_scan[ci] = scan;
+            }
+            if labelled {
+                let h = expand_histogram(&self.histograms, cell.histogram_ref);
+                cell.label = choose_label(model.as_ref(), &h);
+            }
+        }
+        self.dirichlet = model;
+        touched
+    }
+
+    /// The id of the cell with this code, created when missing.
+    fn cell_for_code(&mut self, code: u64, batch: &mut Batch) -> u32 {
+        if batch.hashed {
+            if let Some(&ci) = batch.index.get(&code) {
+                return ci;
+            }
+        }
+        // A hash index holds every cell; without it each code comes once per batch.
+        let found = if batch.hashed { None } else { self.find(code) };
+        let ci = found.unwrap_or_else(|| {
+            // insert_scans checked that the cell count stays below 2³².
+            let ci = self.cells.len() as u32;
+            self.cells.push(Cell::empty(unmorton(code)));
+            if self.coloured {
+                self.colours.push(ColourSum::default());
+            }
+            if batch.hashed {
+                batch.last_scan.push(0);
+            }
+            ci
+        });
+        if batch.hashed {
+            batch.index.insert(code, ci);
+        }
+        ci
+    }
+
+    /// Free-space updates of one scan: one miss for every existing cell a ray traverses
+    /// before its endpoint, unless the cell was hit in this scan. Returns (rays, misses).
     fn cast_rays(
         &mut self,
         origin: [f64; 3],
         points: &[[f64; 3]],
-        hit_now: &[bool],
+        scan: u32,
+        batch: &Batch,
     ) -> (usize, usize) {
         let r = self.options.resolution_m;
         let max_ray = self.options.max_ray_m;
-        let index = &self.index;
+        let (index, last_scan) = (&batch.index, &batch.last_scan);
         let chunk = 4096;
         let mut missed: Vec<u32> = points
             .par_chunks(chunk)
@@ -531,8 +766,8 @@ impl SrMap {
                         continue;
                     }
                     traverse(origin, *p, r, |key| {
-                        if let Some(&ci) = index.get(&key) {
-                            if !hit_now[ci as usize] {
+                        if let Some(&ci) = index.get(&morton(key)) {
+                            if last_scan[ci as usize] != scan {
                                 out.push(ci);
                             }
                         }
@@ -553,39 +788,221 @@ impl SrMap {
         (points.len(), missed.len())
     }
 
-    /// Occupied cells whose volume intersects the box `[min, max]` (metres), unsorted.
+    /// Sorts the cells from `start` on by Morton code (their colour sums with them).
+    fn sort_from(&mut self, start: usize) {
+        if self.cells[start..].is_sorted_by_key(|c| morton(c.key)) {
+            return;
+        }
+        if !self.coloured {
+            self.cells[start..].par_sort_unstable_by_key(|c| morton(c.key));
+            return;
+        }
+        let mut order: Vec<(u64, u32)> = self.cells[start..]
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (morton(c.key), (start + i) as u32))
+            .collect();
+        order.par_sort_unstable();
+        let cells: Vec<Cell> = order.iter().map(|&(_, i)| self.cells[i as usize]).collect();
+        let colours: Vec<ColourSum> = order
+            .iter()
+            .map(|&(_, i)| self.colours[i as usize])
+            .collect();
+        self.cells[start..].copy_from_slice(&cells);
+        self.colours[start..].copy_from_slice(&colours);
+    }
+
+    /// Makes the cells from `old_len` on a run and merges it with the runs before it while
+    /// the one before is less than twice as large. Returns whether the whole map was packed
+    /// anew (which also releases spare capacity).
+    fn index_new_cells(&mut self, old_len: usize) -> bool {
+        let len = self.cells.len();
+        if len == old_len {
+            return false;
+        }
+        let mut start = old_len;
+        while let Some(last) = self.runs.last() {
+            if last.end - last.start < 2 * (len - start) {
+                start = last.start;
+                self.runs.pop();
+            } else {
+                break;
+            }
+        }
+        self.sort_from(start);
+        let tree = PackedTree::build(&self.cells[start..], |c| c.key);
+        self.runs.push(Run {
+            start,
+            end: len,
+            tree,
+        });
+        if start == 0 {
+            self.cells.shrink_to_fit();
+            self.colours.shrink_to_fit();
+            self.histograms.shrink_to_fit();
+        }
+        start == 0
+    }
+
+    /// The keys (one axis) whose cell centre lies in `[lo, hi]`, if any.
+    fn key_range(&self, lo: f64, hi: f64) -> Option<(i32, i32)> {
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return None;
+        }
+        let r = self.options.resolution_m;
+        let centre = |k: i64| (k as f64 + 0.5) * r;
+        let lim = i64::from(KEY_LIMIT) + 1;
+        let clamp = |v: f64| v.clamp(-lim as f64, lim as f64) as i64;
+        let mut kmin = clamp((lo / r - 0.5).ceil());
+        while kmin > -lim && centre(kmin - 1) >= lo {
+            kmin -= 1;
+        }
+        while kmin < lim && centre(kmin) < lo {
+            kmin += 1;
+        }
+        let mut kmax = clamp((hi / r - 0.5).floor());
+        while kmax < lim && centre(kmax + 1) <= hi {
+            kmax += 1;
+        }
+        while kmax > -lim && centre(kmax) > hi {
+            kmax -= 1;
+        }
+        (kmin <= kmax).then_some((kmin as i32, kmax as i32))
+    }
+
+    /// Occupied cells whose volume intersects the box `[min, max]` (metres), i.e. whose
+    /// centre lies in the box grown by half a cell, unsorted.
     pub fn cells_in_box(&self, min: [f64; 3], max: [f64; 3]) -> Vec<u32> {
         let h = 0.5 * self.options.resolution_m;
-        let lo = [min[0] - h, min[1] - h, min[2] - h].map(|v| v as f32);
-        let hi = [max[0] + h, max[1] + h, max[2] + h].map(|v| v as f32);
-        let env = AABB::from_corners(lo, hi);
-        self.tree
-            .locate_in_envelope(&env)
-            .map(|e| e.data)
-            .filter(|&i| self.cells[i as usize].occupied())
-            .collect()
+        let mut q = KeyBox::EMPTY;
+        for a in 0..3 {
+            match self.key_range(min[a] - h, max[a] + h) {
+                Some((lo, hi)) => (q.min[a], q.max[a]) = (lo, hi),
+                None => return Vec::new(),
+            }
+        }
+        self.occupied_where(|b| q.visit_node(b), |key| q.contains(key))
+    }
+
+    /// Occupied cells of every run's tree: nodes as `test` says, cells of a descended
+    /// leaf where `keep(key)`. Unsorted.
+    fn occupied_where(
+        &self,
+        mut test: impl FnMut(&KeyBox) -> Visit,
+        keep: impl Fn([i32; 3]) -> bool,
+    ) -> Vec<u32> {
+        let mut out = Vec::new();
+        for run in &self.runs {
+            let cells = &self.cells[run.start..run.end];
+            let base = run.start as u32;
+            run.tree.visit(&mut test, |range, all| {
+                let start = range.start;
+                for (i, c) in cells[range].iter().enumerate() {
+                    if c.occupied() && (all || keep(c.key)) {
+                        out.push(base + (start + i) as u32);
+                    }
+                }
+            });
+        }
+        out
+    }
+
+    /// Squared distance from `p` to the centre of a key, the one the queries compare.
+    fn dist2(&self, key: [i32; 3], p: [f64; 3]) -> f64 {
+        let c = self.centre(key);
+        let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    }
+
+    /// Smallest and largest squared distances from `p` to the centres of the keys of `b`.
+    fn box_dist2(&self, b: &KeyBox, p: [f64; 3]) -> (f64, f64) {
+        let (lo, hi) = (self.centre(b.min), self.centre(b.max));
+        let mut near = [0.0; 3];
+        let mut far = [0.0; 3];
+        for a in 0..3 {
+            near[a] = if p[a] < lo[a] {
+                lo[a] - p[a]
+            } else if p[a] > hi[a] {
+                p[a] - hi[a]
+            } else {
+                0.0
+            };
+            far[a] = (p[a] - lo[a]).abs().max((hi[a] - p[a]).abs());
+        }
+        (
+            near[0] * near[0] + near[1] * near[1] + near[2] * near[2],
+            far[0] * far[0] + far[1] * far[1] + far[2] * far[2],
+        )
     }
 
     /// Occupied cells whose centre lies within `radius_m` of `centre`, unsorted.
     pub fn cells_within_radius(&self, centre: [f64; 3], radius_m: f64) -> Vec<u32> {
-        let c = centre.map(|v| v as f32);
-        let r2 = (radius_m * radius_m) as f32;
-        self.tree
-            .locate_within_distance(c, r2)
-            .map(|e| e.data)
-            .filter(|&i| self.cells[i as usize].occupied())
-            .collect()
+        if radius_m.is_nan() || radius_m < 0.0 {
+            return Vec::new();
+        }
+        let r2 = radius_m * radius_m;
+        self.occupied_where(
+            |b| {
+                let (near, far) = self.box_dist2(b, centre);
+                if near > r2 {
+                    Visit::Skip
+                } else if far <= r2 {
+                    Visit::All
+                } else {
+                    Visit::Descend
+                }
+            },
+            |key| self.dist2(key, centre) <= r2,
+        )
     }
 
-    /// The `k` occupied cells with centres nearest to `p`, nearest first.
+    /// The `k` occupied cells with centres nearest to `p`, nearest first (best-first
+    /// search over the runs' trees).
     pub fn nearest_cells(&self, p: [f64; 3], k: usize) -> Vec<u32> {
-        let q = p.map(|v| v as f32);
-        self.tree
-            .nearest_neighbor_iter(&q)
-            .map(|e| e.data)
-            .filter(|&i| self.cells[i as usize].occupied())
-            .take(k)
-            .collect()
+        let mut out = Vec::with_capacity(k);
+        if k == 0 || p.iter().any(|v| !v.is_finite()) {
+            return out;
+        }
+        let mut heap = BinaryHeap::new();
+        for (ri, run) in self.runs.iter().enumerate() {
+            if let Some((level, j)) = run.tree.root() {
+                heap.push(Candidate {
+                    d2: self.box_dist2(run.tree.node_box(level, j), p).0,
+                    id: j as u32,
+                    node: Some((ri as u32, level as u32)),
+                });
+            }
+        }
+        while let Some(c) = heap.pop() {
+            let Some((ri, level)) = c.node else {
+                if self.cells[c.id as usize].occupied() {
+                    out.push(c.id);
+                    if out.len() == k {
+                        break;
+                    }
+                }
+                continue;
+            };
+            let run = &self.runs[ri as usize];
+            let (level, j) = (level as usize, c.id as usize);
+            for child in run.tree.children(level, j) {
+                heap.push(if level == 0 {
+                    let id = run.start + child;
+                    Candidate {
+                        d2: self.dist2(self.cells[id].key, p),
+                        id: id as u32,
+                        node: None,
+                    }
+                } else {
+                    Candidate {
+                        d2: self.box_dist2(run.tree.node_box(level - 1, child), p).0,
+                        id: child as u32,
+                        node: Some((ri, level as u32 - 1)),
+                    }
+                });
+            }
+        }
+        out
     }
 
     /// Occupied cells labelled with a class, in cell order.
@@ -611,57 +1028,181 @@ impl SrMap {
             .collect()
     }
 
-    /// Bytes used, by part.
+    /// Bytes held, by part: every allocation of the map (capacities), the Dirichlet model
+    /// and relation graph aside.
     pub fn memory(&self) -> MemoryReport {
         let cells = self.cells.len();
         let cell_bytes = self.cells.capacity() * std::mem::size_of::<Cell>();
-        // hashbrown: one control byte plus the (key, value) slot per bucket.
-        let index_bytes = self.index.capacity().next_power_of_two().max(1) * 8 / 7
-            * (std::mem::size_of::<([i32; 3], u32)>() + 1);
-        // Leaves plus inner nodes (each ~ one entry per child and a bounding box).
-        let leaf = std::mem::size_of::<CellEntry>();
-        let inner_nodes = cells.div_ceil(CellTreeParams::MIN_SIZE + 2);
-        let tree_bytes = cells * (leaf + 8) + inner_nodes * (24 + 8 + 24);
-        let total_bytes = cell_bytes + index_bytes + tree_bytes;
+        let histogram_bytes = self.histograms.capacity() * std::mem::size_of::<Histogram>();
+        let colour_bytes = self.colours.capacity() * std::mem::size_of::<ColourSum>();
+        let tree_bytes = self.runs.iter().map(|r| r.tree.bytes()).sum::<usize>()
+            + self.runs.capacity() * std::mem::size_of::<Run>();
+        let total_bytes = cell_bytes + histogram_bytes + colour_bytes + tree_bytes;
         MemoryReport {
             cells,
             cell_bytes,
-            index_bytes,
+            histogram_bytes,
+            colour_bytes,
+            index_bytes: 0,
             tree_bytes,
             total_bytes,
             bytes_per_cell: total_bytes as f64 / cells.max(1) as f64,
         }
     }
 
-    /// Removes cells that are no longer occupied and rebuilds the index and tree.
+    /// Removes cells that are no longer occupied, compacts the histogram table and packs
+    /// the tree anew. Returns the number of cells removed.
     pub fn prune_free(&mut self) -> usize {
         let before = self.cells.len();
-        self.cells.retain(Cell::occupied);
-        self.index = self
-            .cells
-            .iter()
-            .enumerate()
-            .map(|(i, c)| (c.key, i as u32))
-            .collect();
-        self.rebuild_tree();
-        before - self.cells.len()
+        let with_colours = self.coloured;
+        let mut kept = 0;
+        let mut table = Vec::new();
+        for i in 0..before {
+            let mut c = self.cells[i];
+            if !c.occupied() {
+                continue;
+            }
+            if c.histogram_ref & POOLED != 0 {
+                table.push(self.histograms[(c.histogram_ref & !POOLED) as usize]);
+                c.histogram_ref = POOLED | (table.len() - 1) as u32;
+            }
+            self.cells[kept] = c;
+            if with_colours {
+                self.colours[kept] = self.colours[i];
+            }
+            kept += 1;
+        }
+        self.cells.truncate(kept);
+        self.colours.truncate(if with_colours { kept } else { 0 });
+        self.histograms = table;
+        self.runs.clear();
+        self.index_new_cells(0);
+        before - kept
     }
 
-    /// Height of the R-tree (leaf level = 1).
+    /// Height of the tallest run's R-tree (a lone leaf = 1; empty map: 0).
     pub fn tree_height(&self) -> usize {
-        fn depth<T: rstar::RTreeObject>(n: &rstar::ParentNode<T>) -> usize {
-            1 + n
-                .children()
-                .iter()
-                .map(|c| match c {
-                    rstar::RTreeNode::Parent(p) => depth(p),
-                    rstar::RTreeNode::Leaf(_) => 0,
-                })
-                .max()
-                .unwrap_or(0)
-        }
-        depth(self.tree.root())
+        self.runs.iter().map(|r| r.tree.height()).max().unwrap_or(0)
     }
+
+    /// Number of runs (packed R-trees) the cells are split into.
+    pub fn runs(&self) -> usize {
+        self.runs.len()
+    }
+}
+
+/// `⌊q⌋` for `|q| < 2³¹` without a call to libm's `floor`.
+fn floor_i32(q: f64) -> i32 {
+    let t = q as i32;
+    if f64::from(t) > q {
+        t - 1
+    } else {
+        t
+    }
+}
+
+/// A point to insert: (cell code, scan, point).
+type Item = (u64, u32, u32);
+
+/// Sorts by code, keeping the order of equal codes: radix sort over the bits in which the
+/// codes differ, most significant 11-bit digit first while a bucket is larger than the
+/// cache ([`IN_CACHE`] items), then least significant digit first inside each bucket.
+/// O(p · bits / 11), one scratch copy.
+fn radix_sort_by_code(items: &mut [Item]) {
+    if items.len() < 2 {
+        return;
+    }
+    let (min, max) = items
+        .iter()
+        .fold((u64::MAX, 0), |(lo, hi), x| (lo.min(x.0), hi.max(x.0)));
+    let bits = 64 - (min ^ max).leading_zeros() as usize;
+    let mut scratch = vec![(0u64, 0u32, 0u32); items.len()];
+    sort_low_bits(items, &mut scratch, bits);
+}
+
+/// Bits per radix digit.
+const DIGIT: usize = 11;
+/// Buckets this small are sorted least significant digit first (16 bytes each: 128 KiB).
+const IN_CACHE: usize = 1 << 13;
+
+/// Stable sort of `a` by the low `bits` bits of the codes (the others are equal); `b` is
+/// scratch of the same length.
+fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize) {
+    if bits == 0 || a.len() < 2 {
+        return;
+    }
+    if a.len() <= IN_CACHE {
+        let mut in_a = true;
+        for shift in (0..bits).step_by(DIGIT) {
+            let width = DIGIT.min(bits - shift);
+            let moved = if in_a {
+                scatter(a, b, shift, width)
+            } else {
+                scatter(b, a, shift, width)
+            };
+            in_a ^= moved;
+        }
+        if !in_a {
+            a.copy_from_slice(b);
+        }
+        return;
+    }
+    let shift = bits.saturating_sub(DIGIT);
+    let counts = digit_counts(a, shift, bits - shift);
+    if !scatter_counted(a, b, shift, bits - shift, &counts) {
+        sort_low_bits(a, b, shift);
+        return;
+    }
+    a.copy_from_slice(b);
+    let mut start = 0;
+    for c in counts {
+        let end = start + c;
+        sort_low_bits(&mut a[start..end], &mut b[start..end], shift);
+        start = end;
+    }
+}
+
+/// Counts of the digit `(code >> shift) & (2^width − 1)`.
+fn digit_counts(a: &[Item], shift: usize, width: usize) -> Vec<usize> {
+    let mask = (1u64 << width) - 1;
+    let mut counts = vec![0usize; 1 << width];
+    for x in a {
+        counts[((x.0 >> shift) & mask) as usize] += 1;
+    }
+    counts
+}
+
+/// Stable scatter of `src` into `dst` by one digit. Returns false (nothing moved) when
+/// all items share the digit.
+fn scatter(src: &[Item], dst: &mut [Item], shift: usize, width: usize) -> bool {
+    let counts = digit_counts(src, shift, width);
+    scatter_counted(src, dst, shift, width, &counts)
+}
+
+/// [`scatter`] with the digit counts given.
+fn scatter_counted(
+    src: &[Item],
+    dst: &mut [Item],
+    shift: usize,
+    width: usize,
+    counts: &[usize],
+) -> bool {
+    if counts.contains(&src.len()) {
+        return false;
+    }
+    let mask = (1u64 << width) - 1;
+    let mut offset = Vec::with_capacity(counts.len());
+    let mut sum = 0;
+    for &c in counts {
+        offset.push(sum);
+        sum += c;
+    }
+    for x in src {
+        let d = ((x.0 >> shift) & mask) as usize;
+        dst[offset[d]] = *x;
+        offset[d] += 1;
+    }
+    true
 }
 
 /// The label of a histogram: the Dirichlet choice, or the majority without a model.
@@ -782,8 +1323,9 @@ pub(crate) mod tests {
         assert_eq!((stats.points, stats.new_cells), (4, 2));
         let c = map.cell_at_key([0, 0, 0]).unwrap();
         assert_eq!(c.hits, 3);
-        assert_eq!(c.mean_rgb(), [20, 40, 60]);
-        assert_eq!(c.histogram[1..4], [2, 1, 0]);
+        let id = map.cells().iter().position(|x| x == c).unwrap() as u32;
+        assert_eq!(map.mean_rgb(id), [20, 40, 60]);
+        assert_eq!(map.histogram(c)[1..4], [2, 1, 0]);
         assert_eq!((c.object, c.label), (7, 1));
         assert!((c.log_odds - 0.85).abs() < 1e-6);
         assert!(map.cell_at_key([2, 0, 0]).is_some());
@@ -810,16 +1352,143 @@ pub(crate) mod tests {
         let h = 0.5 * map.resolution_m();
         (0..map.len() as u32)
             .filter(|&i| {
-                let c = map.centre(map.cells()[i as usize].key).map(|v| v as f32);
-                (0..3).all(|k| c[k] >= (min[k] - h) as f32 && c[k] <= (max[k] + h) as f32)
+                let c = map.centre(map.cells()[i as usize].key);
+                (0..3).all(|k| c[k] >= min[k] - h && c[k] <= max[k] + h)
             })
             .collect()
     }
 
-    fn dist2(map: &SrMap, i: u32, p: [f64; 3]) -> f32 {
-        let c = map.centre(map.cells()[i as usize].key).map(|v| v as f32);
-        let q = p.map(|v| v as f32);
-        (0..3).map(|k| (c[k] - q[k]) * (c[k] - q[k])).sum()
+    fn dist2(map: &SrMap, i: u32, p: [f64; 3]) -> f64 {
+        let c = map.centre(map.cells()[i as usize].key);
+        (0..3).map(|k| (c[k] - p[k]) * (c[k] - p[k])).sum()
+    }
+
+    /// The cells as (key, record, full histogram), sorted by key: equal for two maps with
+    /// the same content whatever their cell order and histogram table.
+    pub(crate) fn canonical(map: &SrMap) -> Vec<([i32; 3], Cell, Histogram)> {
+        let mut v: Vec<_> = map
+            .cells()
+            .iter()
+            .map(|c| {
+                let mut c2 = *c;
+                c2.histogram_ref = 0;
+                (c.key, c2, map.histogram(c))
+            })
+            .collect();
+        v.sort_by_key(|x| x.0);
+        v
+    }
+
+    /// Point-by-point reference: every cell's hits, histogram, object vote and log-odds
+    /// from a plain per-point loop.
+    #[test]
+    fn batch_insertion_equals_a_point_by_point_reference() {
+        let clouds: Vec<PointCloud> = (0..3).map(|s| random_cloud(3000, 2.0, 40 + s)).collect();
+        let mut map = SrMap::new(MapOptions::default()).unwrap();
+        let batch: Vec<(&PointCloud, Option<[f64; 3]>)> =
+            clouds.iter().map(|c| (c, None)).collect();
+        map.insert_scans(&batch).unwrap();
+        let o = MapOptions::default();
+        /// Hits, log-odds, histogram, object, votes, red sum.
+        type Want = (u32, f32, [u32; Class::COUNT], u32, u32, u32);
+        let mut want: std::collections::BTreeMap<[i32; 3], Want> = Default::default();
+        for cloud in &clouds {
+            let mut hit_now = std::collections::BTreeSet::new();
+            for i in 0..cloud.len() {
+                let key = map.key_of(cloud.positions[i]);
+                let e = want
+                    .entry(key)
+                    .or_insert((0, 0.0, [0; Class::COUNT], 0, 0, 0));
+                e.0 += 1;
+                if hit_now.insert(key) {
+                    e.1 = (e.1 + o.log_odds_hit).min(o.log_odds_max);
+                }
+                e.2[usize::from(cloud.label.as_ref().unwrap()[i])] += 1;
+                let id = cloud.object.as_ref().unwrap()[i];
+                if id != 0 {
+                    if e.4 == 0 {
+                        (e.3, e.4) = (id, 1);
+                    } else if e.3 == id {
+                        e.4 += 1;
+                    } else {
+                        e.4 -= 1;
+                    }
+                }
+                e.5 += u32::from(cloud.rgb.as_ref().unwrap()[i][0]);
+            }
+        }
+        assert_eq!(map.len(), want.len());
+        let mut mixed = 0;
+        for (i, c) in map.cells().iter().enumerate() {
+            let w = want[&c.key];
+            let h = map.histogram(c);
+            assert_eq!((c.hits, c.log_odds, c.object_votes as u32), (w.0, w.1, w.4));
+            assert_eq!(h.map(u32::from), w.2);
+            if w.4 > 0 {
+                assert_eq!(c.object, w.3);
+            }
+            assert_eq!(c.label, majority(&h).unwrap());
+            let sum = map.colours[i].sum[0];
+            assert_eq!(sum, w.5);
+            mixed += usize::from(h.iter().filter(|&&x| x > 0).count() > 1);
+        }
+        assert!(mixed > 0 && mixed < map.len());
+        assert_eq!(map.histogram_table().len(), mixed);
+    }
+
+    #[test]
+    fn floor_without_libm_equals_floor() {
+        for q in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.999,
+            -2.999,
+            1e9,
+            -1e9 - 0.5,
+            7.0 - 1e-12,
+        ] {
+            assert_eq!(floor_i32(q), q.floor() as i32, "{q}");
+        }
+    }
+
+    #[test]
+    fn radix_sort_is_a_stable_sort_by_code() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        for (n, spread) in [
+            (0, 1u64),
+            (1, 1),
+            (5000, 1 << 40),
+            (5000, 300),
+            (3000, u64::MAX),
+        ] {
+            let mut items: Vec<(u64, u32, u32)> = (0..n)
+                .map(|i| (rng.gen_range(0..spread) | 7 << 50, 0, i))
+                .collect();
+            let mut want = items.clone();
+            want.sort_by_key(|x| x.0);
+            radix_sort_by_code(&mut items);
+            assert_eq!(items, want);
+        }
+    }
+
+    #[test]
+    fn histogram_counts_halve_at_saturation() {
+        let mut table = Vec::new();
+        let mut r = 0u32;
+        for _ in 0..u32::from(u16::MAX) {
+            add_label(&mut table, &mut r, 3);
+        }
+        assert_eq!(expand_histogram(&table, r)[3], u16::MAX);
+        add_label(&mut table, &mut r, 3);
+        assert_eq!(expand_histogram(&table, r)[3], u16::MAX / 2 + 1);
+        add_label(&mut table, &mut r, 5);
+        let h = expand_histogram(&table, r);
+        assert_eq!((h[3], h[5], table.len()), (u16::MAX / 2 + 1, 1, 1));
+        assert!(histogram_ref_valid(r, 1) && !histogram_ref_valid(r, 0));
     }
 
     #[test]
@@ -835,6 +1504,7 @@ pub(crate) mod tests {
         let small = random_cloud(200, 7.0, 3);
         let stats = map.insert_cloud(&small, None).unwrap();
         assert!(!stats.bulk_loaded && stats.new_cells > 0);
+        assert_eq!(map.runs(), 2);
         for _ in 0..50 {
             let a: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-7.0..7.0));
             let b: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-7.0..7.0));
@@ -849,14 +1519,14 @@ pub(crate) mod tests {
             let mut got = map.cells_within_radius(a, radius);
             got.sort_unstable();
             let want: Vec<u32> = (0..map.len() as u32)
-                .filter(|&i| dist2(&map, i, a) <= (radius * radius) as f32)
+                .filter(|&i| dist2(&map, i, a) <= radius * radius)
                 .collect();
             assert_eq!(got, want);
             let k = rng.gen_range(1..30);
             let got = map.nearest_cells(a, k);
-            let mut all: Vec<f32> = (0..map.len() as u32).map(|i| dist2(&map, i, a)).collect();
-            all.sort_by(f32::total_cmp);
-            let got_d: Vec<f32> = got.iter().map(|&i| dist2(&map, i, a)).collect();
+            let mut all: Vec<f64> = (0..map.len() as u32).map(|i| dist2(&map, i, a)).collect();
+            all.sort_by(f64::total_cmp);
+            let got_d: Vec<f64> = got.iter().map(|&i| dist2(&map, i, a)).collect();
             assert_eq!(got_d, all[..k]);
         }
         for class in Class::ALL {
@@ -885,13 +1555,17 @@ pub(crate) mod tests {
             clouds.iter().map(|c| (c, Some([0.1, 0.2, 0.3]))).collect();
         let stats = deferred.insert_scans(&batch).unwrap();
         assert_eq!(stats.points, 3200);
-        assert_eq!(deferred.cells(), one_by_one.cells());
-        let (mut a, mut b) = (
-            deferred.cells_in_box([-2.0, -2.0, 0.0], [2.0, 3.0, 1.0]),
-            one_by_one.cells_in_box([-2.0, -2.0, 0.0], [2.0, 3.0, 1.0]),
-        );
-        a.sort_unstable();
-        b.sort_unstable();
+        assert_eq!(canonical(&deferred), canonical(&one_by_one));
+        let keys = |m: &SrMap| {
+            let mut k: Vec<[i32; 3]> = m
+                .cells_in_box([-2.0, -2.0, 0.0], [2.0, 3.0, 1.0])
+                .iter()
+                .map(|&i| m.cells()[i as usize].key)
+                .collect();
+            k.sort_unstable();
+            k
+        };
+        let (a, b) = (keys(&deferred), keys(&one_by_one));
         assert_eq!(a, b);
         assert!(!a.is_empty());
     }

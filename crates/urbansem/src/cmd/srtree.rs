@@ -277,7 +277,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
                         "object": c.object,
                         "hits": c.hits,
                         "occupancy": c.occupancy(),
-                        "rgb": c.mean_rgb(),
+                        "rgb": m.mean_rgb(i),
                     })
                 })
                 .collect();
@@ -825,9 +825,13 @@ pub struct SrtreeBenchArgs {
     /// Seed of the query boxes.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Runs of the queries; the fastest is reported.
-    #[arg(long, default_value_t = 3)]
+    /// Runs of all the queries; the median run time is reported (and the fastest).
+    #[arg(long, default_value_t = 9)]
     repeat: usize,
+    /// Builds of the map without ray casting; the median time is reported (with ray
+    /// casting: one build).
+    #[arg(long, default_value_t = 3)]
+    insert_repeat: usize,
     /// Use at most this many scans per sequence.
     #[arg(long)]
     max_scans: Option<usize>,
@@ -840,6 +844,26 @@ pub struct SrtreeBenchArgs {
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
+}
+
+/// CPU seconds used so far by this process (all threads) or, with `thread`, by the
+/// calling thread; unaffected by time spent waiting for a core (0 off Linux).
+fn cpu_seconds(thread: bool) -> f64 {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::time::{clock_gettime, ClockId};
+        let t = clock_gettime(if thread {
+            ClockId::ThreadCPUTime
+        } else {
+            ClockId::ProcessCPUTime
+        });
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = thread;
+        0.0
+    }
 }
 
 /// Resident set size of this process, bytes (Linux; 0 elsewhere).
@@ -874,26 +898,48 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
     } else {
         &[false, true]
     };
+    let batch: Vec<(&geodata::cloud::PointCloud, Option<[f64; 3]>)> =
+        scans.iter().map(|(c, o)| (c, Some(*o))).collect();
     for &ray_casting in modes {
-        let rss0 = rss_bytes();
-        let mut map = SrMap::new(MapOptions {
-            resolution_m: args.resolution,
-            ray_casting,
-            ..MapOptions::default()
-        })?;
-        let t = Instant::now();
-        let batch: Vec<(&geodata::cloud::PointCloud, Option<[f64; 3]>)> =
-            scans.iter().map(|(c, o)| (c, Some(*o))).collect();
-        let stats = map.insert_scans(&batch)?;
+        let builds = if ray_casting {
+            1
+        } else {
+            args.insert_repeat.max(1)
+        };
+        let (mut walls, mut cpus) = (Vec::new(), Vec::new());
+        let mut last = None;
+        let mut rss = None;
+        for _ in 0..builds {
+            drop(last.take());
+            let rss0 = rss_bytes();
+            let mut map = SrMap::new(MapOptions {
+                resolution_m: args.resolution,
+                ray_casting,
+                ..MapOptions::default()
+            })?;
+            let (t, cpu0) = (Instant::now(), cpu_seconds(false));
+            let stats = map.insert_scans(&batch)?;
+            walls.push(t.elapsed().as_secs_f64());
+            cpus.push(cpu_seconds(false) - cpu0);
+            // RSS growth of the first build (later ones reuse freed pages).
+            rss.get_or_insert(rss_bytes().saturating_sub(rss0));
+            last = Some((map, stats));
+        }
+        let (map, stats) = last.context("no map built")?;
+        let rss = rss.unwrap_or(0);
+        walls.sort_by(f64::total_cmp);
+        cpus.sort_by(f64::total_cmp);
+        let (seconds, cpu) = (walls[walls.len() / 2], cpus[cpus.len() / 2]);
         let (rays, misses) = (stats.rays, stats.misses);
-        let seconds = t.elapsed().as_secs_f64();
-        let rss = rss_bytes().saturating_sub(rss0);
         let mem = map.memory();
         let occupied = map.cells().iter().filter(|c| c.occupied()).count();
         runs.push(json!({
             "ray_casting": ray_casting,
             "seconds": seconds,
             "points_per_second": points as f64 / seconds.max(1e-9),
+            "cpu_seconds": cpu,
+            "points_per_cpu_second": points as f64 / cpu.max(1e-9),
+            "builds": builds,
             "cells": map.len(),
             "occupied_cells": occupied,
             "rays": rays,
@@ -922,10 +968,11 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
             ]
         })
         .collect();
-    let mut best = f64::INFINITY;
+    let mut times = Vec::new();
+    let mut cpu_times = Vec::new();
     let mut found = 0usize;
     for _ in 0..args.repeat.max(1) {
-        let t = Instant::now();
+        let (t, cpu0) = (Instant::now(), cpu_seconds(true));
         found = boxes
             .iter()
             .map(|b| {
@@ -933,8 +980,14 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
                     .len()
             })
             .sum();
-        best = best.min(t.elapsed().as_secs_f64());
+        times.push(t.elapsed().as_secs_f64());
+        cpu_times.push(cpu_seconds(true) - cpu0);
     }
+    times.sort_by(f64::total_cmp);
+    cpu_times.sort_by(f64::total_cmp);
+    let cpu_median = cpu_times[cpu_times.len() / 2];
+    let best = times[times.len() / 2];
+    let fastest = times[0];
     if let Some(dir) = &args.export {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         write_f64s(
@@ -967,6 +1020,9 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
             "boxes": boxes.len(),
             "cells_found": found,
             "seconds": best,
+            "seconds_fastest": fastest,
+            "cpu_seconds": cpu_median,
+            "repeat": times.len(),
             "microseconds_per_query": best * 1e6 / boxes.len().max(1) as f64,
         },
         "export": args.export.as_ref().map(|p| p.display().to_string()),
@@ -982,9 +1038,10 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
     );
     for r in &runs {
         println!(
-            "insert (ray casting {}): {:.2} s, {:.2} M points/s, {} cells, {:.0} bytes/cell ({:.1} MB), RSS +{:.1} MB",
+            "insert (ray casting {}): {:.2} s ({:.2} s CPU), {:.2} M points/s, {} cells, {:.0} bytes/cell ({:.1} MB), RSS +{:.1} MB",
             r["ray_casting"],
             r["seconds"].as_f64().unwrap_or(0.0),
+            r["cpu_seconds"].as_f64().unwrap_or(0.0),
             r["points_per_second"].as_f64().unwrap_or(0.0) / 1e6,
             r["cells"],
             r["memory"]["bytes_per_cell"].as_f64().unwrap_or(0.0),
@@ -993,10 +1050,12 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
         );
     }
     println!(
-        "box queries: {} boxes, {} cells found, {:.3} s ({:.1} µs per box)",
+        "box queries: {} boxes, {} cells found, median of {} runs {:.3} s ({:.3} s CPU, {:.1} µs per box)",
         boxes.len(),
         found,
+        times.len(),
         best,
+        cpu_median,
         best * 1e6 / boxes.len().max(1) as f64
     );
     Ok(())
