@@ -11,7 +11,6 @@
 //! Building the network is O(S log S).
 
 use super::model::{HighwayWay, Intersection, StreetNetwork, StreetSegment};
-use rustc_hash::FxHashMap;
 
 /// Builds segments, intersections and neighbour pairs from highway ways (`area=yes` ways are skipped).
 pub fn build_network(highways: &[HighwayWay]) -> StreetNetwork {
@@ -40,40 +39,45 @@ pub fn build_network(highways: &[HighwayWay]) -> StreetNetwork {
             });
         }
     }
-    // Segment ends per node: (segment id, position, way index).
-    let mut ends: FxHashMap<i64, Vec<(usize, [f64; 2], usize)>> = FxHashMap::default();
+    // Segment ends sorted by node (then segment): each node's ends form one run, so no
+    // per-node lists are allocated. (node id, segment id, way index, position).
+    let mut ends: Vec<(i64, usize, usize, [f64; 2])> = Vec::with_capacity(2 * segments.len());
     for (id, s) in segments.iter().enumerate() {
-        ends.entry(s.from_node)
-            .or_default()
-            .push((id, s.a, s.way_index));
-        ends.entry(s.to_node)
-            .or_default()
-            .push((id, s.b, s.way_index));
+        ends.push((s.from_node, id, s.way_index, s.a));
+        ends.push((s.to_node, id, s.way_index, s.b));
     }
+    ends.sort_unstable_by_key(|e| (e.0, e.1));
     let mut intersections = Vec::new();
     let mut neighbour_pairs = Vec::new();
-    for (&node_id, list) in &ends {
-        let first_way = list.first().map(|e| e.2);
-        let several_ways = list.iter().any(|e| Some(e.2) != first_way);
-        let mut segment_ids: Vec<usize> = list.iter().map(|e| e.0).collect();
-        segment_ids.sort_unstable();
+    for run in ends.chunk_by(|x, y| x.0 == y.0) {
+        let Some(&(node_id, _, first_way, position)) = run.first() else {
+            continue;
+        };
+        let several_ways = run.iter().any(|e| e.2 != first_way);
+        if let [a, b] = run {
+            // The common case: a node inside one way joins its two segments.
+            if !several_ways {
+                if a.1 != b.1 {
+                    neighbour_pairs.push([a.1, b.1]);
+                }
+                continue;
+            }
+        }
+        let mut segment_ids: Vec<usize> = run.iter().map(|e| e.1).collect();
         segment_ids.dedup();
         for (i, &s1) in segment_ids.iter().enumerate() {
             for &s2 in segment_ids.iter().skip(i + 1) {
                 neighbour_pairs.push([s1, s2]);
             }
         }
-        if list.len() >= 3 || several_ways {
-            if let Some(&(_, position, _)) = list.first() {
-                intersections.push(Intersection {
-                    node_id,
-                    position,
-                    segment_ids,
-                });
-            }
+        if run.len() >= 3 || several_ways {
+            intersections.push(Intersection {
+                node_id,
+                position,
+                segment_ids,
+            });
         }
     }
-    intersections.sort_unstable_by_key(|i| i.node_id);
     neighbour_pairs.sort_unstable();
     neighbour_pairs.dedup();
     StreetNetwork {
@@ -121,6 +125,61 @@ impl StreetNetwork {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rustc_hash::FxHashMap;
+
+    /// The network's intersections and neighbour pairs from per-node lists of segment ends
+    /// (the straightforward construction the sorted one replaces).
+    fn reference_junctions(segments: &[StreetSegment]) -> (Vec<Intersection>, Vec<[usize; 2]>) {
+        let mut ends: FxHashMap<i64, Vec<(usize, [f64; 2], usize)>> = FxHashMap::default();
+        for (id, s) in segments.iter().enumerate() {
+            ends.entry(s.from_node).or_default().push((id, s.a, s.way_index));
+            ends.entry(s.to_node).or_default().push((id, s.b, s.way_index));
+        }
+        let mut intersections = Vec::new();
+        let mut neighbour_pairs = Vec::new();
+        for (&node_id, list) in &ends {
+            let several_ways = list.iter().any(|e| e.2 != list[0].2);
+            let mut segment_ids: Vec<usize> = list.iter().map(|e| e.0).collect();
+            segment_ids.sort_unstable();
+            segment_ids.dedup();
+            for (i, &s1) in segment_ids.iter().enumerate() {
+                for &s2 in segment_ids.iter().skip(i + 1) {
+                    neighbour_pairs.push([s1, s2]);
+                }
+            }
+            if list.len() >= 3 || several_ways {
+                intersections.push(Intersection {
+                    node_id,
+                    position: list[0].1,
+                    segment_ids,
+                });
+            }
+        }
+        intersections.sort_unstable_by_key(|i| i.node_id);
+        neighbour_pairs.sort_unstable();
+        neighbour_pairs.dedup();
+        (intersections, neighbour_pairs)
+    }
+
+    #[test]
+    fn junctions_equal_the_per_node_reference_on_the_real_maps() {
+        let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/osm"));
+        for name in ["monaco.osm.pbf", "helsinki_centre.osm.pbf", "kth_campus_stockholm.osm"] {
+            let map = crate::osm::OsmMap::load(dir.join(name)).unwrap();
+            let net = &map.streets;
+            let (intersections, pairs) = reference_junctions(&net.segments);
+            assert!(!intersections.is_empty(), "{name}");
+            assert_eq!(net.intersections.len(), intersections.len(), "{name}");
+            for (a, b) in net.intersections.iter().zip(&intersections) {
+                assert_eq!(
+                    (a.node_id, a.position, &a.segment_ids),
+                    (b.node_id, b.position, &b.segment_ids),
+                    "{name}"
+                );
+            }
+            assert_eq!(net.neighbour_pairs, pairs, "{name}");
+        }
+    }
 
     fn way(ids: &[i64], pts: &[[f64; 2]], area: bool) -> HighwayWay {
         HighwayWay {
