@@ -132,8 +132,12 @@ mod tests {
     fn reference_junctions(segments: &[StreetSegment]) -> (Vec<Intersection>, Vec<[usize; 2]>) {
         let mut ends: FxHashMap<i64, Vec<(usize, [f64; 2], usize)>> = FxHashMap::default();
         for (id, s) in segments.iter().enumerate() {
-            ends.entry(s.from_node).or_default().push((id, s.a, s.way_index));
-            ends.entry(s.to_node).or_default().push((id, s.b, s.way_index));
+            ends.entry(s.from_node)
+                .or_default()
+                .push((id, s.a, s.way_index));
+            ends.entry(s.to_node)
+                .or_default()
+                .push((id, s.b, s.way_index));
         }
         let mut intersections = Vec::new();
         let mut neighbour_pairs = Vec::new();
@@ -163,8 +167,15 @@ mod tests {
 
     #[test]
     fn junctions_equal_the_per_node_reference_on_the_real_maps() {
-        let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/osm"));
-        for name in ["monaco.osm.pbf", "helsinki_centre.osm.pbf", "kth_campus_stockholm.osm"] {
+        let dir = std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../../shared/data/osm"
+        ));
+        for name in [
+            "monaco.osm.pbf",
+            "helsinki_centre.osm.pbf",
+            "kth_campus_stockholm.osm",
+        ] {
             let map = crate::osm::OsmMap::load(dir.join(name)).unwrap();
             let net = &map.streets;
             let (intersections, pairs) = reference_junctions(&net.segments);
