@@ -11,6 +11,19 @@ use localize::chamfer::{
 use std::collections::HashMap;
 use std::time::Instant;
 
+/// CPU seconds (user + system) of this process so far, from `/proc/self/stat` (0 elsewhere).
+fn cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name's closing parenthesis: utime and stime are the 12th and
+    // 13th, in clock ticks (100 per second on Linux).
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .map(|x| x.parse().unwrap_or(0.0))
+        .collect();
+    (f.get(11).copied().unwrap_or(0.0) + f.get(12).copied().unwrap_or(0.0)) / 100.0
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let path = args.next().unwrap_or_else(|| {
@@ -55,16 +68,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     let (min, max) = bounding_box(&edges).ok_or("no edges in the window")?;
     let options = ChamferOptions::default();
-    let t = Instant::now();
+    let (t, c) = (Instant::now(), cpu_s());
     let dt = DtTensor::build(&edges, &options)?;
-    let dt_s = t.elapsed().as_secs_f64();
-    let t = Instant::now();
+    let (dt_s, dt_cpu) = (t.elapsed().as_secs_f64(), cpu_s() - c);
+    let (t, c) = (Instant::now(), cpu_s());
     let pyr = BoundPyramid::build(&dt, 6);
-    let pyr_s = t.elapsed().as_secs_f64();
+    let (pyr_s, pyr_cpu) = (t.elapsed().as_secs_f64(), cpu_s() - c);
     let t = Instant::now();
     let idt = IntegralDt::build(&dt);
     let idt_s = t.elapsed().as_secs_f64();
     drop(idt);
+    // On a shared machine the wall time depends on the load; the process CPU time does not
+    // (its ratio to the thread count bounds the wall time on idle cores).
+    println!(
+        "CPU time (user + system, all threads): tensor {dt_cpu:.2} s, pyramid {pyr_cpu:.2} s; load average {}",
+        std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
+    );
     println!(
         "{path}: {} edges in {:.0} m × {:.0} m; tensor {}×{}×{} at {} m: {dt_s:.2} s ({:.0} MB), pyramid {pyr_s:.2} s ({:.0} MB), integral DTs {idt_s:.2} s; {} threads; thesis: 35–155 s → {:.0}–{:.0}× faster",
         edges.len(),

@@ -14,6 +14,7 @@
 //! and the result equals exhaustive search ([`exhaustive_search`], checked in the tests).
 
 use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
+use crate::feasible::FeasibleMask;
 use crate::{angle_diff, Pose2, Segment};
 use geodata::osm::index::MapIndex;
 use rayon::prelude::*;
@@ -39,12 +40,16 @@ pub struct SearchOptions {
     pub street_distance_m: f64,
     /// Most raw poses kept (the cheapest); 0: no limit.
     pub max_raw_poses: usize,
+    /// Search only feasible poses (outside buildings, near streets; see
+    /// [`crate::feasible`]): the factor then refers to the minimum over feasible poses.
+    /// False: every pose of the domain, filtered after the search (the thesis' order).
+    pub feasible_only: bool,
 }
 
 impl Default for SearchOptions {
     fn default() -> Self {
         SearchOptions {
-            yaw_step_deg: 1.0,
+            yaw_step_deg: 0.5,
             levels: 6,
             keep_factor: (8, 5),
             pose_margin_m: 40.0,
@@ -52,6 +57,7 @@ impl Default for SearchOptions {
             nms_yaw_rad: 10f64.to_radians(),
             street_distance_m: 12.0,
             max_raw_poses: 2_000_000,
+            feasible_only: true,
         }
     }
 }
@@ -350,6 +356,7 @@ fn expand(
     templates: &[Template],
     plans: &Plans<'_>,
     domain: Domain,
+    mask: Option<&FeasibleMask>,
     &(parent, h, k, x, y): &Node,
     limit: u64,
     out: &mut Vec<Node>,
@@ -365,8 +372,11 @@ fn expand(
         if cx >= domain.i1 || cy >= domain.j1 || cx + half <= domain.i0 || cy + half <= domain.j0 {
             continue;
         }
-        evaluated += 1;
         let (bx, by) = (cx >> ch, cy >> ch);
+        if mask.is_some_and(|m| !m.any(ch, bx, by)) {
+            continue;
+        }
+        evaluated += 1;
         let b = plans
             .bound(k, ch, bx, by, limit)
             .unwrap_or_else(|| box_bound(dt, pyr, t, ch, bx, by, limit))
@@ -386,8 +396,10 @@ fn buckets_len(max_bound: u64, width: u64) -> usize {
     (max_bound / width) as usize + 1
 }
 
-/// Every pose (over all templates and the domain) with cost ≤ factor × minimum, sorted by
-/// (cost, yaw, i, j), by branch and bound. Equal to [`exhaustive_search`].
+/// Every pose (over all templates and the domain's cells, only the feasible ones when a
+/// `mask` is given) with cost ≤ factor × minimum over those poses, sorted by
+/// (cost, yaw, i, j), by branch and bound. Equal to [`exhaustive_search`]. Boxes without a
+/// feasible cell are never bounded.
 ///
 /// Two phases, so that no box is bounded against a cut looser than factor × the minimum:
 /// 1. best first: the queue starts with the top-level boxes of every yaw; the 1024 best
@@ -405,6 +417,7 @@ pub fn search(
     pyr: &BoundPyramid,
     templates: &[Template],
     domain: Domain,
+    mask: Option<&FeasibleMask>,
     factor: (u64, u64),
 ) -> (Vec<RawPose>, SearchStats) {
     let mut stats = SearchStats {
@@ -425,12 +438,14 @@ pub fn search(
         .flat_map_iter(|(k, t)| {
             let plans = &plans;
             (bj0..=bj1).flat_map(move |bj| {
-                (bi0..=bi1).map(move |bi| {
-                    let b = plans
-                        .bound(k, top, bi, bj, u64::MAX)
-                        .unwrap_or_else(|| box_bound(dt, pyr, t, top, bi, bj, u64::MAX));
-                    (b, top, k, bi << top, bj << top)
-                })
+                (bi0..=bi1)
+                    .filter(move |&bi| mask.is_none_or(|m| m.any(top, bi, bj)))
+                    .map(move |bi| {
+                        let b = plans
+                            .bound(k, top, bi, bj, u64::MAX)
+                            .unwrap_or_else(|| box_bound(dt, pyr, t, top, bi, bj, u64::MAX));
+                        (b, top, k, bi << top, bj << top)
+                    })
             })
         })
         .collect();
@@ -481,7 +496,9 @@ pub fn search(
             .map(|chunk| {
                 let (mut boxes, mut leaves, mut out) = (0, 0, Vec::with_capacity(4 * chunk.len()));
                 for node in chunk {
-                    let n = expand(dt, pyr, templates, &plans, domain, node, cut, &mut out);
+                    let n = expand(
+                        dt, pyr, templates, &plans, domain, mask, node, cut, &mut out,
+                    );
                     if node.1 == 1 {
                         leaves += n;
                     } else {
@@ -535,7 +552,9 @@ pub fn search(
                         });
                         continue;
                     }
-                    let n = expand(dt, pyr, templates, &plans, domain, &node, limit, &mut stack);
+                    let n = expand(
+                        dt, pyr, templates, &plans, domain, mask, &node, limit, &mut stack,
+                    );
                     if h == 1 {
                         leaves += n;
                     } else {
@@ -559,17 +578,22 @@ pub fn search(
     (found, stats)
 }
 
-/// Every pose with cost ≤ factor × minimum by evaluating every pose (reference for tests).
+/// Every (feasible) pose with cost ≤ factor × minimum by evaluating every pose (reference
+/// for tests).
 pub fn exhaustive_search(
     dt: &DtTensor,
     templates: &[Template],
     domain: Domain,
+    mask: Option<&FeasibleMask>,
     factor: (u64, u64),
 ) -> Vec<RawPose> {
     let mut all = Vec::new();
     for (k, t) in templates.iter().enumerate() {
         for j in domain.j0..domain.j1 {
             for i in domain.i0..domain.i1 {
+                if mask.is_some_and(|m| !m.is_feasible(i, j)) {
+                    continue;
+                }
                 all.push(RawPose {
                     cost: pose_cost(dt, t, i, j),
                     yaw_index: k,
@@ -736,10 +760,30 @@ mod tests {
             .map(|k| build_template(&scan, k as f64 * 0.8, &dt, levels))
             .collect();
         let domain = Domain::from_box(&dt, [-10.0, -9.0], [9.0, 10.5]);
-        let (fast, stats) = search(&dt, &pyr, &templates, domain, factor);
-        let slow = exhaustive_search(&dt, &templates, domain, factor);
+        let (fast, stats) = search(&dt, &pyr, &templates, domain, None, factor);
+        let slow = exhaustive_search(&dt, &templates, domain, None, factor);
         assert_eq!(fast, slow, "seed {seed}");
         assert!(stats.leaves <= stats.space + 4 * stats.space / 3);
+        // Restricted to a mask of random infeasible rectangles (buildings).
+        let (w, h) = (domain.i1 - domain.i0, domain.j1 - domain.j0);
+        let mut flags = vec![true; (w * h) as usize];
+        for _ in 0..6 {
+            let (x0, y0) = (rng.gen_range(0..w), rng.gen_range(0..h));
+            let (x1, y1) = (
+                (x0 + rng.gen_range(2..16)).min(w),
+                (y0 + rng.gen_range(2..16)).min(h),
+            );
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    flags[(y * w + x) as usize] = false;
+                }
+            }
+        }
+        let mask = FeasibleMask::from_cells(domain, flags, levels);
+        let (fast, _) = search(&dt, &pyr, &templates, domain, Some(&mask), factor);
+        let slow = exhaustive_search(&dt, &templates, domain, Some(&mask), factor);
+        assert_eq!(fast, slow, "seed {seed}, masked");
+        assert!(fast.iter().all(|p| mask.is_feasible(p.i, p.j)));
     }
 
     #[test]
@@ -798,6 +842,6 @@ mod tests {
             i1: 0,
             j1: 0,
         };
-        assert!(search(&dt, &pyr, &[t], d, (8, 5)).0.is_empty());
+        assert!(search(&dt, &pyr, &[t], d, None, (8, 5)).0.is_empty());
     }
 }

@@ -11,6 +11,8 @@
 //!   transform (Matas et al. 2000) per histogram, merging of near-coincident segments.
 //! - [`chamfer`]: map edges from the outlines and the directional distance-transform tensor
 //!   of FDCM (Liu et al., CVPR 2010) with integral DTs and a lower-bound pyramid.
+//! - [`feasible`]: the feasible poses (outside buildings, near streets) as a mask with an
+//!   any-feasible pyramid, so that the search runs over them only (§5.3.4).
 //! - [`candidates`]: exact branch-and-bound search of d_DCM (eq. 5.3) over rotation ×
 //!   translation, every pose within a factor of the minimum, non-maximum suppression,
 //!   filtering by buildings and streets (§5.3.4).
@@ -26,6 +28,7 @@ pub mod candidates;
 pub mod chamfer;
 pub mod distractors;
 pub mod eval;
+pub mod feasible;
 pub mod hashing;
 pub mod pipeline;
 pub mod rank;

@@ -16,6 +16,7 @@ use crate::candidates::{
     Template,
 };
 use crate::chamfer::{bounding_box, map_edges, BoundPyramid, ChamferOptions, DtTensor};
+use crate::feasible::FeasibleMask;
 use crate::rank::{confidence, costs, rank_order, CostKind, CostOptions, Costs};
 use crate::refine::{refine_pose, RefineOptions};
 use crate::segments::{extract_segments, SegmentOptions};
@@ -53,9 +54,14 @@ pub struct LocalizeOptions {
     pub distinct_m: f64,
     /// Poses turned more than this are distinct (confidence), radians.
     pub distinct_rad: f64,
-    /// The result is empty when the best candidate's symmetric cost exceeds this, metres
-    /// (no pose explains the scan: it is probably outside the map).
+    /// The result is empty when the best candidate's symmetric cost exceeds this and its
+    /// d_DCM exceeds `max_accept_dcm_m`, metres (no pose explains the scan: it is probably
+    /// outside the map).
     pub max_accept_cost_m: f64,
+    /// See `max_accept_cost_m`: a candidate whose segments lie on map edges (low d_DCM) is
+    /// kept even when the visibility-aware costs are high (a building of the map missing in
+    /// the world hides, in the map, the walls the scan sees behind it), metres.
+    pub max_accept_dcm_m: f64,
 }
 
 impl Default for LocalizeOptions {
@@ -73,6 +79,7 @@ impl Default for LocalizeOptions {
             distinct_m: 4.0,
             distinct_rad: 0.2,
             max_accept_cost_m: 1.8,
+            max_accept_dcm_m: 1.0,
         }
     }
 }
@@ -86,6 +93,8 @@ pub struct MapSeconds {
     pub distance_transform: f64,
     /// Lower-bound pyramid.
     pub pyramid: f64,
+    /// Feasible-pose mask.
+    pub feasible: f64,
 }
 
 /// A map prepared for localization.
@@ -104,6 +113,8 @@ pub struct Localizer<'m> {
     pub pyramid: BoundPyramid,
     /// The searched poses (cells).
     pub domain: Domain,
+    /// The feasible poses of the domain (when the search is restricted to them).
+    pub feasible: Option<FeasibleMask>,
     /// Map preparation times.
     pub seconds: MapSeconds,
     index: MapIndex<'m>,
@@ -184,6 +195,7 @@ impl<'m> Localizer<'m> {
         let t = Instant::now();
         let pyramid = BoundPyramid::build(&dt, options.search.levels);
         let pyr_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
         let domain = match bounding_box(&edges) {
             Some((min, max)) => {
                 let m = options.search.pose_margin_m;
@@ -196,6 +208,16 @@ impl<'m> Localizer<'m> {
                 j1: 0,
             },
         };
+        let feasible = options.search.feasible_only.then(|| {
+            FeasibleMask::build(
+                map,
+                &dt,
+                domain,
+                options.search.street_distance_m,
+                pyramid.top(),
+            )
+        });
+        let feasible_s = t.elapsed().as_secs_f64();
         Ok(Localizer {
             map,
             options,
@@ -204,10 +226,12 @@ impl<'m> Localizer<'m> {
             dt,
             pyramid,
             domain,
+            feasible,
             seconds: MapSeconds {
                 edges: edges_s,
                 distance_transform: dt_s,
                 pyramid: pyr_s,
+                feasible: feasible_s,
             },
             index,
         })
@@ -278,6 +302,7 @@ impl<'m> Localizer<'m> {
             &self.pyramid,
             &templates,
             self.domain,
+            self.feasible.as_ref(),
             o.search.keep_factor,
         );
         if o.search.max_raw_poses > 0 {
@@ -339,11 +364,13 @@ impl<'m> Localizer<'m> {
             first.confidence = out.confidence;
         }
         if let Some(best) = cands.first() {
-            if best.costs.symmetric > o.max_accept_cost_m {
+            if best.costs.symmetric > o.max_accept_cost_m && best.costs.dcm > o.max_accept_dcm_m {
                 out.message = Some(format!(
-                    "no pose explains the scan: the best candidate's symmetric cost is {:.2} m > {:.2} m ({} candidates dropped); the scan is probably outside the map",
+                    "no pose explains the scan: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m ({} candidates dropped); the scan is probably outside the map",
                     best.costs.symmetric,
                     o.max_accept_cost_m,
+                    best.costs.dcm,
+                    o.max_accept_dcm_m,
                     cands.len()
                 ));
                 cands.clear();

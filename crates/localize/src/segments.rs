@@ -57,7 +57,7 @@ impl Default for SegmentOptions {
             max_gap_m: 1.2,
             band_px: 1,
             merge_angle_rad: 8f64.to_radians(),
-            merge_distance_m: 0.7,
+            merge_distance_m: 0.35,
             merge_gap_m: 2.0,
             final_min_length_m: 2.5,
             seed: 1,
@@ -385,16 +385,40 @@ fn try_merge(s: &Segment, t: &Segment, options: &SegmentOptions) -> Option<Segme
     if gap > options.merge_gap_m {
         return None;
     }
-    // The merged line: length-weighted average offset, the longer one's direction.
-    let (ls, ll) = (short.length(), len);
-    let signed = |p: [f64; 2]| (p[0] - long.a[0]) * -d[1] + (p[1] - long.a[1]) * d[0];
-    let off = (signed(short.a) + signed(short.b)) * 0.5 * ls / (ls + ll);
-    let base = [long.a[0] - d[1] * off, long.a[1] + d[0] * off];
-    let (t0, t1) = (s0.min(0.0), s1.max(len));
-    Some(Segment::new(
-        [base[0] + t0 * d[0], base[1] + t0 * d[1]],
-        [base[0] + t1 * d[0], base[1] + t1 * d[1]],
-    ))
+    Some(fit_two(long, short))
+}
+
+/// The total-least-squares line of two segments taken as uniform mass along their lengths
+/// (the principal axis of their joint second moments), cut at the extreme projections of
+/// their end points.
+fn fit_two(s: &Segment, t: &Segment) -> Segment {
+    let parts = [s, t].map(|g| {
+        let l = g.length();
+        let m = [(g.a[0] + g.b[0]) * 0.5, (g.a[1] + g.b[1]) * 0.5];
+        let d = [(g.b[0] - g.a[0]) / l, (g.b[1] - g.a[1]) / l];
+        (l, m, d)
+    });
+    let total: f64 = parts.iter().map(|p| p.0).sum();
+    let mx = parts.iter().map(|p| p.0 * p.1[0]).sum::<f64>() / total;
+    let my = parts.iter().map(|p| p.0 * p.1[1]).sum::<f64>() / total;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for (l, m, d) in parts {
+        let (dx, dy) = (m[0] - mx, m[1] - my);
+        let spread = l * l / 12.0;
+        sxx += l * (dx * dx + spread * d[0] * d[0]);
+        sxy += l * (dx * dy + spread * d[0] * d[1]);
+        syy += l * (dy * dy + spread * d[1] * d[1]);
+    }
+    let angle = 0.5 * f64::atan2(2.0 * sxy, sxx - syy);
+    let d = [angle.cos(), angle.sin()];
+    let proj = |p: [f64; 2]| (p[0] - mx) * d[0] + (p[1] - my) * d[1];
+    let ts = [s.a, s.b, t.a, t.b].map(proj);
+    let t0 = ts.iter().copied().fold(f64::INFINITY, f64::min);
+    let t1 = ts.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    Segment::new(
+        [mx + t0 * d[0], my + t0 * d[1]],
+        [mx + t1 * d[0], my + t1 * d[1]],
+    )
 }
 
 #[cfg(test)]

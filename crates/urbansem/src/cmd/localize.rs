@@ -85,6 +85,10 @@ pub struct RunArgs {
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
+    /// Yaw step of the search, degrees (1 is about twice as fast, with fewer accurate
+    /// candidates on maps with errors).
+    #[arg(long, default_value_t = 0.5)]
+    pub yaw_step_deg: f64,
 }
 
 /// Methods of `localize eval`.
@@ -119,7 +123,8 @@ pub struct EvalArgs {
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
-    /// Write one SVG per scan into this folder.
+    /// Write one SVG per scan and `curves.svg` (N_accurate against w, Figs. 5.5/5.6) into
+    /// this folder.
     #[arg(long)]
     pub figures: Option<PathBuf>,
     /// Evaluate at most this many scans.
@@ -128,6 +133,10 @@ pub struct EvalArgs {
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
+    /// Yaw step of the search, degrees (1 is about twice as fast, with fewer accurate
+    /// candidates on maps with errors).
+    #[arg(long, default_value_t = 0.5)]
+    pub yaw_step_deg: f64,
     /// Embed the map among distractor buildings and streets cut from this other real OSM map
     /// (rotated tiles in a ring around the map's buildings; see `localize::distractors`).
     #[arg(long)]
@@ -148,13 +157,17 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     }
 }
 
-fn options(cost: CostKind, grid_m: f64) -> LocalizeOptions {
+fn options(cost: CostKind, grid_m: f64, yaw_step_deg: f64) -> anyhow::Result<LocalizeOptions> {
+    if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
+        bail!("--yaw-step-deg {yaw_step_deg}: expected a step in (0, 90] degrees");
+    }
     let mut o = LocalizeOptions {
         rank_by: cost,
         ..LocalizeOptions::default()
     };
     o.chamfer.grid_m = grid_m;
-    o
+    o.search.yaw_step_deg = yaw_step_deg;
+    Ok(o)
 }
 
 fn candidate_json(map: &OsmMap, rank: usize, c: &localize::pipeline::Candidate) -> Value {
@@ -187,8 +200,11 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
     let map = OsmMap::load(map_path)
         .with_context(|| format!("loading the map {}", map_path.display()))?;
     let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = Localizer::new(&map, options(args.cost.kind(), args.grid_m))
-        .with_context(|| format!("preparing the map {}", map_path.display()))?;
+    let localizer = Localizer::new(
+        &map,
+        options(args.cost.kind(), args.grid_m, args.yaw_step_deg)?,
+    )
+    .with_context(|| format!("preparing the map {}", map_path.display()))?;
     let t = Instant::now();
     let cloud = geodata::cloud::read_cloud(scan_path)
         .with_context(|| format!("reading the scan {}", scan_path.display()))?;
@@ -228,6 +244,7 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
                 "map_edges": localizer.seconds.edges,
                 "distance_transform": localizer.seconds.distance_transform,
                 "pyramid": localizer.seconds.pyramid,
+                "feasible_mask": localizer.seconds.feasible,
                 "read_scan": read_scan_s,
                 "surfaces": s.surfaces,
                 "segments": s.segments,
@@ -432,8 +449,11 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         None => (map, None),
     };
     let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = Localizer::new(&map, options(CostKind::Reverse, args.grid_m))
-        .with_context(|| format!("preparing the map {}", map_path.display()))?;
+    let localizer = Localizer::new(
+        &map,
+        options(CostKind::Reverse, args.grid_m, args.yaw_step_deg)?,
+    )
+    .with_context(|| format!("preparing the map {}", map_path.display()))?;
     let t = Instant::now();
     let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
     let hashing_index_s = t.elapsed().as_secs_f64();
@@ -685,6 +705,12 @@ fn summarize(
             "summary": s,
         })
     });
+    if let Some(dir) = &args.figures {
+        let path = dir.join("curves.svg");
+        let names: Vec<&str> = method_rows.iter().map(|(n, _)| *n).collect();
+        std::fs::write(&path, curves_svg(&table, &names, n))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     if args.json {
         let scans: Vec<Value> = records
             .iter()
@@ -734,6 +760,7 @@ fn summarize(
                 "map_edges": localizer.seconds.edges,
                 "distance_transform": localizer.seconds.distance_transform,
                 "pyramid": localizer.seconds.pyramid,
+                "feasible_mask": localizer.seconds.feasible,
                 "hashing_index": hashing_index_s,
             },
             "tensor": {"width": localizer.dt.width, "height": localizer.dt.height, "channels": localizer.dt.channels, "grid_m": localizer.dt.grid_m, "bytes": localizer.dt.bytes()},
@@ -801,14 +828,17 @@ fn summarize(
         strict_top1[0], strict_top1[1], strict_top1[2], strict_top1[3]
     );
     println!(
-        "map: load {load_map_s:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, hashing index {hashing_index_s:.3} s ({threads} threads)",
+        "map: load {load_map_s:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, feasible-pose mask {:.3} s ({} of {} cells), hashing index {hashing_index_s:.3} s ({threads} threads)",
         localizer.seconds.edges,
         localizer.dt.width,
         localizer.dt.height,
         localizer.dt.channels,
         localizer.dt.grid_m,
         localizer.seconds.distance_transform,
-        localizer.seconds.pyramid
+        localizer.seconds.pyramid,
+        localizer.seconds.feasible,
+        localizer.feasible.as_ref().map_or(localizer.domain.cells(), |m| m.feasible_cells),
+        localizer.domain.cells()
     );
     println!(
         "{:<18} {:>9} {:>9} {:>9}",
@@ -818,6 +848,104 @@ fn summarize(
         println!("{name:<18} {mean:>9.4} {med:>9.4} {max:>9.4}");
     }
     Ok(())
+}
+
+/// The curves of thesis Figs. 5.5/5.6: N_accurate against the search radius w, one panel per
+/// k, one line per method (`table[method][k][w]` as built by `summarize`).
+fn curves_svg(table: &serde_json::Map<String, Value>, methods: &[&str], scans: usize) -> String {
+    use std::fmt::Write as _;
+    let (pw, ph, left, top, gap) = (260.0, 220.0, 48.0, 30.0, 30.0);
+    let width = left + KS.len() as f64 * (pw + gap) + 110.0;
+    let height = top + ph + 50.0;
+    let colour = |m: &str| match m {
+        "dcm" => "#7f7f7f",
+        "forward" => "#1f77b4",
+        "reverse" => "#d62728",
+        "symmetric" => "#2ca02c",
+        _ => "#9467bd",
+    };
+    let mut out = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="11"><rect width="100%" height="100%" fill="white"/>"#
+    );
+    let ymax = scans.max(1) as f64;
+    for (p, k) in KS.iter().enumerate() {
+        let x0 = left + p as f64 * (pw + gap);
+        let px = |i: usize| x0 + pw * i as f64 / (RADII.len() - 1) as f64;
+        let py = |v: f64| top + ph * (1.0 - v / ymax);
+        let _ = write!(
+            out,
+            r#"<rect x="{x0:.1}" y="{top:.1}" width="{pw:.1}" height="{ph:.1}" fill="none" stroke="dimgray"/><text x="{:.1}" y="{:.1}" text-anchor="middle">k = {k}</text>"#,
+            x0 + pw / 2.0,
+            top - 8.0
+        );
+        for (i, w) in RADII.iter().enumerate() {
+            let _ = write!(
+                out,
+                r#"<line x1="{x:.1}" y1="{y0:.1}" x2="{x:.1}" y2="{y1:.1}" stroke="gainsboro"/><text x="{x:.1}" y="{ty:.1}" text-anchor="middle">{}</text>"#,
+                radius_name(*w),
+                x = px(i),
+                y0 = top,
+                y1 = top + ph,
+                ty = top + ph + 14.0
+            );
+        }
+        for q in 0..=4 {
+            let v = ymax * q as f64 / 4.0;
+            let _ = write!(
+                out,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{v:.0}</text>"#,
+                x0 - 4.0,
+                py(v) + 4.0
+            );
+        }
+        let _ = write!(
+            out,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">search radius w (m)</text>"#,
+            x0 + pw / 2.0,
+            top + ph + 32.0
+        );
+        for m in methods {
+            let pts: Vec<String> = RADII
+                .iter()
+                .enumerate()
+                .map(|(i, w)| {
+                    let c = table
+                        .get(*m)
+                        .and_then(|v| v.get(k.to_string()))
+                        .and_then(|v| v.get(radius_name(*w)))
+                        .and_then(Value::as_u64)
+                        .unwrap_or(0);
+                    format!("{:.1},{:.1}", px(i), py(c as f64))
+                })
+                .collect();
+            let _ = write!(
+                out,
+                r#"<polyline points="{}" fill="none" stroke="{}" stroke-width="2"/>"#,
+                pts.join(" "),
+                colour(m)
+            );
+        }
+    }
+    let _ = write!(
+        out,
+        r#"<text x="12" y="{:.1}" transform="rotate(-90 12 {:.1})" text-anchor="middle">N_accurate of {scans}</text>"#,
+        top + ph / 2.0,
+        top + ph / 2.0
+    );
+    let lx = left + KS.len() as f64 * (pw + gap);
+    for (i, m) in methods.iter().enumerate() {
+        let y = top + 14.0 + 18.0 * i as f64;
+        let _ = write!(
+            out,
+            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{}" stroke-width="2"/><text x="{:.1}" y="{:.1}">{m}</text>"#,
+            lx + 22.0,
+            colour(m),
+            lx + 28.0,
+            y + 4.0
+        );
+    }
+    out.push_str("</svg>");
+    out
 }
 
 /// The demo stage: simulated scans of the embedded default city (with the OSM map-error
