@@ -9,8 +9,11 @@ use crate::model::{
     network_edges, segment_bins, BinClassifier, ClassifierOptions, GeometryOptions, SegmentBins,
     Target,
 };
-use crate::potentials::{segment_potential, Confusion, GeometryPrior, SegmentPotential};
+use crate::potentials::{
+    segment_potential, tempered_with_prior, Confusion, GeometryPrior, SegmentPotential, Tempering,
+};
 use crate::{Result, StreetsError};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -26,6 +29,30 @@ pub struct EvalOptions {
     pub folds: usize,
     /// MCMC beside max-product.
     pub mcmc: McmcOptions,
+    /// Candidate likelihood temperings; each fold takes the one with the smallest boundary
+    /// error on its training segments (one candidate: no selection).
+    pub temperings: Vec<Tempering>,
+}
+
+/// The default candidates: τ ∈ {8, 32, 128, 512} × floor ∈ {∞, 8} nats × prior weight ∈
+/// {1, 4} × coupling cap ∈ {∞, 10} nats.
+pub fn default_temperings() -> Vec<Tempering> {
+    let mut out = Vec::new();
+    for tau in [8.0, 32.0, 128.0, 512.0] {
+        for floor_nats in [f64::INFINITY, 8.0] {
+            for prior_weight in [1.0, 4.0] {
+                for coupling_cap_nats in [f64::INFINITY, 10.0] {
+                    out.push(Tempering {
+                        tau,
+                        floor_nats,
+                        prior_weight,
+                        coupling_cap_nats,
+                    });
+                }
+            }
+        }
+    }
+    out
 }
 
 impl Default for EvalOptions {
@@ -35,6 +62,7 @@ impl Default for EvalOptions {
             classifier: ClassifierOptions::default(),
             folds: 5,
             mcmc: McmcOptions::default(),
+            temperings: default_temperings(),
         }
     }
 }
@@ -82,8 +110,13 @@ pub struct TargetDetails {
     pub edges: usize,
     /// Mean SVM support vectors per fold.
     pub support_vectors: f64,
-    /// Held-out confusion counts summed over folds.
+    /// Confusion counts of the classifiers on their own held-out bins (from the training
+    /// segments), summed over folds.
     pub confusion: [[u64; 2]; 2],
+    /// Confusion counts on the test segments (held-out folds), summed over folds.
+    pub confusion_test: [[u64; 2]; 2],
+    /// The tempering each fold selected.
+    pub temperings: Vec<Tempering>,
 }
 
 /// The evaluation result.
@@ -231,8 +264,8 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
         (0.0, 0.0, 0.0, 0.0, 0.0);
     for target in [Target::DrivingArea, Target::WithSidewalk] {
         let mut predicted: Vec<Vec<bool>> = vec![Vec::new(); eval_ids.len()];
-        let mut potentials: Vec<Option<SegmentPotential>> = vec![None; eval_ids.len()];
         let mut priors = vec![GeometryPrior::flat(); eval_ids.len()];
+        let mut fold_priors = Vec::with_capacity(folds);
         let mut conf_sum = [[0u64; 2]; 2];
         let mut sv_sum = 0usize;
         for fold in 0..folds {
@@ -265,6 +298,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 },
             )?;
             let prior = GeometryPrior::fit(&train_geom);
+            fold_priors.push(prior);
             sv_sum += clf.svm.support_count();
             for (sum_row, row) in conf_sum.iter_mut().zip(&clf.confusion.counts) {
                 for (s, c) in sum_row.iter_mut().zip(row) {
@@ -289,20 +323,75 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 off += n;
             }
             predict_s += t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let clog = clf.confusion.log_likelihood();
             for &k in &test {
                 priors[k] = prior;
-                potentials[k] = Some(segment_potential(
-                    &eval_bins[k].counts(&predicted[k]),
-                    &clog,
-                    &prior,
-                    &grid,
-                ));
             }
-            potentials_s += t.elapsed().as_secs_f64();
         }
-        let net = Network {
+        // Potentials: C of fold f from the out-of-fold predictions of its training segments
+        // (segments held out from the classifier that labelled them), the tempering selected on
+        // those training segments, then the test segments' potentials.
+        let t = Instant::now();
+        let counts: Vec<_> = (0..eval_ids.len())
+            .map(|k| eval_bins[k].counts(&predicted[k]))
+            .collect();
+        let mut potentials: Vec<Option<SegmentPotential>> = vec![None; eval_ids.len()];
+        let mut conf_test = [[0u64; 2]; 2];
+        let mut chosen = Vec::with_capacity(folds);
+        let truth_cols: Vec<(usize, usize)> = eval_ids
+            .iter()
+            .map(|&s| {
+                let (d, w) = true_geometry(ds, s, target);
+                grid.columns_of(d, w)
+            })
+            .collect();
+        for (fold, fold_prior) in fold_priors.iter().enumerate() {
+            let mut truth = Vec::new();
+            let mut pred = Vec::new();
+            for k in (0..eval_ids.len()).filter(|&k| fold_of(k) != fold) {
+                for (c, &p) in classes[k].iter().zip(&predicted[k]) {
+                    if let Some(c) = c {
+                        truth.push(target.positive(*c));
+                        pred.push(p);
+                    }
+                }
+            }
+            let clog = Confusion::from_pairs(&truth, &pred).log_likelihood();
+            let flat = GeometryPrior::flat();
+            let prior_log = crate::potentials::prior_table(fold_prior, &grid);
+            let ll: Vec<SegmentPotential> = counts
+                .par_iter()
+                .map(|c| segment_potential(c, &clog, &flat, &grid))
+                .collect();
+            let train: Vec<usize> = (0..eval_ids.len())
+                .filter(|&k| fold_of(k) != fold)
+                .collect();
+            let selected = select_tempering(
+                &options.temperings,
+                &Selection {
+                    ll: &ll,
+                    members: &train,
+                    truth: &truth_cols,
+                    weights: &eval_ids
+                        .iter()
+                        .map(|&s| segs[s].length_m)
+                        .collect::<Vec<_>>(),
+                    edges: &edges,
+                    lambda,
+                    prior: &prior_log,
+                },
+            );
+            chosen.push(selected);
+            for k in (0..eval_ids.len()).filter(|&k| fold_of(k) == fold) {
+                potentials[k] = Some(tempered_with_prior(&ll[k], &selected, &prior_log));
+                for (c, &p) in classes[k].iter().zip(&predicted[k]) {
+                    if let Some(c) = c {
+                        conf_test[usize::from(target.positive(*c))][usize::from(p)] += 1;
+                    }
+                }
+            }
+        }
+        potentials_s += t.elapsed().as_secs_f64();
+        let mut net = Network {
             potentials: potentials
                 .into_iter()
                 .map(|p| {
@@ -314,11 +403,38 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 .collect(),
             edges: edges.clone(),
             lambda,
+            truncation: chosen[0].coupling_cap_nats,
         };
         let single = net.single_segment();
+        // The full model: a test fold's segments take their states from the whole network
+        // with the coupling cap that fold selected (one run per distinct cap).
         let t = Instant::now();
-        let full = net.max_product(20);
+        let mut full_states = single.states.clone();
+        let mut done = vec![false; folds];
+        let (mut full_exact, mut full_log_p) = (true, f64::NAN);
+        for f in 0..folds {
+            if done[f] {
+                continue;
+            }
+            let cap = chosen[f].coupling_cap_nats;
+            net.truncation = cap;
+            let sol = net.max_product(20);
+            full_exact &= sol.exact;
+            if f == 0 {
+                full_log_p = sol.log_probability;
+            }
+            for g in f..folds {
+                if chosen[g].coupling_cap_nats.total_cmp(&cap).is_eq() {
+                    done[g] = true;
+                    for k in (g..eval_ids.len()).step_by(folds) {
+                        full_states[k] = sol.states[k];
+                    }
+                }
+            }
+        }
         inference_s += t.elapsed().as_secs_f64();
+        // MCMC on the network with fold 0's cap (its log P is compared with max-product's there).
+        net.truncation = chosen[0].coupling_cap_nats;
         let t = Instant::now();
         let mcmc = net.mcmc(&options.mcmc);
         mcmc_s += t.elapsed().as_secs_f64();
@@ -343,13 +459,6 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     }
                 }
                 segment_potential(&counts, &perfect, &priors[k], &grid).argmax()
-            })
-            .collect();
-        let true_states: Vec<(usize, usize)> = eval_ids
-            .iter()
-            .map(|&s| {
-                let (d, w) = true_geometry(ds, s, target);
-                grid.columns_of(d, w)
             })
             .collect();
         let score = |states: Option<&[(usize, usize)]>| -> Scores {
@@ -381,20 +490,22 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
         let scores = TargetScores {
             raw: score(None),
             single_segment: score(Some(&single.states)),
-            full_model: score(Some(&full.states)),
+            full_model: score(Some(&full_states)),
             opt_on_truth: score(Some(&truth_states)),
-            true_geometry: score(Some(&true_states)),
+            true_geometry: score(Some(&truth_cols)),
         };
         details.insert(
             target.key(),
             TargetDetails {
                 mcmc: score(Some(&mcmc.states)),
-                max_product_log_p: full.log_probability,
+                max_product_log_p: full_log_p,
                 mcmc_log_p: mcmc.log_probability,
-                exact: full.exact,
+                exact: full_exact,
                 edges: net.edges.len(),
                 support_vectors: sv_sum as f64 / folds as f64,
                 confusion: conf_sum,
+                confusion_test: conf_test,
+                temperings: chosen,
             },
         );
         geometries.insert(
@@ -402,7 +513,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             (0..eval_ids.len())
                 .map(|k| SegmentGeometry {
                     segment: eval_ids[k],
-                    estimate: grid.geometry(full.states[k].0, full.states[k].1),
+                    estimate: grid.geometry(full_states[k].0, full_states[k].1),
                     single: grid.geometry(single.states[k].0, single.states[k].1),
                     truth: true_geometry(ds, eval_ids[k], target),
                 })
@@ -448,4 +559,77 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
         bins: n_bins,
         geometries,
     })
+}
+
+/// What [`select_tempering`] scores: a subnetwork of training segments with their truth.
+struct Selection<'a> {
+    /// Likelihood tables (flat prior) of all segments.
+    ll: &'a [SegmentPotential],
+    /// The training segments (indices into `ll`).
+    members: &'a [usize],
+    /// True column ranges of all segments.
+    truth: &'a [(usize, usize)],
+    /// Length weights of all segments.
+    weights: &'a [f64],
+    /// Edges among all segments.
+    edges: &'a [crate::inference::Edge],
+    /// Coupling.
+    lambda: f64,
+    /// The fold's prior as a table.
+    prior: &'a [f64],
+}
+
+/// The candidate whose full-model solution on the training subnetwork has the smallest
+/// length-weighted squared boundary error (ties: the earlier candidate).
+fn select_tempering(candidates: &[Tempering], sel: &Selection) -> Tempering {
+    if candidates.len() < 2 {
+        return candidates.first().copied().unwrap_or_default();
+    }
+    let mut pos = vec![usize::MAX; sel.ll.len()];
+    for (i, &k) in sel.members.iter().enumerate() {
+        pos[k] = i;
+    }
+    let edges: Vec<crate::inference::Edge> = sel
+        .edges
+        .iter()
+        .filter(|e| pos[e.s1] != usize::MAX && pos[e.s2] != usize::MAX)
+        .map(|e| crate::inference::Edge {
+            s1: pos[e.s1],
+            s2: pos[e.s2],
+            flipped: e.flipped,
+        })
+        .collect();
+    let errors: Vec<f64> = candidates
+        .par_iter()
+        .map(|t| {
+            let net = Network {
+                potentials: sel
+                    .members
+                    .iter()
+                    .map(|&k| tempered_with_prior(&sel.ll[k], t, sel.prior))
+                    .collect(),
+                edges: edges.clone(),
+                lambda: sel.lambda,
+                truncation: t.coupling_cap_nats,
+            };
+            let sol = net.max_product(20);
+            sel.members
+                .iter()
+                .zip(&sol.states)
+                .map(|(&k, &(a, b))| {
+                    let (ta, tb) = sel.truth[k];
+                    let da = a as f64 - ta as f64;
+                    let db = b as f64 - tb as f64;
+                    sel.weights[k] * (da * da + db * db)
+                })
+                .sum()
+        })
+        .collect();
+    let mut best = 0;
+    for (i, e) in errors.iter().enumerate() {
+        if *e < errors[best] {
+            best = i;
+        }
+    }
+    candidates[best]
 }

@@ -35,6 +35,9 @@ pub struct Network {
     pub edges: Vec<Edge>,
     /// λ = bin² / (2σ²): the coupling per squared column difference.
     pub lambda: f64,
+    /// Largest penalty of one coupling, nats (∞: the thesis' Gaussian; finite: a truncated
+    /// quadratic, so a segment whose street really changes width can break away).
+    pub truncation: f64,
 }
 
 /// A labelling: one `(a, b)` per segment.
@@ -70,7 +73,7 @@ impl Network {
         };
         let da = x1.0 as f64 - x2.0 as f64;
         let db = x1.1 as f64 - x2.1 as f64;
-        -self.lambda * (da * da + db * db)
+        (-self.lambda * (da * da + db * db)).max(-self.truncation)
     }
 
     /// log P(Θ | Z) of a labelling up to a constant (eq. 4.1).
@@ -144,7 +147,13 @@ impl Network {
         } else {
             h.to_vec()
         };
-        distance_transform_2d(&src, n, self.lambda)
+        let mut msg = distance_transform_2d(&src, n, self.lambda);
+        if self.truncation.is_finite() {
+            // max(DT, max h − K): the truncated quadratic's message, still exact.
+            let floor = src.iter().copied().fold(f64::NEG_INFINITY, f64::max) - self.truncation;
+            msg.iter_mut().for_each(|v| *v = v.max(floor));
+        }
+        msg
     }
 
     /// Max-product: exact two-pass on a forest; on loops `rounds` of damped loopy
@@ -548,7 +557,7 @@ fn distance_transform_2d(h: &[f64], n: usize, lambda: f64) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use proptest::prelude::{prop_assert, proptest, ProptestConfig};
+    use proptest::prelude::{any, prop_assert, proptest, ProptestConfig};
 
     fn random_potential(n: usize, rng: &mut ChaCha8Rng, max_width: usize) -> SegmentPotential {
         let mut log = vec![f64::NEG_INFINITY; n * n];
@@ -561,7 +570,7 @@ mod tests {
     }
 
     /// A random tree on `k` nodes (node i > 0 attached to a random earlier node).
-    fn random_tree(k: usize, n: usize, seed: u64, lambda: f64) -> Network {
+    fn random_tree(k: usize, n: usize, seed: u64, lambda: f64, truncation: f64) -> Network {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let potentials = (0..k)
             .map(|_| random_potential(n, &mut rng, n - 1))
@@ -577,6 +586,7 @@ mod tests {
             potentials,
             edges,
             lambda,
+            truncation,
         }
     }
 
@@ -639,8 +649,8 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig { cases: 40, ..ProptestConfig::default() })]
         #[test]
-        fn exact_tree_inference_equals_brute_force(k in 1usize..5, n in 2usize..6, seed in 0u64..1000, lambda in 0.0f64..2.0) {
-            let net = random_tree(k, n, seed, lambda);
+        fn exact_tree_inference_equals_brute_force(k in 1usize..5, n in 2usize..6, seed in 0u64..1000, lambda in 0.0f64..2.0, truncated in any::<bool>(), cap in 0.1f64..4.0) {
+            let net = random_tree(k, n, seed, lambda, if truncated { cap } else { f64::INFINITY });
             let sol = net.max_product(10);
             prop_assert!(sol.exact);
             let bf = brute_force(&net);
@@ -651,7 +661,7 @@ mod tests {
     #[test]
     fn mcmc_reaches_the_exact_optimum_on_small_trees() {
         for seed in 0..8 {
-            let net = random_tree(4, 5, seed, 0.5);
+            let net = random_tree(4, 5, seed, 0.5, f64::INFINITY);
             let exact = net.max_product(0).log_probability;
             let mc = net.mcmc(&McmcOptions {
                 chains: 8,
@@ -669,7 +679,7 @@ mod tests {
 
     #[test]
     fn mcmc_is_deterministic_for_a_seed() {
-        let net = random_tree(5, 6, 3, 0.3);
+        let net = random_tree(5, 6, 3, 0.3, f64::INFINITY);
         let o = McmcOptions {
             chains: 4,
             iterations: 5_000,
@@ -709,6 +719,7 @@ mod tests {
             potentials,
             edges,
             lambda: 0.4,
+            truncation: f64::INFINITY,
         };
         assert!(!net.is_forest());
         let sol = net.max_product(30);

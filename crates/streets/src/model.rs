@@ -5,7 +5,8 @@ use crate::corridor::{map_corridors, Corridor, CorridorOptions};
 use crate::features::{bin_features, BinFeatures, FeatureOptions, FEATURE_DIMS};
 use crate::inference::{Edge, McmcOptions, Network};
 use crate::potentials::{
-    segment_potential, ColumnCounts, Confusion, GeometryPrior, SegmentPotential, ThetaGrid,
+    segment_potential, tempered_with_prior, ColumnCounts, Confusion, GeometryPrior,
+    SegmentPotential, Tempering, ThetaGrid,
 };
 use crate::svm::{Svm, SvmOptions};
 use crate::{Result, StreetsError};
@@ -201,6 +202,10 @@ pub struct GeometryOptions {
     /// Couple neighbours only when their directions differ by less than this, degrees
     /// (180: every pair of N, as the thesis).
     pub max_turn_deg: f64,
+    /// Tempering of the segment likelihood, prior weight and coupling cap used by
+    /// [`StreetModel::estimate`] (`urbansem streets eval` selects them per fold instead).
+    #[serde(default)]
+    pub tempering: Tempering,
 }
 
 impl Default for GeometryOptions {
@@ -211,6 +216,12 @@ impl Default for GeometryOptions {
             max_width_m: 30.0,
             sigma_m: 0.5,
             max_turn_deg: 45.0,
+            tempering: Tempering {
+                tau: 128.0,
+                floor_nats: 8.0,
+                prior_weight: 1.0,
+                coupling_cap_nats: f64::INFINITY,
+            },
         }
     }
 }
@@ -394,6 +405,8 @@ impl StreetModel {
         }
         let grid = self.geometry.theta_grid();
         let clog = self.classifier.confusion.log_likelihood();
+        let prior = crate::potentials::prior_table(&self.prior, &grid);
+        let flat = GeometryPrior::flat();
         // Per segment: corridor → features → labels → potential, keeping only the potential.
         let results = map_corridors(
             segs,
@@ -419,7 +432,11 @@ impl StreetModel {
                 }
                 let labels = self.classifier.predict(&rows)?;
                 Ok(Some((
-                    segment_potential(&b.counts(&labels), &clog, &self.prior, &grid),
+                    tempered_with_prior(
+                        &segment_potential(&b.counts(&labels), &clog, &flat, &grid),
+                        &self.geometry.tempering,
+                        &prior,
+                    ),
                     labels.len(),
                 )))
             },
@@ -475,6 +492,7 @@ impl StreetModel {
             potentials,
             edges: network_edges(map, &ids, self.geometry.max_turn_deg),
             lambda: (self.geometry.corridor.bin_m / self.geometry.sigma_m).powi(2) / 2.0,
+            truncation: self.geometry.tempering.coupling_cap_nats,
         };
         let sol = net.max_product(20);
         let segments = used

@@ -226,6 +226,69 @@ pub fn segment_potential(
         base += o * c[0][1] + z * c[0][0];
         prefix[j + 1] = prefix[j] + o * (c[1][1] - c[0][1]) + z * (c[1][0] - c[0][0]);
     }
+    let mut log = prior_table(prior, grid);
+    for a in 0..n {
+        for b in a..n {
+            if !grid.valid(a, b) {
+                break;
+            }
+            log[a * n + b] += base + prefix[b + 1] - prefix[a];
+        }
+    }
+    SegmentPotential { cols: n, log }
+}
+
+/// Tempered, robust segment likelihood: `max(ℓ(θ)/τ − max_θ ℓ/τ, −floor)`.
+///
+/// Eq. 4.4 multiplies thousands of bins as if their labels were independent given θ; the
+/// classifier's errors are spatially correlated (a whole setts street or a sidewalk paved
+/// like the square next to it is mislabelled together), so the product is far too peaked.
+/// Dividing the log-likelihood by τ (≈ bins per independent error) tempers it; the floor is
+/// the max-approximation of a mixture with a "classifier failed on this segment" component
+/// whose likelihood does not depend on θ, so no geometry is more than `floor` nats worse
+/// than the best and the prior and the neighbours can overrule a wrong segment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Tempering {
+    /// τ: the log-likelihood is divided by it (1: eq. 4.4 as is).
+    pub tau: f64,
+    /// Deepest a geometry falls below the segment's best, nats (∞: no floor).
+    pub floor_nats: f64,
+    /// Weight of the log prior (1: eq. 4.2 as is).
+    pub prior_weight: f64,
+    /// Largest penalty of one intersegment coupling, nats (∞: the thesis' Gaussian).
+    #[serde(default = "infinite")]
+    pub coupling_cap_nats: f64,
+}
+
+fn infinite() -> f64 {
+    f64::INFINITY
+}
+
+impl Default for Tempering {
+    fn default() -> Self {
+        Tempering {
+            tau: 1.0,
+            floor_nats: f64::INFINITY,
+            prior_weight: 1.0,
+            coupling_cap_nats: f64::INFINITY,
+        }
+    }
+}
+
+/// The segment potential from a likelihood table `ll` (from [`segment_potential`] with a flat
+/// prior): tempered and floored as `t` says, plus the weighted prior.
+pub fn tempered_potential(
+    ll: &SegmentPotential,
+    t: &Tempering,
+    prior: &GeometryPrior,
+    grid: &ThetaGrid,
+) -> SegmentPotential {
+    tempered_with_prior(ll, t, &prior_table(prior, grid))
+}
+
+/// log P(θ) for every θ = `a ..= b` (row-major `N × N`, invalid geometries −∞).
+pub fn prior_table(prior: &GeometryPrior, grid: &ThetaGrid) -> Vec<f64> {
+    let n = grid.cols;
     let mut log = vec![f64::NEG_INFINITY; n * n];
     for a in 0..n {
         for b in a..n {
@@ -233,10 +296,32 @@ pub fn segment_potential(
                 break;
             }
             let (d, w) = grid.geometry(a, b);
-            log[a * n + b] = base + prefix[b + 1] - prefix[a] + prior.log_density(d, w);
+            log[a * n + b] = prior.log_density(d, w);
         }
     }
-    SegmentPotential { cols: n, log }
+    log
+}
+
+/// [`tempered_potential`] with the prior as a [`prior_table`].
+pub fn tempered_with_prior(
+    ll: &SegmentPotential,
+    t: &Tempering,
+    prior: &[f64],
+) -> SegmentPotential {
+    let top = ll.log.iter().copied().fold(f64::NEG_INFINITY, f64::max) / t.tau;
+    let log = ll
+        .log
+        .iter()
+        .zip(prior)
+        .map(|(&v, &p)| {
+            if v == f64::NEG_INFINITY || p == f64::NEG_INFINITY {
+                f64::NEG_INFINITY
+            } else {
+                (v / t.tau - top).max(-t.floor_nats) + t.prior_weight * p
+            }
+        })
+        .collect();
+    SegmentPotential { cols: ll.cols, log }
 }
 
 /// The same value as [`segment_potential`] for one θ by direct summation over the bins.
@@ -290,6 +375,55 @@ mod tests {
         assert_eq!(c.counts, [[2, 0], [1, 2]]);
         for row in c.log_likelihood() {
             assert!((row[0].exp() + row[1].exp() - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn tempering_one_without_floor_is_eq_4_4() {
+        let grid = ThetaGrid {
+            cols: 9,
+            bin_m: 0.2,
+            max_width_cols: 8,
+        };
+        let labels: Vec<Option<bool>> = (0..27)
+            .map(|k| match k % 4 {
+                0 => None,
+                1 => Some(false),
+                _ => Some(k % 9 > 2),
+            })
+            .collect();
+        let conf = Confusion {
+            counts: [[30, 5], [4, 40]],
+        }
+        .log_likelihood();
+        let prior = GeometryPrior {
+            mean_offset_m: 0.1,
+            sigma_offset_m: 0.5,
+            mean_log_width: 0.0,
+            sigma_log_width: 0.7,
+        };
+        let counts = ColumnCounts::from_grid(&labels, grid.cols);
+        let ll = segment_potential(&counts, &conf, &GeometryPrior::flat(), &grid);
+        let plain = segment_potential(&counts, &conf, &prior, &grid);
+        let top = ll.log.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let t1 = tempered_potential(&ll, &Tempering::default(), &prior, &grid);
+        let floored = Tempering {
+            tau: 2.0,
+            floor_nats: 1.5,
+            prior_weight: 1.0,
+            coupling_cap_nats: f64::INFINITY,
+        };
+        let t2 = tempered_potential(&ll, &floored, &GeometryPrior::flat(), &grid);
+        for a in 0..grid.cols {
+            for b in 0..grid.cols {
+                if grid.valid(a, b) {
+                    assert!((t1.at(a, b) - (plain.at(a, b) - top)).abs() < 1e-9);
+                    let want = ((ll.at(a, b) - top) / 2.0).max(-1.5);
+                    assert!((t2.at(a, b) - want).abs() < 1e-9);
+                } else {
+                    assert_eq!(t1.at(a, b), f64::NEG_INFINITY);
+                }
+            }
         }
     }
 

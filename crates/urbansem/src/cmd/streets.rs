@@ -405,7 +405,7 @@ fn details_text(r: &EvalReport) -> String {
     );
     for (k, d) in &r.details {
         out += &format!(
-            "\n{k}: max-product ({}) log P {:.3}, MCMC log P {:.3} (gap {:.3}); MCMC F1 {:.3} RMSE_w {}; {} coupled pairs; {:.0} SVs/fold; held-out confusion {:?}",
+            "\n{k}: max-product ({}) log P {:.3}, MCMC log P {:.3} (gap {:.3}); MCMC F1 {:.3} RMSE_w {}; {} coupled pairs; {:.0} SVs/fold; confusion on the classifiers' held-out bins {:?}, on the test folds {:?}; tempering per fold (τ, floor, prior weight, coupling cap) {}",
             if d.exact { "exact, tree" } else { "loopy" },
             d.max_product_log_p,
             d.mcmc_log_p,
@@ -414,7 +414,18 @@ fn details_text(r: &EvalReport) -> String {
             d.mcmc.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
             d.edges,
             d.support_vectors,
-            d.confusion
+            d.confusion,
+            d.confusion_test,
+            d.temperings
+                .iter()
+                .map(|t| {
+                    format!(
+                        "({}, {}, {}, {})",
+                        t.tau, t.floor_nats, t.prior_weight, t.coupling_cap_nats
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
         );
     }
     out
