@@ -251,17 +251,36 @@ pub fn segment_potential(
 pub struct Tempering {
     /// τ: the log-likelihood is divided by it (1: eq. 4.4 as is).
     pub tau: f64,
-    /// Deepest a geometry falls below the segment's best, nats (∞: no floor).
+    /// Deepest a geometry falls below the segment's best, nats (∞: no floor; JSON null).
+    #[serde(with = "infinite_as_null")]
     pub floor_nats: f64,
     /// Weight of the log prior (1: eq. 4.2 as is).
     pub prior_weight: f64,
-    /// Largest penalty of one intersegment coupling, nats (∞: the thesis' Gaussian).
-    #[serde(default = "infinite")]
+    /// Largest penalty of one intersegment coupling, nats (∞: the thesis' Gaussian; JSON
+    /// null or absent).
+    #[serde(default = "infinite", with = "infinite_as_null")]
     pub coupling_cap_nats: f64,
 }
 
 fn infinite() -> f64 {
     f64::INFINITY
+}
+
+/// JSON has no ∞: +∞ is written as null and null read as +∞.
+mod infinite_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_some(v)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+    }
 }
 
 impl Default for Tempering {
@@ -376,6 +395,26 @@ mod tests {
         for row in c.log_likelihood() {
             assert!((row[0].exp() + row[1].exp() - 1.0).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn tempering_round_trips_through_json_with_infinities() {
+        for t in [
+            Tempering::default(),
+            Tempering {
+                tau: 32.0,
+                floor_nats: 8.0,
+                prior_weight: 4.0,
+                coupling_cap_nats: 10.0,
+            },
+        ] {
+            let json = serde_json::to_string(&t).unwrap();
+            assert_eq!(serde_json::from_str::<Tempering>(&json).unwrap(), t);
+        }
+        let old: Tempering =
+            serde_json::from_str(r#"{"tau": 2.0, "floor_nats": null, "prior_weight": 1.0}"#)
+                .unwrap();
+        assert_eq!(old.coupling_cap_nats, f64::INFINITY);
     }
 
     #[test]
