@@ -1107,6 +1107,7 @@ mod tests {
             json: false,
             svg: None,
             grid_m: 0.5,
+            yaw_step_deg: 0.5,
         })
         .unwrap_err();
         assert!(err.to_string().contains("--map"), "{err}");
