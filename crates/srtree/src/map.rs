@@ -19,9 +19,10 @@
 //! [`SrMap::memory`] counts every byte the map holds (allocated capacities).
 //!
 //! **Insertion.** One batch (a cloud, or [`SrMap::insert_scans`]' list of scans) sorts
-//! its points by (cell code, scan, point), finds each cell once (binary search, or created
-//! in Morton order) and applies its points in insertion order: the result equals inserting
-//! point by point, scan by scan. With ray casting the same is done scan by scan, and a
+//! its points by (cell code, scan, point) with a parallel radix sort, finds each cell once
+//! (binary search, or created in Morton order) and applies its points in insertion order,
+//! slices of cells in parallel on copies that are merged in order: the result equals
+//! inserting point by point, scan by scan. With ray casting the same is done scan by scan, and a
 //! hash index of all cells lives during the batch for the rays' lookups. O(p log p) for p
 //! points, no allocation per point. The batch's new cells form a new run; a
 //! run is merged with the one before it while that one is less than twice its size
@@ -59,6 +60,7 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
+use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
 /// Largest number of children of an R-tree node (M of the thesis).
 pub const NODE_CAPACITY: usize = 16;
@@ -506,8 +508,14 @@ impl SrMap {
             .for_each(|c| c.label = choose_label(model, &expand_histogram(table, c.histogram_ref)));
     }
 
-    /// Checks every position (finite, inside the grid) and the origin.
-    fn check_scan(&self, cloud: &PointCloud, origin: Option<[f64; 3]>) -> Result<()> {
+    /// Checks the columns, the origin and (with `positions`) every position: finite and
+    /// inside the grid.
+    fn check_scan(
+        &self,
+        cloud: &PointCloud,
+        origin: Option<[f64; 3]>,
+        positions: bool,
+    ) -> Result<()> {
         cloud.check_columns()?;
         if u32::try_from(cloud.len()).is_err() {
             return Err(SrtreeError::InvalidOption {
@@ -517,26 +525,15 @@ impl SrMap {
             });
         }
         let limit_m = f64::from(KEY_LIMIT) * self.options.resolution_m;
-        cloud
-            .positions
-            .par_iter()
-            .enumerate()
-            .try_for_each(|(index, p)| {
-                if !p.iter().all(|v| v.is_finite()) {
-                    return Err(SrtreeError::NonFinite {
-                        index,
-                        position: *p,
-                    });
-                }
-                if p.iter().any(|v| v.abs() >= limit_m) {
-                    return Err(SrtreeError::OutOfGrid {
-                        index,
-                        position: *p,
-                        limit_m,
-                    });
-                }
-                Ok(())
-            })?;
+        if positions {
+            if let Some(index) = cloud
+                .positions
+                .par_iter()
+                .position_first(|p| !self.inside_grid(p))
+            {
+                return Err(self.position_error(index, cloud.positions[index], limit_m));
+            }
+        }
         if let Some(o) = origin.filter(|_| self.options.ray_casting) {
             if let Some(&bad) = o.iter().find(|v| !(v.is_finite() && v.abs() < limit_m)) {
                 return Err(SrtreeError::InvalidOption {
@@ -547,6 +544,25 @@ impl SrMap {
             }
         }
         Ok(())
+    }
+
+    /// Whether a position is finite and inside the grid.
+    fn inside_grid(&self, p: &[f64; 3]) -> bool {
+        let limit_m = f64::from(KEY_LIMIT) * self.options.resolution_m;
+        p.iter().all(|v| v.abs() < limit_m)
+    }
+
+    /// The error of a position that is not finite or outside the grid.
+    fn position_error(&self, index: usize, position: [f64; 3], limit_m: f64) -> SrtreeError {
+        if position.iter().all(|v| v.is_finite()) {
+            SrtreeError::OutOfGrid {
+                index,
+                position,
+                limit_m,
+            }
+        } else {
+            SrtreeError::NonFinite { index, position }
+        }
     }
 
     /// Inserts a cloud (its `label`, `rgb` and `object` columns when present); with
@@ -567,8 +583,11 @@ impl SrMap {
         &mut self,
         scans: &[(&PointCloud, Option<[f64; 3]>)],
     ) -> Result<InsertStats> {
+        let rays = self.options.ray_casting && scans.iter().any(|(_, o)| o.is_some());
+        // Without ray casting the positions are checked while their cells are computed,
+        // before the map changes.
         for (cloud, origin) in scans {
-            self.check_scan(cloud, *origin)?;
+            self.check_scan(cloud, *origin, rays)?;
         }
         let old_len = self.cells.len();
         let points: usize = scans.iter().map(|(c, _)| c.len()).sum();
@@ -579,7 +598,6 @@ impl SrMap {
                 expected: "fewer than 2³² cells plus new points in one map",
             });
         }
-        let rays = self.options.ray_casting && scans.iter().any(|(_, o)| o.is_some());
         let mut batch = Batch {
             index: if rays {
                 self.cells
@@ -606,7 +624,7 @@ impl SrMap {
             // Scan by scan: the misses of a scan must see the hits of the scans before it.
             for (s, (cloud, origin)) in scans.iter().enumerate() {
                 let scan = s as u32 + 1;
-                let order = self.sorted_points(&clouds[s..=s], scan);
+                let order = self.sorted_points(&clouds[s..=s], scan)?;
                 total.touched_cells +=
                     self.update_endpoints(&clouds[s..=s], scan, &order, &mut batch);
                 if let Some(origin) = origin {
@@ -618,7 +636,7 @@ impl SrMap {
         } else {
             // Hits only commute between cells: all points at once, sorted by cell and then
             // in insertion order, so new cells come out in Morton order.
-            let order = self.sorted_points(&clouds, 1);
+            let order = self.sorted_points(&clouds, 1)?;
             total.touched_cells += self.update_endpoints(&clouds, 1, &order, &mut batch);
         }
         drop(batch);
@@ -628,30 +646,32 @@ impl SrMap {
     }
 
     /// (cell code, scan, point) of every point of `clouds` (scan numbers from `first`),
-    /// sorted: by cell, then in insertion order.
-    fn sorted_points(&self, clouds: &[&PointCloud], first: u32) -> Vec<Item> {
-        const CHUNK: usize = 1 << 16;
+    /// sorted: by cell, then in insertion order. A position that is not finite or outside
+    /// the grid is an error.
+    fn sorted_points(&self, clouds: &[&PointCloud], first: u32) -> Result<Vec<Item>> {
         let r = self.options.resolution_m;
-        let mut order = vec![(0u64, 0u32, 0u32); clouds.iter().map(|c| c.len()).sum()];
-        // (output slice, positions, scan, index of the first point), filled in parallel.
-        let mut parts = Vec::new();
-        let mut rest = order.as_mut_slice();
+        let mut order = Vec::with_capacity(clouds.iter().map(|c| c.len()).sum());
+        let outside = AtomicBool::new(false);
         for (s, cloud) in clouds.iter().enumerate() {
-            for (c, positions) in cloud.positions.chunks(CHUNK).enumerate() {
-                let (out, tail) = rest.split_at_mut(positions.len());
-                parts.push((out, positions, first + s as u32, c * CHUNK));
-                rest = tail;
+            let scan = first + s as u32;
+            order.par_extend(cloud.positions.par_iter().enumerate().map(|(i, p)| {
+                if !self.inside_grid(p) {
+                    outside.store(true, AtomicOrdering::Relaxed);
+                    return (0, scan, i as u32);
+                }
+                (morton(p.map(|v| floor_i32(v / r))), scan, i as u32)
+            }));
+        }
+        if outside.into_inner() {
+            let limit_m = f64::from(KEY_LIMIT) * r;
+            for cloud in clouds {
+                if let Some(index) = cloud.positions.iter().position(|p| !self.inside_grid(p)) {
+                    return Err(self.position_error(index, cloud.positions[index], limit_m));
+                }
             }
         }
-        parts
-            .into_par_iter()
-            .for_each(|(out, positions, scan, base)| {
-                for (i, (o, p)) in out.iter_mut().zip(positions).enumerate() {
-                    *o = (morton(p.map(|v| floor_i32(v / r))), scan, (base + i) as u32);
-                }
-            });
         radix_sort_by_code(&mut order);
-        order
+        Ok(order)
     }
 
     /// Endpoint updates of sorted points (see [`SrMap::sorted_points`]; `clouds[s]` is scan
@@ -664,81 +684,183 @@ impl SrMap {
         order: &[(u64, u32, u32)],
         batch: &mut Batch,
     ) -> usize {
-        let (hit, max) = (self.options.log_odds_hit, self.options.log_odds_max);
+        if !batch.hashed {
+            return self.update_endpoints_parallel(clouds, first, order);
+        }
         let distinct = order.chunk_by(|a, b| a.0 == b.0).count();
         self.cells.reserve(distinct);
-        if batch.hashed {
-            batch.last_scan.reserve(distinct);
-        }
+        batch.last_scan.reserve(distinct);
         if self.coloured {
             self.colours.reserve(distinct);
         }
         let labelled = clouds.iter().any(|c| c.label.is_some());
-        // Taken out while the cells are borrowed; put back below.
-        let model = self.dirichlet.take();
         let mut touched = 0;
         for points in order.chunk_by(|a, b| a.0 == b.0) {
             let ci = self.cell_for_code(points[0].0, batch) as usize;
-            let cell = &mut self.cells[ci];
-            let mut scan = 0;
-            for &(_, s, i) in points {
-                if s != scan {
-                    // One hit per scan and cell, as OctoMap's insertPointCloud.
-                    scan = s;
-                    touched += 1;
-                    cell.log_odds = (cell.log_odds + hit).min(max);
-                }
-                let cloud = clouds[(s - first) as usize];
-                let i = i as usize;
-                cell.hits = cell.hits.saturating_add(1);
-                if let Some(l) = &cloud.label {
-                    add_label(&mut self.histograms, &mut cell.histogram_ref, l[i]);
-                }
-                if let Some(o) = &cloud.object {
-                    if o[i] != 0 {
-                        cell.add_object(o[i]);
-                    }
-                }
-                if let Some(c) = &cloud.rgb {
-                    self.colours[ci].add(c[i]);
-                }
+            let mut colour = self.colours.get(ci).copied();
+            let (t, scan) = apply_points(
+                &mut self.cells[ci],
+                &mut self.histograms,
+                colour.as_mut(),
+                points,
+                clouds,
+                first,
+                &self.options,
+            );
+            if let Some(c) = colour {
+                self.colours[ci] = c;
             }
-            if batch.hashed {
-                batch.last_scan[ci] = scan;
-            }
+            touched += t;
+            batch.last_scan[ci] = scan;
             if labelled {
+                let cell = &mut self.cells[ci];
                 let h = expand_histogram(&self.histograms, cell.histogram_ref);
-                cell.label = choose_label(model.as_ref(), &h);
+                cell.label = choose_label(self.dirichlet.as_ref(), &h);
             }
         }
-        self.dirichlet = model;
         touched
     }
 
-    /// The id of the cell with this code, created when missing.
+    /// [`SrMap::update_endpoints`] without a hash index: slices of whole cell groups are
+    /// updated in parallel on copies (existing cells found by binary search), then merged
+    /// in order, so cells and histogram table come out as a sequential pass makes them.
+    fn update_endpoints_parallel(
+        &mut self,
+        clouds: &[&PointCloud],
+        first: u32,
+        order: &[(u64, u32, u32)],
+    ) -> usize {
+        let labelled = clouds.iter().any(|c| c.label.is_some());
+        let slices = group_slices(order, rayon::current_num_threads() * 8, MIN_SLICE);
+        let this = &*self;
+        let updates: Vec<GroupUpdates> = slices
+            .into_par_iter()
+            .map(|slice| {
+                let mut u = GroupUpdates::default();
+                let groups = slice.chunk_by(|a, b| a.0 == b.0).count();
+                u.created.reserve_exact(groups);
+                if this.coloured {
+                    u.created_colours.reserve_exact(groups);
+                }
+                for points in slice.chunk_by(|a, b| a.0 == b.0) {
+                    let code = points[0].0;
+                    let found = this.find(code);
+                    let (mut cell, mut colour) = match found {
+                        Some(ci) => (
+                            this.cells[ci as usize],
+                            this.colours.get(ci as usize).copied().unwrap_or_default(),
+                        ),
+                        None => (Cell::empty(unmorton(code)), ColourSum::default()),
+                    };
+                    if cell.histogram_ref & POOLED != 0 {
+                        let g = cell.histogram_ref & !POOLED;
+                        cell.histogram_ref = POOLED | u.histograms.len() as u32;
+                        u.histograms.push(this.histograms[g as usize]);
+                        u.origin.push(g);
+                    }
+                    let (t, _) = apply_points(
+                        &mut cell,
+                        &mut u.histograms,
+                        this.coloured.then_some(&mut colour),
+                        points,
+                        clouds,
+                        first,
+                        &this.options,
+                    );
+                    u.origin.resize(u.histograms.len(), NEW_HISTOGRAM);
+                    u.touched += t;
+                    if labelled {
+                        let h = expand_histogram(&u.histograms, cell.histogram_ref);
+                        cell.label = choose_label(this.dirichlet.as_ref(), &h);
+                    }
+                    match found {
+                        Some(ci) => u.existing.push((ci, cell, colour)),
+                        None => {
+                            u.created.push(cell);
+                            if this.coloured {
+                                u.created_colours.push(colour);
+                            }
+                        }
+                    }
+                }
+                u
+            })
+            .collect();
+        let mut touched = 0;
+        let mut remaps = Vec::with_capacity(updates.len());
+        for u in &updates {
+            touched += u.touched;
+            // Local histogram index → map table index; new histograms are appended in the
+            // order a sequential pass creates them.
+            let remap: Vec<u32> = u
+                .histograms
+                .iter()
+                .zip(&u.origin)
+                .map(|(h, &g)| {
+                    if g == NEW_HISTOGRAM {
+                        assert!(
+                            self.histograms.len() < POOLED as usize,
+                            "histogram table overflow"
+                        );
+                        self.histograms.push(*h);
+                        (self.histograms.len() - 1) as u32
+                    } else {
+                        self.histograms[g as usize] = *h;
+                        g
+                    }
+                })
+                .collect();
+            for &(ci, mut cell, colour) in &u.existing {
+                cell.histogram_ref = global_ref(&remap, cell.histogram_ref);
+                self.cells[ci as usize] = cell;
+                if self.coloured {
+                    self.colours[ci as usize] = colour;
+                }
+            }
+            remaps.push(remap);
+        }
+        // The created cells, appended in parallel in slice order.
+        let mut starts = Vec::with_capacity(updates.len());
+        let mut created = 0;
+        for u in &updates {
+            starts.push(created);
+            created += u.created.len();
+        }
+        let slice_of = |i: usize| {
+            let s = starts.partition_point(|&start| start <= i) - 1;
+            (s, i - starts[s])
+        };
+        self.cells.reserve_exact(created);
+        self.cells.par_extend((0..created).into_par_iter().map(|i| {
+            let (s, j) = slice_of(i);
+            let mut cell = updates[s].created[j];
+            cell.histogram_ref = global_ref(&remaps[s], cell.histogram_ref);
+            cell
+        }));
+        if self.coloured {
+            self.colours.reserve_exact(created);
+            self.colours
+                .par_extend((0..created).into_par_iter().map(|i| {
+                    let (s, j) = slice_of(i);
+                    updates[s].created_colours[j]
+                }));
+        }
+        touched
+    }
+
+    /// The id of the cell with this code in the batch's hash index, created when missing.
     fn cell_for_code(&mut self, code: u64, batch: &mut Batch) -> u32 {
-        if batch.hashed {
-            if let Some(&ci) = batch.index.get(&code) {
-                return ci;
-            }
+        if let Some(&ci) = batch.index.get(&code) {
+            return ci;
         }
-        // A hash index holds every cell; without it each code comes once per batch.
-        let found = if batch.hashed { None } else { self.find(code) };
-        let ci = found.unwrap_or_else(|| {
-            // insert_scans checked that the cell count stays below 2³².
-            let ci = self.cells.len() as u32;
-            self.cells.push(Cell::empty(unmorton(code)));
-            if self.coloured {
-                self.colours.push(ColourSum::default());
-            }
-            if batch.hashed {
-                batch.last_scan.push(0);
-            }
-            ci
-        });
-        if batch.hashed {
-            batch.index.insert(code, ci);
+        // insert_scans checked that the cell count stays below 2³².
+        let ci = self.cells.len() as u32;
+        self.cells.push(Cell::empty(unmorton(code)));
+        if self.coloured {
+            self.colours.push(ColourSum::default());
         }
+        batch.last_scan.push(0);
+        batch.index.insert(code, ci);
         ci
     }
 
@@ -1104,6 +1226,99 @@ fn floor_i32(q: f64) -> i32 {
 /// A point to insert: (cell code, scan, point).
 type Item = (u64, u32, u32);
 
+/// Fewest points per slice of a parallel endpoint update (small in tests, to have many).
+#[cfg(not(test))]
+const MIN_SLICE: usize = 1 << 14;
+#[cfg(test)]
+const MIN_SLICE: usize = 64;
+
+/// [`GroupUpdates::origin`] of a histogram created in the slice.
+const NEW_HISTOGRAM: u32 = u32::MAX;
+
+/// Endpoint updates of one slice of whole cell groups, computed apart from the map.
+#[derive(Default)]
+struct GroupUpdates {
+    /// Updated copies of existing cells: (cell id, cell, colour sum).
+    existing: Vec<(u32, Cell, ColourSum)>,
+    /// Cells created, in Morton order.
+    created: Vec<Cell>,
+    /// Colour sums of `created`.
+    created_colours: Vec<ColourSum>,
+    /// Histograms of the slice's pooled cells (their `histogram_ref`s index this).
+    histograms: Vec<Histogram>,
+    /// Per histogram, the map table entry it updates ([`NEW_HISTOGRAM`]: a new one).
+    origin: Vec<u32>,
+    /// (cell, scan) pairs touched.
+    touched: usize,
+}
+
+/// A cell's `histogram_ref` with a slice-local table index mapped to the map's table.
+fn global_ref(remap: &[u32], r: u32) -> u32 {
+    if r & POOLED != 0 {
+        POOLED | remap[(r & !POOLED) as usize]
+    } else {
+        r
+    }
+}
+
+/// Applies one cell's points (sorted by scan, then point; `clouds[s]` is scan `first + s`):
+/// one hit per scan, then hit count, label histogram, object vote and colour per point.
+/// Returns (scans touching the cell, last scan).
+fn apply_points(
+    cell: &mut Cell,
+    histograms: &mut Vec<Histogram>,
+    mut colour: Option<&mut ColourSum>,
+    points: &[Item],
+    clouds: &[&PointCloud],
+    first: u32,
+    options: &MapOptions,
+) -> (usize, u32) {
+    let (hit, max) = (options.log_odds_hit, options.log_odds_max);
+    let mut scan = 0;
+    let mut touched = 0;
+    for &(_, s, i) in points {
+        if s != scan {
+            // One hit per scan and cell, as OctoMap's insertPointCloud.
+            scan = s;
+            touched += 1;
+            cell.log_odds = (cell.log_odds + hit).min(max);
+        }
+        let cloud = clouds[(s - first) as usize];
+        let i = i as usize;
+        cell.hits = cell.hits.saturating_add(1);
+        if let Some(l) = &cloud.label {
+            add_label(histograms, &mut cell.histogram_ref, l[i]);
+        }
+        if let Some(o) = &cloud.object {
+            if o[i] != 0 {
+                cell.add_object(o[i]);
+            }
+        }
+        if let (Some(c), Some(sum)) = (&cloud.rgb, colour.as_deref_mut()) {
+            sum.add(c[i]);
+        }
+    }
+    (touched, scan)
+}
+
+/// Splits sorted items into about `parts` slices (each at least `min_len` items unless it
+/// is the last) that never cut a run of equal codes.
+fn group_slices(items: &[Item], parts: usize, min_len: usize) -> Vec<&[Item]> {
+    let target = (items.len() / parts.max(1)).max(min_len).max(1);
+    let mut slices = Vec::new();
+    let mut rest = items;
+    while !rest.is_empty() {
+        let mut end = target.min(rest.len());
+        while end < rest.len() && rest[end].0 == rest[end - 1].0 {
+            end += 1;
+        }
+        let (head, tail) = rest.split_at(end);
+        slices.push(head);
+        rest = tail;
+    }
+    slices
+}
+
 /// Sorts by code, keeping the order of equal codes: radix sort over the bits in which the
 /// codes differ, most significant 11-bit digit first while a bucket is larger than the
 /// cache ([`IN_CACHE`] items), then least significant digit first inside each bucket.
@@ -1117,7 +1332,7 @@ fn radix_sort_by_code(items: &mut [Item]) {
         .fold((u64::MAX, 0), |(lo, hi), x| (lo.min(x.0), hi.max(x.0)));
     let bits = 64 - (min ^ max).leading_zeros() as usize;
     let mut scratch = vec![(0u64, 0u32, 0u32); items.len()];
-    sort_low_bits(items, &mut scratch, bits);
+    sort_low_bits(items, &mut scratch, bits, false);
 }
 
 /// Bits per radix digit.
@@ -1126,9 +1341,12 @@ const DIGIT: usize = 11;
 const IN_CACHE: usize = 1 << 13;
 
 /// Stable sort of `a` by the low `bits` bits of the codes (the others are equal); `b` is
-/// scratch of the same length.
-fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize) {
+/// scratch of the same length. The result lands in `b` when `to_b`, else in `a`.
+fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize, to_b: bool) {
     if bits == 0 || a.len() < 2 {
+        if to_b {
+            b.copy_from_slice(a);
+        }
         return;
     }
     if a.len() <= IN_CACHE {
@@ -1142,7 +1360,9 @@ fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize) {
             };
             in_a ^= moved;
         }
-        if !in_a {
+        if in_a && to_b {
+            b.copy_from_slice(a);
+        } else if !in_a && !to_b {
             a.copy_from_slice(b);
         }
         return;
@@ -1150,26 +1370,48 @@ fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize) {
     let shift = bits.saturating_sub(DIGIT);
     let counts = digit_counts(a, shift, bits - shift);
     if !scatter_counted(a, b, shift, bits - shift, &counts) {
-        sort_low_bits(a, b, shift);
+        sort_low_bits(a, b, shift, to_b);
         return;
     }
-    a.copy_from_slice(b);
-    let mut start = 0;
+    // The data is in `b` now; the buckets are independent: sorted in parallel, each into
+    // the side asked for.
+    let mut buckets = Vec::with_capacity(counts.len());
+    let (mut rest_a, mut rest_b) = (a, b);
     for c in counts {
-        let end = start + c;
-        sort_low_bits(&mut a[start..end], &mut b[start..end], shift);
-        start = end;
+        let (head_a, tail_a) = rest_a.split_at_mut(c);
+        let (head_b, tail_b) = rest_b.split_at_mut(c);
+        if c > 0 {
+            buckets.push((head_b, head_a));
+        }
+        rest_a = tail_a;
+        rest_b = tail_b;
     }
+    buckets
+        .into_par_iter()
+        .with_min_len(4)
+        .for_each(|(b, a)| sort_low_bits(b, a, shift, !to_b));
 }
 
 /// Counts of the digit `(code >> shift) & (2^width − 1)`.
 fn digit_counts(a: &[Item], shift: usize, width: usize) -> Vec<usize> {
     let mask = (1u64 << width) - 1;
-    let mut counts = vec![0usize; 1 << width];
-    for x in a {
-        counts[((x.0 >> shift) & mask) as usize] += 1;
+    let count = |part: &[Item]| {
+        let mut counts = vec![0usize; 1 << width];
+        for x in part {
+            counts[((x.0 >> shift) & mask) as usize] += 1;
+        }
+        counts
+    };
+    if a.len() < 1 << 18 {
+        return count(a);
     }
-    counts
+    a.par_chunks(1 << 16).map(count).reduce(
+        || vec![0usize; 1 << width],
+        |mut x, y| {
+            x.iter_mut().zip(y).for_each(|(x, y)| *x += y);
+            x
+        },
+    )
 }
 
 /// Stable scatter of `src` into `dst` by one digit. Returns false (nothing moved) when
@@ -1464,6 +1706,10 @@ pub(crate) mod tests {
             (5000, 1 << 40),
             (5000, 300),
             (3000, u64::MAX),
+            // Above the cache size: most significant digits first, buckets in parallel.
+            (60_000, 1 << 40),
+            (60_000, 300),
+            (60_000, u64::MAX >> 1),
         ] {
             let mut items: Vec<(u64, u32, u32)> = (0..n)
                 .map(|i| (rng.gen_range(0..spread) | 7 << 50, 0, i))
@@ -1536,6 +1782,43 @@ pub(crate) mod tests {
             assert_eq!(map.cells_of_class(class), want);
         }
         assert!(map.tree_height() >= 2);
+    }
+
+    #[test]
+    fn parallel_endpoint_updates_equal_the_sequential_pass() {
+        // Without ray casting, slices of cells are updated in parallel (existing cells
+        // found by binary search); with ray casting (rays too long to be cast), one
+        // sequential pass per scan over a hash index. Both must give the same cells, in the same order, and the same
+        // histogram table, also when later batches hit cells made by earlier ones.
+        let clouds: Vec<PointCloud> = (0..5).map(|s| random_cloud(4000, 1.5, 60 + s)).collect();
+        let build = |ray_casting: bool| {
+            let mut map = SrMap::new(MapOptions {
+                ray_casting,
+                max_ray_m: 1.0,
+                ..MapOptions::default()
+            })
+            .unwrap();
+            for part in [&clouds[..2], &clouds[2..3], &clouds[3..]] {
+                let batch: Vec<(&PointCloud, Option<[f64; 3]>)> = part
+                    .iter()
+                    .map(|c| (c, ray_casting.then_some([100.0, 100.0, 100.0])))
+                    .collect();
+                map.insert_scans(&batch).unwrap();
+            }
+            map
+        };
+        let (parallel, sequential) = (build(false), build(true));
+        // The sequential pass pools histograms scan by scan, so table indices differ;
+        // the full histograms, cells and colours must not.
+        assert_eq!(canonical(&parallel), canonical(&sequential));
+        let keys = |m: &SrMap| m.cells().iter().map(|c| c.key).collect::<Vec<_>>();
+        assert_eq!(keys(&parallel), keys(&sequential));
+        assert_eq!(parallel.colour_sums(), sequential.colour_sums());
+        assert_eq!(
+            parallel.histogram_table().len(),
+            sequential.histogram_table().len()
+        );
+        assert!(parallel.histogram_table().len() > 100);
     }
 
     #[test]
