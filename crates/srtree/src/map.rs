@@ -1328,8 +1328,9 @@ fn radix_sort_by_code(items: &mut [Item]) {
         return;
     }
     let (min, max) = items
-        .iter()
-        .fold((u64::MAX, 0), |(lo, hi), x| (lo.min(x.0), hi.max(x.0)));
+        .par_iter()
+        .fold(|| (u64::MAX, 0), |(lo, hi), x| (lo.min(x.0), hi.max(x.0)))
+        .reduce(|| (u64::MAX, 0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
     let bits = 64 - (min ^ max).leading_zeros() as usize;
     let mut scratch = vec![(0u64, 0u32, 0u32); items.len()];
     sort_low_bits(items, &mut scratch, bits, false);
@@ -1369,19 +1370,19 @@ fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize, to_b: bool) {
     }
     let shift = bits.saturating_sub(DIGIT);
     let counts = digit_counts(a, shift, bits - shift);
-    if !scatter_counted(a, b, shift, bits - shift, &counts) {
+    let Some(spans) = scatter_spans(a, b, shift, bits - shift, &counts) else {
         sort_low_bits(a, b, shift, to_b);
         return;
-    }
+    };
     // The data is in `b` now; the buckets are independent: sorted in parallel, each into
-    // the side asked for.
+    // the side asked for, by the low bits in which its codes differ.
     let mut buckets = Vec::with_capacity(counts.len());
     let (mut rest_a, mut rest_b) = (a, b);
-    for c in counts {
+    for (c, bits) in counts.into_iter().zip(spans) {
         let (head_a, tail_a) = rest_a.split_at_mut(c);
         let (head_b, tail_b) = rest_b.split_at_mut(c);
         if c > 0 {
-            buckets.push((head_b, head_a));
+            buckets.push((head_b, head_a, bits));
         }
         rest_a = tail_a;
         rest_b = tail_b;
@@ -1389,7 +1390,42 @@ fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize, to_b: bool) {
     buckets
         .into_par_iter()
         .with_min_len(4)
-        .for_each(|(b, a)| sort_low_bits(b, a, shift, !to_b));
+        .for_each(|(b, a, bits)| sort_low_bits(b, a, bits, !to_b));
+}
+
+/// [`scatter_counted`] that also returns, per bucket, the number of low bits in which its
+/// codes differ (so the next pass starts at the highest of them). `None`: nothing moved.
+fn scatter_spans(
+    src: &[Item],
+    dst: &mut [Item],
+    shift: usize,
+    width: usize,
+    counts: &[usize],
+) -> Option<Vec<usize>> {
+    if counts.contains(&src.len()) {
+        return None;
+    }
+    let mask = (1u64 << width) - 1;
+    let mut offset = Vec::with_capacity(counts.len());
+    let mut sum = 0;
+    for &c in counts {
+        offset.push(sum);
+        sum += c;
+    }
+    let (mut lo, mut hi) = (vec![u64::MAX; counts.len()], vec![0u64; counts.len()]);
+    for x in src {
+        let d = ((x.0 >> shift) & mask) as usize;
+        dst[offset[d]] = *x;
+        offset[d] += 1;
+        lo[d] = lo[d].min(x.0);
+        hi[d] = hi[d].max(x.0);
+    }
+    Some(
+        lo.iter()
+            .zip(&hi)
+            .map(|(&l, &h)| (64 - (l ^ h).leading_zeros() as usize).min(shift))
+            .collect(),
+    )
 }
 
 /// Counts of the digit `(code >> shift) & (2^width − 1)`.
