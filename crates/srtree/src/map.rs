@@ -1393,6 +1393,18 @@ fn sort_low_bits(a: &mut [Item], b: &mut [Item], bits: usize, to_b: bool) {
         .for_each(|(b, a, bits)| sort_low_bits(b, a, bits, !to_b));
 }
 
+/// The first position of each bucket (prefix sums of the counts).
+fn bucket_starts(counts: &[usize]) -> Vec<usize> {
+    counts
+        .iter()
+        .scan(0, |sum, &c| {
+            let start = *sum;
+            *sum += c;
+            Some(start)
+        })
+        .collect()
+}
+
 /// [`scatter_counted`] that also returns, per bucket, the number of low bits in which its
 /// codes differ (so the next pass starts at the highest of them). `None`: nothing moved.
 fn scatter_spans(
@@ -1406,12 +1418,7 @@ fn scatter_spans(
         return None;
     }
     let mask = (1u64 << width) - 1;
-    let mut offset = Vec::with_capacity(counts.len());
-    let mut sum = 0;
-    for &c in counts {
-        offset.push(sum);
-        sum += c;
-    }
+    let mut offset = bucket_starts(counts);
     let (mut lo, mut hi) = (vec![u64::MAX; counts.len()], vec![0u64; counts.len()]);
     for x in src {
         let d = ((x.0 >> shift) & mask) as usize;
@@ -1469,12 +1476,7 @@ fn scatter_counted(
         return false;
     }
     let mask = (1u64 << width) - 1;
-    let mut offset = Vec::with_capacity(counts.len());
-    let mut sum = 0;
-    for &c in counts {
-        offset.push(sum);
-        sum += c;
-    }
+    let mut offset = bucket_starts(counts);
     for x in src {
         let d = ((x.0 >> shift) & mask) as usize;
         dst[offset[d]] = *x;
