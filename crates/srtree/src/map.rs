@@ -722,8 +722,9 @@ impl SrMap {
     }
 
     /// [`SrMap::update_endpoints`] without a hash index: slices of whole cell groups are
-    /// updated in parallel on copies (existing cells found by binary search), then merged
-    /// in order, so cells and histogram table come out as a sequential pass makes them.
+    /// updated in parallel (existing cells found by binary search and updated on copies,
+    /// created cells written in place), then merged in order, so cells and histogram table
+    /// come out as a sequential pass makes them.
     fn update_endpoints_parallel(
         &mut self,
         clouds: &[&PointCloud],
@@ -732,63 +733,108 @@ impl SrMap {
     ) -> usize {
         let labelled = clouds.iter().any(|c| c.label.is_some());
         let slices = group_slices(order, rayon::current_num_threads() * 8, MIN_SLICE);
-        let this = &*self;
-        let updates: Vec<GroupUpdates> = slices
+        // The stored cell of every group ([`NEW_CELL`]: created), per slice.
+        let found: Vec<Vec<u32>> = {
+            let this = &*self;
+            slices
+                .par_iter()
+                .map(|slice| {
+                    slice
+                        .chunk_by(|a, b| a.0 == b.0)
+                        .map(|g| this.find(g[0].0).unwrap_or(NEW_CELL))
+                        .collect()
+                })
+                .collect()
+        };
+        let created: Vec<usize> = found
+            .iter()
+            .map(|f| f.iter().filter(|&&c| c == NEW_CELL).count())
+            .collect();
+        let total: usize = created.iter().sum();
+        let old_len = self.cells.len();
+        // Room for the created cells, filled in parallel below.
+        self.cells.reserve_exact(total);
+        self.cells
+            .par_extend(rayon::iter::repeat_n(Cell::empty([0; 3]), total));
+        if self.coloured {
+            self.colours.reserve_exact(total);
+            self.colours
+                .par_extend(rayon::iter::repeat_n(ColourSum::default(), total));
+        }
+        let (old_cells, mut new_cells) = self.cells.split_at_mut(old_len);
+        let colours_len = self.colours.len();
+        let (old_colours, mut new_colours) = self.colours.split_at_mut(old_len.min(colours_len));
+        let mut parts = Vec::with_capacity(slices.len());
+        for ((slice, found), &n) in slices.into_iter().zip(found).zip(&created) {
+            let (cells, rest) = std::mem::take(&mut new_cells).split_at_mut(n);
+            new_cells = rest;
+            let colours = if self.coloured {
+                let (colours, rest) = std::mem::take(&mut new_colours).split_at_mut(n);
+                new_colours = rest;
+                colours
+            } else {
+                &mut []
+            };
+            parts.push((slice, found, cells, colours));
+        }
+        let (old_cells, old_colours) = (&*old_cells, &*old_colours);
+        let (table, options, model) = (&self.histograms, &self.options, self.dirichlet.as_ref());
+        let coloured = self.coloured;
+        let updates: Vec<SliceUpdates> = parts
             .into_par_iter()
-            .map(|slice| {
-                let mut u = GroupUpdates::default();
-                let groups = slice.chunk_by(|a, b| a.0 == b.0).count();
-                u.created.reserve_exact(groups);
-                if this.coloured {
-                    u.created_colours.reserve_exact(groups);
-                }
-                for points in slice.chunk_by(|a, b| a.0 == b.0) {
-                    let code = points[0].0;
-                    let found = this.find(code);
-                    let (mut cell, mut colour) = match found {
-                        Some(ci) => (
-                            this.cells[ci as usize],
-                            this.colours.get(ci as usize).copied().unwrap_or_default(),
-                        ),
-                        None => (Cell::empty(unmorton(code)), ColourSum::default()),
+            .map(|(slice, found, cells, colours)| {
+                let mut u = SliceUpdates::default();
+                let mut next = 0;
+                for (points, &ci) in slice.chunk_by(|a, b| a.0 == b.0).zip(&found) {
+                    let (mut cell, mut colour) = if ci == NEW_CELL {
+                        (Cell::empty(unmorton(points[0].0)), ColourSum::default())
+                    } else {
+                        let i = ci as usize;
+                        (
+                            old_cells[i],
+                            old_colours.get(i).copied().unwrap_or_default(),
+                        )
                     };
                     if cell.histogram_ref & POOLED != 0 {
                         let g = cell.histogram_ref & !POOLED;
                         cell.histogram_ref = POOLED | u.histograms.len() as u32;
-                        u.histograms.push(this.histograms[g as usize]);
+                        u.histograms.push(table[g as usize]);
                         u.origin.push(g);
                     }
                     let (t, _) = apply_points(
                         &mut cell,
                         &mut u.histograms,
-                        this.coloured.then_some(&mut colour),
+                        coloured.then_some(&mut colour),
                         points,
                         clouds,
                         first,
-                        &this.options,
+                        options,
                     );
                     u.origin.resize(u.histograms.len(), NEW_HISTOGRAM);
                     u.touched += t;
                     if labelled {
                         let h = expand_histogram(&u.histograms, cell.histogram_ref);
-                        cell.label = choose_label(this.dirichlet.as_ref(), &h);
+                        cell.label = choose_label(model, &h);
                     }
-                    match found {
-                        Some(ci) => u.existing.push((ci, cell, colour)),
-                        None => {
-                            u.created.push(cell);
-                            if this.coloured {
-                                u.created_colours.push(colour);
-                            }
+                    if ci == NEW_CELL {
+                        if cell.histogram_ref & POOLED != 0 {
+                            u.pooled_created.push(next as u32);
                         }
+                        cells[next] = cell;
+                        if let Some(c) = colours.get_mut(next) {
+                            *c = colour;
+                        }
+                        next += 1;
+                    } else {
+                        u.existing.push((ci, cell, colour));
                     }
                 }
                 u
             })
             .collect();
         let mut touched = 0;
-        let mut remaps = Vec::with_capacity(updates.len());
-        for u in &updates {
+        let mut start = old_len;
+        for (u, n) in updates.into_iter().zip(created) {
             touched += u.touched;
             // Local histogram index → map table index; new histograms are appended in the
             // order a sequential pass creates them.
@@ -810,40 +856,18 @@ impl SrMap {
                     }
                 })
                 .collect();
-            for &(ci, mut cell, colour) in &u.existing {
+            for (ci, mut cell, colour) in u.existing {
                 cell.histogram_ref = global_ref(&remap, cell.histogram_ref);
                 self.cells[ci as usize] = cell;
                 if self.coloured {
                     self.colours[ci as usize] = colour;
                 }
             }
-            remaps.push(remap);
-        }
-        // The created cells, appended in parallel in slice order.
-        let mut starts = Vec::with_capacity(updates.len());
-        let mut created = 0;
-        for u in &updates {
-            starts.push(created);
-            created += u.created.len();
-        }
-        let slice_of = |i: usize| {
-            let s = starts.partition_point(|&start| start <= i) - 1;
-            (s, i - starts[s])
-        };
-        self.cells.reserve_exact(created);
-        self.cells.par_extend((0..created).into_par_iter().map(|i| {
-            let (s, j) = slice_of(i);
-            let mut cell = updates[s].created[j];
-            cell.histogram_ref = global_ref(&remaps[s], cell.histogram_ref);
-            cell
-        }));
-        if self.coloured {
-            self.colours.reserve_exact(created);
-            self.colours
-                .par_extend((0..created).into_par_iter().map(|i| {
-                    let (s, j) = slice_of(i);
-                    updates[s].created_colours[j]
-                }));
+            for j in u.pooled_created {
+                let cell = &mut self.cells[start + j as usize];
+                cell.histogram_ref = global_ref(&remap, cell.histogram_ref);
+            }
+            start += n;
         }
         touched
     }
@@ -1232,18 +1256,19 @@ const MIN_SLICE: usize = 1 << 14;
 #[cfg(test)]
 const MIN_SLICE: usize = 64;
 
-/// [`GroupUpdates::origin`] of a histogram created in the slice.
+/// [`SliceUpdates::origin`] of a histogram created in the slice.
 const NEW_HISTOGRAM: u32 = u32::MAX;
 
-/// Endpoint updates of one slice of whole cell groups, computed apart from the map.
+/// A group of points whose cell is created by the batch.
+const NEW_CELL: u32 = u32::MAX;
+
+/// What one slice of cell groups leaves to merge into the map.
 #[derive(Default)]
-struct GroupUpdates {
+struct SliceUpdates {
     /// Updated copies of existing cells: (cell id, cell, colour sum).
     existing: Vec<(u32, Cell, ColourSum)>,
-    /// Cells created, in Morton order.
-    created: Vec<Cell>,
-    /// Colour sums of `created`.
-    created_colours: Vec<ColourSum>,
+    /// Created cells (positions in the slice's part) whose histogram is pooled.
+    pooled_created: Vec<u32>,
     /// Histograms of the slice's pooled cells (their `histogram_ref`s index this).
     histograms: Vec<Histogram>,
     /// Per histogram, the map table entry it updates ([`NEW_HISTOGRAM`]: a new one).
