@@ -403,6 +403,17 @@ impl<T: Capacity> Graph<T> {
         }
     }
 
+    /// Sum of the residual capacities of every arc at `node` (both directions) and of its
+    /// terminal residual: a terminal link larger than this can never be cut (after a build).
+    pub fn incident_residual(&self, node: usize) -> T {
+        let mut sum = self.nodes[node].tr_cap.abs_value();
+        for a in self.arc_range(node) {
+            let arc = self.arcs[a];
+            sum += arc.r_cap + arc.rev_cap;
+        }
+        sum
+    }
+
     /// Marks `node` as changed since the last solve, for `maxflow(true)`.
     pub fn mark_node(&mut self, node: usize) {
         let n = &mut self.nodes[node];

@@ -286,15 +286,38 @@ impl<T: Capacity> Qpbo<T> {
         // flow is not symmetric, so mixing the source tree of x with the sink tree of x̄
         // labelled nodes whose x and x̄ sat on the same side (with float round-off, −F&S with
         // 100 persons under ISH had every node labelled and a "bound" twice the minimum).
-        for (i, l) in self.labels.iter_mut().enumerate() {
-            let in_sink = |v: usize| g2.tree(v) == Some(Segment::Sink);
-            *l = match (in_sink(2 * i), in_sink(2 * i + 1)) {
-                (false, true) => Label::Zero,
-                (true, false) => Label::One,
-                _ => Label::Unlabelled,
-            };
-        }
+        self.labels = doubled_labels(&g2, n, false);
         self.solved = Solved::Doubled(Box::new(g2));
+    }
+
+    /// The roof dual of the function with `x_k = value` substituted, continued from the
+    /// doubled graph of the last [`Qpbo::solve`] on a copy (max-flow with tree reuse, so
+    /// only the region the fixing disturbs is searched): (labels, twice the bound), with
+    /// weak persistencies when `weak`. `None` when the last solve needed no doubled graph.
+    pub(crate) fn solve_fixed(&self, k: usize, value: bool, weak: bool) -> Option<(Vec<Label>, T)> {
+        let Solved::Doubled(g) = &self.solved else {
+            return None;
+        };
+        let mut g = (**g).clone();
+        let twice = self.twice_bound + force_value(&mut g, k, value);
+        Some((doubled_labels(&g, self.labels.len(), weak), twice))
+    }
+
+    /// Substitutes `x_k = v` for every `(k, v)` in place, continuing from the last solve's
+    /// doubled graph, and recomputes labels and bound (weak persistencies when `weak`).
+    /// Returns false (nothing changed) when the last solve needed no doubled graph.
+    pub(crate) fn fix_values(&mut self, values: &[(usize, bool)], weak: bool) -> bool {
+        let n = self.labels.len();
+        let Solved::Doubled(g) = &mut self.solved else {
+            return false;
+        };
+        let mut delta = T::ZERO;
+        for &(k, v) in values {
+            delta += force_value(g, k, v);
+        }
+        self.twice_bound += delta;
+        self.labels = doubled_labels(g, n, weak);
+        true
     }
 
     /// Extends the labels of [`Qpbo::solve`] to a weakly persistent labelling (call right
@@ -380,6 +403,47 @@ impl<T: Capacity> Qpbo<T> {
     pub(crate) fn set_label(&mut self, i: usize, l: Label) {
         self.labels[i] = l;
     }
+}
+
+/// The labels of a solved doubled graph (2n nodes): one minimum cut, the sink tree T
+/// against the rest (free nodes on the source side, as Kolmogorov's QPBO): x = 0 if x ∉ T
+/// and x̄ ∈ T, x = 1 if x ∈ T and x̄ ∉ T; with `weak`, extended by [`weak_sides`].
+fn doubled_labels<T: Capacity>(g: &Graph<T>, n: usize, weak: bool) -> Vec<Label> {
+    let in_sink = |v: usize| g.tree(v) == Some(Segment::Sink);
+    let mut labels: Vec<Label> = (0..n)
+        .map(|i| match (in_sink(2 * i), in_sink(2 * i + 1)) {
+            (false, true) => Label::Zero,
+            (true, false) => Label::One,
+            _ => Label::Unlabelled,
+        })
+        .collect();
+    if weak && labels.contains(&Label::Unlabelled) {
+        for (l, s) in labels.iter_mut().zip(weak_sides(g, n)) {
+            if *l == Label::Unlabelled {
+                *l = s;
+            }
+        }
+    }
+    labels
+}
+
+/// Forces `x_k = value` in a solved doubled graph (x = 0: node 2k on the source side and
+/// 2k + 1 in the sink tree; x = 1 the reverse) by terminal links no cut can afford, and
+/// continues the max-flow. Returns the growth of the flow, i.e. of twice the bound.
+fn force_value<T: Capacity>(g: &mut Graph<T>, k: usize, value: bool) -> T {
+    let before = g.flow();
+    let (source_side, sink_side) = if value {
+        (2 * k + 1, 2 * k)
+    } else {
+        (2 * k, 2 * k + 1)
+    };
+    let big = g.incident_residual(source_side) + T::from_i32(1);
+    g.add_tweights(source_side, big, T::ZERO);
+    let big = g.incident_residual(sink_side) + T::from_i32(1);
+    g.add_tweights(sink_side, T::ZERO, big);
+    g.mark_node(source_side);
+    g.mark_node(sink_side);
+    g.maxflow(true) - before
 }
 
 /// Weak-persistency labels from the residual graph of the doubled graph `g` (2n nodes,
