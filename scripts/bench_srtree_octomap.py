@@ -11,8 +11,8 @@
    the points calling the C++ `updateNode`; the points are converted to Python lists
    before the clock starts) followed by `updateInnerOccupancy()`; with ray casting by the
    native `insertPointCloud(points, origin, max_range)` (OctoMap's own batch insertion).
-   Without ray casting both sides build as many times as `--insert-repeat` of ours
-   (default 3) and report the median time; with ray casting once.
+   Without ray casting both sides build `--insert-repeat` times (default 3) and report
+   the median time; with ray casting once.
    Memory is OctoMap's `memoryUsage()` (bytes of its nodes) and the process RSS growth;
    ours is every byte the map holds (`memory.total_bytes`: cell records, histogram table,
    R-tree nodes). Times are wall clock and process CPU time (CPU time is less disturbed
@@ -26,7 +26,7 @@
 pyoctomap, rtree and numpy are installed with pip when missing.
 Usage: python3 scripts/bench_srtree_octomap.py [--urbansem target/release/urbansem]
        [--data ../shared/data/lidar] [--resolution 0.1] [--max-scans N] [--no-ray-casting]
-       [--json]
+       [--insert-repeat 3] [--json]
 """
 
 import argparse
@@ -59,6 +59,8 @@ def main():
     ap.add_argument("--export", default="target/bench-srtree")
     ap.add_argument("--resolution", type=float, default=0.1)
     ap.add_argument("--max-scans", type=int)
+    ap.add_argument("--insert-repeat", type=int, default=3,
+                    help="builds without ray casting on each side; the median time is reported")
     ap.add_argument("--no-ray-casting", action="store_true",
                     help="skip the runs with ray casting (OctoMap's takes long and GBs)")
     ap.add_argument("--json", action="store_true")
@@ -71,6 +73,7 @@ def main():
 
     cmd = [args.urbansem, "bench", "srtree", "--json", "--export", args.export,
            "--data", args.data, "--resolution", str(args.resolution)]
+    cmd += ["--insert-repeat", str(args.insert_repeat)]
     if args.max_scans:
         cmd += ["--max-scans", str(args.max_scans)]
     if args.no_ray_casting:
