@@ -7,6 +7,7 @@
 //! inserted into an [`SrMap`] and its objects extracted from the map, so the relations are
 //! estimated from the map and never from the simulator's true boxes.
 
+use crate::amodal::AnnotatedBox;
 use crate::error::{io_err, Result, SrtreeError};
 use crate::features::ViewObject;
 use crate::graph::{Relation, Viewpoint};
@@ -38,6 +39,9 @@ pub struct Scene {
     pub viewpoint: Viewpoint,
     /// Objects of the dataset's list found in the map, seen from the viewpoint.
     pub objects: Vec<ViewObject>,
+    /// The annotated box of each object (`None` where the file gives none); training reads
+    /// them for the amodal class priors, evaluation never does.
+    pub annotated_boxes: Vec<Option<AnnotatedBox>>,
     /// Labelled pairs between them.
     pub pairs: Vec<LabelledPair>,
     /// Pairs of the file whose objects the map did not hold (scored as all-false).
@@ -113,6 +117,40 @@ pub fn read_viewpoint(v: &Value, path: &Path) -> Result<Viewpoint> {
     })
 }
 
+/// The annotated box of a listed object (`centre`, `half_extents`, `yaw_rad`), `None` if
+/// it has none; present but malformed fields are an error.
+fn annotated_box(o: &Value, path: &Path) -> Result<Option<AnnotatedBox>> {
+    let (Some(centre), Some(half), Some(yaw)) =
+        (o.get("centre"), o.get("half_extents"), o.get("yaw_rad"))
+    else {
+        return Ok(None);
+    };
+    let triple = |v: &Value, what: &str| -> Result<[f64; 3]> {
+        let a = v.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
+            bad(
+                path,
+                format!("object `{what}` is not an array of 3 numbers: {o}"),
+            )
+        })?;
+        let mut out = [0.0; 3];
+        for (k, x) in a.iter().enumerate() {
+            out[k] = x
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| bad(path, format!("object `{what}` has a non-number: {o}")))?;
+        }
+        Ok(out)
+    };
+    Ok(Some(AnnotatedBox {
+        centre: triple(centre, "centre")?,
+        half_extents: triple(half, "half_extents")?,
+        yaw_rad: yaw
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| bad(path, format!("object `yaw_rad` is not a number: {o}")))?,
+    }))
+}
+
 /// Loads one scene: reads its scan into a map and its labels.
 pub fn load_scene(
     dir: &Path,
@@ -138,10 +176,11 @@ pub fn load_scene(
     let mut map = SrMap::new(map_options.clone())?;
     map.insert_cloud(&cloud, Some(viewpoint.position))?;
     let extracted = extract_objects(&map, objects);
-    let listed: Vec<u32> = json
+    let listed_objects = json
         .get("objects")
         .and_then(Value::as_array)
-        .ok_or_else(|| bad(&json_path, "missing array `objects`".into()))?
+        .ok_or_else(|| bad(&json_path, "missing array `objects`".into()))?;
+    let listed: Vec<u32> = listed_objects
         .iter()
         .map(|o| {
             o.get("id")
@@ -149,6 +188,10 @@ pub fn load_scene(
                 .map(|v| v as u32)
                 .ok_or_else(|| bad(&json_path, format!("object without an integer `id`: {o}")))
         })
+        .collect::<Result<_>>()?;
+    let boxes: Vec<Option<AnnotatedBox>> = listed_objects
+        .iter()
+        .map(|o| annotated_box(o, &json_path))
         .collect::<Result<_>>()?;
     let view: Vec<ViewObject> = extracted
         .par_iter()
@@ -190,9 +233,19 @@ pub fn load_scene(
             _ => missing_pairs.push((a, b, truth)),
         }
     }
+    let annotated_boxes = view
+        .iter()
+        .map(|o| {
+            listed
+                .iter()
+                .position(|&id| id == o.id)
+                .and_then(|i| boxes[i])
+        })
+        .collect();
     Ok(Scene {
         index,
         viewpoint,
+        annotated_boxes,
         objects: view,
         pairs,
         missing_pairs,
@@ -228,5 +281,38 @@ impl RelationsDataset {
             train: load(indices(&meta, "train", &meta_path)?)?,
             test: load(indices(&meta, "test", &meta_path)?)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn annotated_boxes_are_read_absent_or_rejected_with_the_file() {
+        let path = Path::new("scene_007.json");
+        let o = json!({"id": 3, "centre": [1.0, 2.0, 0.5], "half_extents": [2.0, 0.9, 0.7], "yaw_rad": 0.25});
+        let b = annotated_box(&o, path).ok().flatten();
+        assert_eq!(
+            b,
+            Some(AnnotatedBox {
+                centre: [1.0, 2.0, 0.5],
+                half_extents: [2.0, 0.9, 0.7],
+                yaw_rad: 0.25
+            })
+        );
+        assert_eq!(annotated_box(&json!({"id": 3}), path).ok(), Some(None));
+        for bad in [
+            json!({"id": 3, "centre": [1.0, 2.0], "half_extents": [2.0, 0.9, 0.7], "yaw_rad": 0.0}),
+            json!({"id": 3, "centre": [1.0, "x", 0.5], "half_extents": [2.0, 0.9, 0.7], "yaw_rad": 0.0}),
+            json!({"id": 3, "centre": [1.0, 2.0, 0.5], "half_extents": [2.0, 0.9, 0.7], "yaw_rad": "north"}),
+        ] {
+            let message = annotated_box(&bad, path)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(message.contains("scene_007.json"), "{message}");
+        }
     }
 }

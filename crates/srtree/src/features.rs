@@ -30,18 +30,23 @@
 //! - occlusion: the fraction of a's lateral edges (azimuth extremes of its cells) at which
 //!   b hides a (b has nearer cells at that azimuth, [`edges_occluded_by`]), and the same of
 //!   b's edges by a: what a human reads as "partly hidden behind" where the visible
-//!   azimuth extents no longer overlap.
+//!   azimuth extents no longer overlap;
+//! - amodal geometry ([`crate::amodal`], from class priors learnt on annotated training
+//!   boxes): the azimuth overlap of the completed intervals (each continued behind the
+//!   other where the other hides it), the centre and nearest-corner range differences of
+//!   the completed boxes, and how far each continues behind the other.
 //!
 //! Cost per pair: O(|a| log |hull b| + |b|) with objects subsampled to at most
 //! [`MAX_FEATURE_CELLS`] cells for the hull tests.
 
+use crate::amodal::{completed_azimuth, hidden_extent_m, ClassPriors};
 use crate::graph::Viewpoint;
 use crate::objects::{MapObject, OrientedBox};
 use crate::SrtreeError;
 use geodata::classes::Class;
 
 /// Names of the features, in vector order.
-pub const FEATURE_NAMES: [&str; 43] = [
+pub const FEATURE_NAMES: [&str; 48] = [
     "centroid_distance",
     "box_distance_min",
     "box_distance_max",
@@ -85,6 +90,11 @@ pub const FEATURE_NAMES: [&str; 43] = [
     "b_is_nearest_ground_to_contact",
     "a_edges_occluded_by_b",
     "b_edges_occluded_by_a",
+    "amodal_azimuth_overlap_of_narrower",
+    "amodal_range_centroid_diff",
+    "amodal_range_nearest_corner_diff",
+    "hidden_extent_a_behind_b",
+    "hidden_extent_b_behind_a",
 ];
 
 /// Number of features.
@@ -204,6 +214,11 @@ impl ViewObject {
         }
     }
 
+    /// Range of the estimated box's centre from the observer, metres.
+    pub fn centre_range(&self) -> f64 {
+        self.box_centre[0].hypot(self.box_centre[1])
+    }
+
     /// A map object seen from `viewpoint`.
     pub fn from_map_object(
         map: &crate::map::SrMap,
@@ -289,9 +304,20 @@ fn segment_distance(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> f64 {
     (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
 }
 
+/// Overlap of two intervals as a fraction of the narrower one (a point interval: 1 inside
+/// the other, else 0).
 fn overlap_of_narrower(a: [f64; 2], b: [f64; 2]) -> f64 {
+    let narrower = (a[1] - a[0]).min(b[1] - b[0]);
+    if narrower <= 1e-12 {
+        let (point, other) = if a[1] - a[0] <= b[1] - b[0] {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        let m = 0.5 * (point[0] + point[1]);
+        return f64::from(u8::from(other[0] <= m && m <= other[1]));
+    }
     let overlap = (a[1].min(b[1]) - a[0].max(b[0])).max(0.0);
-    let narrower = (a[1] - a[0]).min(b[1] - b[0]).max(1e-9);
     (overlap / narrower).min(1.0)
 }
 
@@ -342,15 +368,14 @@ fn cells_near_contact(a: &ViewObject, b: &ViewObject) -> usize {
         .count()
 }
 
-/// Fraction (0, ½, 1) of the two lateral edges of `a`'s cells (their lowest and highest
-/// azimuth) at which `b` has a cell within [`OCCLUSION_WINDOW_RAD`] of the edge's azimuth
-/// and at least [`OCCLUSION_DEPTH_M`] nearer than `a`'s cells there: `a`'s visible extent
-/// ends there because `b` hides the rest, so `a` continues behind `b`.
-pub fn edges_occluded_by(a: &ViewObject, b: &ViewObject) -> f64 {
+/// Whether `b` hides `a` at each lateral edge of `a`'s cells (lowest, highest azimuth):
+/// `b` has a cell within [`OCCLUSION_WINDOW_RAD`] of the edge's azimuth at least
+/// [`OCCLUSION_DEPTH_M`] nearer than `a`'s cells there, so `a`'s visible extent ends there
+/// because `b` hides the rest and `a` continues behind `b`.
+pub fn edge_occlusion(a: &ViewObject, b: &ViewObject) -> [bool; 2] {
     let az = |p: &[f64; 3]| p[1].atan2(p[0]);
     let range = |p: &[f64; 3]| p[0].hypot(p[1]);
-    let mut occluded = 0;
-    for edge in a.cells_azimuth {
+    a.cells_azimuth.map(|edge| {
         let near_edge = |p: &&[f64; 3]| (az(p) - edge).abs() <= OCCLUSION_WINDOW_RAD;
         let a_range = a
             .footprint_cells
@@ -358,25 +383,28 @@ pub fn edges_occluded_by(a: &ViewObject, b: &ViewObject) -> f64 {
             .filter(near_edge)
             .map(range)
             .fold(f64::INFINITY, f64::min);
-        if !a_range.is_finite() {
-            continue;
-        }
-        if b.footprint_cells
-            .iter()
-            .filter(near_edge)
-            .any(|p| range(p) + OCCLUSION_DEPTH_M <= a_range)
-        {
-            occluded += 1;
-        }
-    }
-    f64::from(occluded) / 2.0
+        a_range.is_finite()
+            && b.footprint_cells
+                .iter()
+                .filter(near_edge)
+                .any(|p| range(p) + OCCLUSION_DEPTH_M <= a_range)
+    })
 }
 
-/// The feature vector of the ordered pair (a, b); `context` is `a`'s [`SubjectContext`].
+/// Fraction (0, ½, 1) of the two lateral edges of `a`'s cells at which `b` hides `a`
+/// ([`edge_occlusion`]).
+pub fn edges_occluded_by(a: &ViewObject, b: &ViewObject) -> f64 {
+    let e = edge_occlusion(a, b);
+    f64::from(u8::from(e[0]) + u8::from(e[1])) / 2.0
+}
+
+/// The feature vector of the ordered pair (a, b); `context` is `a`'s [`SubjectContext`],
+/// `priors` the amodal class priors.
 pub fn pair_features(
     a: &ViewObject,
     b: &ViewObject,
     context: &SubjectContext,
+    priors: &ClassPriors,
     tol_m: f64,
 ) -> [f64; FEATURE_COUNT] {
     let mut f = [0.0; FEATURE_COUNT];
@@ -478,8 +506,27 @@ pub fn pair_features(
     f[40] = f64::from(u8::from(
         is_ground(b.class) && contact_m <= context.nearest_ground_m,
     ));
-    f[41] = edges_occluded_by(a, b);
-    f[42] = edges_occluded_by(b, a);
+    let (a_by_b, b_by_a) = (edge_occlusion(a, b), edge_occlusion(b, a));
+    let half = |e: [bool; 2]| f64::from(u8::from(e[0]) + u8::from(e[1])) / 2.0;
+    f[41] = half(a_by_b);
+    f[42] = half(b_by_a);
+    let (pa, pb) = (priors.get(a.class), priors.get(b.class));
+    f[43] = overlap_of_narrower(
+        completed_azimuth(a, a_by_b, &pa),
+        completed_azimuth(b, b_by_a, &pb),
+    );
+    f[44] = (a.centre_range() + pa.centre_range_offset_m)
+        - (b.centre_range() + pb.centre_range_offset_m);
+    f[45] = (a.near_range + pa.near_range_offset_m) - (b.near_range + pb.near_range_offset_m);
+    let behind = |o: &ViewObject, e: [bool; 2], p| {
+        if e[0] || e[1] {
+            hidden_extent_m(o, p).min(50.0)
+        } else {
+            0.0
+        }
+    };
+    f[46] = behind(a, a_by_b, &pa);
+    f[47] = behind(b, b_by_a, &pb);
     f
 }
 
@@ -593,14 +640,14 @@ mod tests {
             nearest_ground_m: 50.0,
             ground_cells_near: 0,
         };
-        let f = pair_features(&left, &right, &none, 0.05);
+        let f = pair_features(&left, &right, &none, &ClassPriors::default(), 0.05);
         assert!(f[19] > 0.0, "a's right boundary is left of b's left one");
         assert_eq!(f[22], 0.0);
         assert!((f[0] - 10.0).abs() < 1e-9);
         assert!((f[4] - 10.0).abs() < 1e-9);
         let far = object(3, 20.0, 0.0, Class::Car);
         let near = object(4, 8.0, 0.0, Class::Car);
-        let f = pair_features(&far, &near, &none, 0.05);
+        let f = pair_features(&far, &near, &none, &ClassPriors::default(), 0.05);
         assert!(f[22] > 0.99 && f[25] > 11.0 && f[26] > 11.0);
         assert!(
             f[12] > 0.99,
@@ -693,8 +740,9 @@ mod tests {
             ground(3, -4.0, -0.7, Class::Street),
         ];
         let context = SubjectContext::new(&objects, 0);
-        let on_sidewalk = pair_features(&objects[0], &objects[1], &context, 0.05);
-        let on_street = pair_features(&objects[0], &objects[2], &context, 0.05);
+        let none = ClassPriors::default();
+        let [on_sidewalk, on_street] =
+            [1, 2].map(|b| pair_features(&objects[0], &objects[b], &context, &none, 0.05));
         assert_eq!((on_sidewalk[40], on_street[40]), (1.0, 0.0));
         assert!(on_sidewalk[38] > on_street[38]);
         assert_eq!(on_sidewalk[37], 0.0);

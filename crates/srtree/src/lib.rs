@@ -11,9 +11,11 @@
 //! - [`scans`]: the real labelled scans of `../shared/data/lidar/`, registered with their poses.
 //! - [`label_eval`]: Dirichlet label choice against majority vote on the real scans.
 //! - [`objects`]: per object cells, centroid, class, oriented box (normal-histogram yaw).
+//! - [`amodal`]: class priors for what a scan does not show of an object (learnt on annotated boxes).
 //! - [`features`]: pairwise features of two objects in a viewpoint frame.
 //! - [`svm`]: linear SVM by dual coordinate descent (liblinear), cross-validation.
 //! - [`consistency`]: the relation MLN (thesis knowledge base), MAP by `mln`, weight learning.
+//! - [`rules`]: conjunctive threshold rules learnt per relation, one more SVM feature.
 //! - [`relations`]: training, inference, relation graph and Table 3.6 evaluation.
 //! - [`dataset`]: reader of simulated `relations` datasets.
 //! - [`graph`]: the spatial relation graph and its queries.
@@ -25,6 +27,7 @@
 //! # Ok::<(), srtree::SrtreeError>(())
 //! ```
 
+pub mod amodal;
 pub mod consistency;
 pub mod dataset;
 pub mod dirichlet;
@@ -36,6 +39,7 @@ pub mod label_eval;
 pub mod map;
 pub mod objects;
 pub mod relations;
+pub mod rules;
 pub mod scans;
 pub mod svm;
 

@@ -15,6 +15,7 @@
 //! training data, against the annotated labels with the filtered ones flipped (flipped
 //! labels break transitivity at random and drove its weights to 0).
 
+use crate::amodal::ClassPriors;
 use crate::consistency::{
     hard_violations, learn_weights, map_relations, Assignment, LearnOptions, MlnScene, MlnWeights,
 };
@@ -24,6 +25,7 @@ use crate::features::{
     is_ground, pair_features, FeatureScaler, SubjectContext, ViewObject, FEATURE_COUNT,
 };
 use crate::graph::{ObjectNode, Relation, RelationEdge, RelationGraph, Viewpoint};
+use crate::rules::{Rule, RuleOptions};
 use crate::svm::{cross_validate, CvResult, LinearSvm, SvmOptions};
 use mln::infer::InferOptions;
 use rayon::prelude::*;
@@ -48,6 +50,8 @@ pub struct TrainOptions {
     pub filter_margin: f64,
     /// (C, positive weight) of the filtering classifier.
     pub filter_svm: (f64, f64),
+    /// The per-relation rule feature ([`crate::rules`]); `None`: no rule feature.
+    pub rules: Option<RuleOptions>,
 }
 
 impl Default for TrainOptions {
@@ -64,6 +68,7 @@ impl Default for TrainOptions {
             hull_tolerance_m: 0.05,
             filter_margin: 0.5,
             filter_svm: (0.1, 1.0),
+            rules: Some(RuleOptions::default()),
         }
     }
 }
@@ -83,6 +88,21 @@ pub struct RelationModel {
     pub mln: MlnWeights,
     /// Hull tolerance used in the features, metres.
     pub hull_tolerance_m: f64,
+    /// Amodal class priors used in the features (learnt on the training scenes' boxes).
+    #[serde(default)]
+    pub priors: ClassPriors,
+    /// Per base relation, the rule whose verdict is the classifier's last feature (none:
+    /// no such feature).
+    #[serde(default)]
+    pub rules: Vec<Rule>,
+}
+
+/// The classifier input of a relation: the scaled features, then its rule's verdict.
+fn with_rule(mut x: Vec<f32>, raw: &[f64; FEATURE_COUNT], rule: Option<&Rule>) -> Vec<f32> {
+    if let Some(rule) = rule {
+        x.push(f32::from(u8::from(rule.fires(raw))));
+    }
+    x
 }
 
 /// The candidate pairs of a scene: every ordered pair with a non-ground subject.
@@ -97,6 +117,7 @@ pub fn candidate_pairs(objects: &[ViewObject]) -> Vec<(usize, usize)> {
 fn raw_features(
     objects: &[ViewObject],
     pairs: &[(usize, usize)],
+    priors: &ClassPriors,
     tol: f64,
 ) -> Vec<[f64; FEATURE_COUNT]> {
     let context: Vec<SubjectContext> = (0..objects.len())
@@ -105,7 +126,7 @@ fn raw_features(
         .collect();
     pairs
         .par_iter()
-        .map(|&(a, b)| pair_features(&objects[a], &objects[b], &context[a], tol))
+        .map(|&(a, b)| pair_features(&objects[a], &objects[b], &context[a], priors, tol))
         .collect()
 }
 
@@ -116,6 +137,11 @@ fn subjects(objects: &[ViewObject]) -> Vec<bool> {
 /// Trains the classifiers and the MLN weights on labelled scenes (annotated labels).
 pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> {
     let tol = options.hull_tolerance_m;
+    let priors = ClassPriors::learn(
+        scenes
+            .iter()
+            .map(|s| (&s.viewpoint, &s.objects[..], &s.annotated_boxes[..])),
+    );
     // Labelled pairs only (those the annotator saw).
     let mut raw = Vec::new();
     let mut labels = Vec::new();
@@ -123,7 +149,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
     let mut owner = Vec::new();
     for (s, scene) in scenes.iter().enumerate() {
         let pairs: Vec<(usize, usize)> = scene.pairs.iter().map(|p| (p.a, p.b)).collect();
-        raw.extend(raw_features(&scene.objects, &pairs, tol));
+        raw.extend(raw_features(&scene.objects, &pairs, &priors, tol));
         labels.extend(scene.pairs.iter().map(|p| p.annotated));
         groups.extend(std::iter::repeat_n(s, pairs.len()));
         owner.extend(scene.pairs.iter().map(|p| (s, p.a, p.b)));
@@ -137,6 +163,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         .map(|s| Assignment::empty(s.objects.len()))
         .collect();
     let mut filtered = Vec::new();
+    let mut rules = Vec::new();
     // The annotated labels with the filtered ones flipped: what the MLN learns from.
     let mut corrected: Vec<Assignment> = scenes
         .iter()
@@ -180,8 +207,17 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
                 !((t && d < -options.filter_margin) || (!t && d > options.filter_margin))
             })
             .collect();
+        // The filter's share of contradicted labels estimates the annotator's flip rate.
+        let noise_rate = keep.iter().filter(|&&k| !k).count() as f64 / keep.len().max(1) as f64;
+        let rule = options.rules.map(|o| Rule::learn(&raw, &y, noise_rate, &o));
+        let xr: Vec<Vec<f32>> = x
+            .par_iter()
+            .zip(&raw)
+            .map(|(v, r)| with_rule(v.clone(), r, rule.as_ref()))
+            .collect();
+        rules.extend(rule);
         let cv: CvResult = cross_validate(
-            &x,
+            &xr,
             &y,
             &groups,
             Some(&keep),
@@ -192,11 +228,11 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         for (i, &(s, a, b)) in owner.iter().enumerate() {
             oof[s].set(r, a, b, cv.out_of_fold[i]);
         }
-        let kx: Vec<Vec<f32>> = x
-            .iter()
+        let kx: Vec<Vec<f32>> = xr
+            .into_iter()
             .zip(&keep)
             .filter(|(_, &k)| k)
-            .map(|(v, _)| v.clone())
+            .map(|(v, _)| v)
             .collect();
         let ky: Vec<bool> = y
             .iter()
@@ -237,6 +273,8 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         filtered_pairs: filtered,
         mln,
         hull_tolerance_m: tol,
+        priors,
+        rules,
     })
 }
 
@@ -253,13 +291,14 @@ impl RelationModel {
     /// SVM decisions for every candidate pair, then the MLN MAP.
     pub fn infer(&self, objects: &[ViewObject], infer: &InferOptions) -> Result<Inferred> {
         let pairs = candidate_pairs(objects);
-        let raw = raw_features(objects, &pairs, self.hull_tolerance_m);
+        let raw = raw_features(objects, &pairs, &self.priors, self.hull_tolerance_m);
         let mut svm = Assignment::empty(objects.len());
         for (&(a, b), r) in pairs.iter().zip(&raw) {
             let x = self.scaler.scale(r);
             for (k, rel) in Relation::BASE.into_iter().enumerate() {
                 if let Some(s) = self.svms.get(k) {
-                    svm.set(rel, a, b, s.predict(&x));
+                    let xk = with_rule(x.clone(), r, self.rules.get(k));
+                    svm.set(rel, a, b, s.predict(&xk));
                 }
             }
         }

@@ -1,0 +1,369 @@
+//! Amodal completion: how far an object extends beyond what the scan shows of it, from
+//! class priors learnt on the annotated boxes of the training scenes.
+//!
+//! A scan sees the near side of a thing, and of a thing partly hidden behind another only
+//! the uncovered part; an annotator's box (and with it the thesis' relations, which are
+//! defined on boxes) covers the whole thing. Per class, [`ClassPriors::learn`] measures on
+//! the training objects
+//!
+//! - how much farther the annotated box's centre and nearest corner are than the
+//!   estimated box's (median over objects: 5 m for buildings, whose depth the scan never
+//!   sees, 1.2 m for trees, 0.3 m for cars),
+//! - how much wider the annotated box's azimuth interval is at an edge where nothing
+//!   hides the object (the box corners of a round crown lie outside its visible outline),
+//! - the median footprint of the annotated boxes (long × short side).
+//!
+//! At an edge where a nearer object hides the object's cells ([`crate::features::edge_occlusion`])
+//! the object is assumed to continue behind it until its lateral extent reaches that of
+//! the class' median footprint at the estimated yaw ([`hidden_extent_m`]).
+//!
+//! Only training scenes' annotations are read; inference uses the learnt priors alone.
+
+use crate::features::ViewObject;
+use crate::graph::Viewpoint;
+use geodata::classes::Class;
+use serde::{Deserialize, Serialize};
+
+/// Fewer annotated objects of a class than this leave its prior at zero (no completion).
+pub const MIN_PRIOR_SAMPLES: usize = 5;
+
+/// An annotated box of an object, map frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnnotatedBox {
+    /// Centre, metres.
+    pub centre: [f64; 3],
+    /// Half extents along the yaw axis, across it, and up, metres.
+    pub half_extents: [f64; 3],
+    /// Yaw of the first axis, counter-clockwise from the map's x axis, radians.
+    pub yaw_rad: f64,
+}
+
+/// Azimuth interval, nearest footprint corner range and centre range of a box seen from a viewpoint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxView {
+    /// Azimuth interval (lo, hi), radians, left positive.
+    pub azimuth: [f64; 2],
+    /// Range of the nearest footprint corner, metres.
+    pub near_range: f64,
+    /// Range of the centre, metres.
+    pub centre_range: f64,
+}
+
+impl AnnotatedBox {
+    /// How the box looks from `viewpoint` (top view).
+    pub fn view(&self, viewpoint: &Viewpoint) -> BoxView {
+        let (s, c) = self.yaw_rad.sin_cos();
+        let h = self.half_extents;
+        let mut out = BoxView {
+            azimuth: [f64::INFINITY, f64::NEG_INFINITY],
+            near_range: f64::INFINITY,
+            centre_range: 0.0,
+        };
+        for (kx, ky) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            let (x, y) = (kx * h[0], ky * h[1]);
+            let p = viewpoint.to_view([
+                self.centre[0] + c * x - s * y,
+                self.centre[1] + s * x + c * y,
+                self.centre[2],
+            ]);
+            let a = p[1].atan2(p[0]);
+            out.azimuth = [out.azimuth[0].min(a), out.azimuth[1].max(a)];
+            out.near_range = out.near_range.min(p[0].hypot(p[1]));
+        }
+        let v = viewpoint.to_view(self.centre);
+        out.centre_range = v[0].hypot(v[1]);
+        out
+    }
+}
+
+/// What the annotated boxes of one class add to the estimated ones.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct ClassPrior {
+    /// Annotated objects the prior was learnt from.
+    pub samples: usize,
+    /// Median of annotated minus estimated box centre range, metres.
+    pub centre_range_offset_m: f64,
+    /// Median of annotated minus estimated nearest footprint corner range, metres.
+    pub near_range_offset_m: f64,
+    /// Median widening of the azimuth interval at an edge nothing hides, metres at the
+    /// estimated centre's range.
+    pub free_widening_m: f64,
+    /// Median footprint of the annotated boxes, long and short side, metres.
+    pub footprint_m: [f64; 2],
+    /// Mean share of the [`hidden_extent_m`] by which the annotated box's azimuth
+    /// interval is wider at an edge another object hides.
+    pub hidden_fraction: f64,
+}
+
+/// One [`ClassPrior`] per class (indexed by class id).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ClassPriors {
+    /// Priors by class id; classes without enough samples are all zero.
+    pub classes: Vec<ClassPrior>,
+}
+
+impl Default for ClassPriors {
+    fn default() -> Self {
+        ClassPriors {
+            classes: vec![ClassPrior::default(); Class::COUNT],
+        }
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+impl ClassPriors {
+    /// The prior of a class (zero if none was learnt).
+    pub fn get(&self, class: Class) -> ClassPrior {
+        self.classes
+            .get(usize::from(class.id()))
+            .copied()
+            .unwrap_or_default()
+    }
+
+    /// Learns the priors from scenes' objects with their annotated boxes (`None`: not annotated).
+    pub fn learn<'a>(
+        scenes: impl IntoIterator<Item = (&'a Viewpoint, &'a [ViewObject], &'a [Option<AnnotatedBox>])>,
+    ) -> ClassPriors {
+        #[derive(Default)]
+        struct Acc {
+            centre: Vec<f64>,
+            near: Vec<f64>,
+            free: Vec<f64>,
+            long: Vec<f64>,
+            short: Vec<f64>,
+            /// Widening at edges another object hides, metres at the centre's range, and
+            /// the object (scene, index).
+            occluded: Vec<(f64, usize, usize)>,
+        }
+        let scenes: Vec<_> = scenes.into_iter().collect();
+        let mut acc: Vec<Acc> = (0..Class::COUNT).map(|_| Acc::default()).collect();
+        for (scene, &(viewpoint, objects, boxes)) in scenes.iter().enumerate() {
+            for (i, (o, b)) in objects.iter().zip(boxes).enumerate() {
+                let Some(b) = b else { continue };
+                let Some(a) = acc.get_mut(usize::from(o.class.id())) else {
+                    continue;
+                };
+                let truth = b.view(viewpoint);
+                let range = o.centre_range();
+                if !(truth.centre_range.is_finite() && range.is_finite()) {
+                    continue;
+                }
+                a.centre.push(truth.centre_range - range);
+                a.near.push(truth.near_range - o.near_range);
+                let mut occluded = [false; 2];
+                for (j, other) in objects.iter().enumerate() {
+                    if j != i {
+                        let e = crate::features::edge_occlusion(o, other);
+                        occluded = [occluded[0] || e[0], occluded[1] || e[1]];
+                    }
+                }
+                let widening = [
+                    (o.azimuth[0] - truth.azimuth[0]) * range,
+                    (truth.azimuth[1] - o.azimuth[1]) * range,
+                ];
+                for k in 0..2 {
+                    if occluded[k] {
+                        a.occluded.push((widening[k], scene, i));
+                    } else {
+                        a.free.push(widening[k]);
+                    }
+                }
+                let (h0, h1) = (b.half_extents[0], b.half_extents[1]);
+                a.long.push(2.0 * h0.max(h1));
+                a.short.push(2.0 * h0.min(h1));
+            }
+        }
+        ClassPriors {
+            classes: acc
+                .into_iter()
+                .map(|a| {
+                    let samples = a.centre.len();
+                    if samples < MIN_PRIOR_SAMPLES {
+                        return ClassPrior::default();
+                    }
+                    let mut prior = ClassPrior {
+                        samples,
+                        centre_range_offset_m: median(a.centre),
+                        near_range_offset_m: median(a.near),
+                        free_widening_m: median(a.free),
+                        footprint_m: [median(a.long), median(a.short)],
+                        hidden_fraction: 0.0,
+                    };
+                    // Edges with at least 0.5 m hidden by the footprint prior.
+                    let ratios: Vec<f64> = a
+                        .occluded
+                        .iter()
+                        .filter_map(|&(w, s, i)| {
+                            let hidden = hidden_extent_m(&scenes[s].1[i], &prior);
+                            (hidden >= 0.5).then(|| (w / hidden).clamp(0.0, 1.0))
+                        })
+                        .collect();
+                    prior.hidden_fraction = if ratios.is_empty() {
+                        0.0
+                    } else {
+                        ratios.iter().sum::<f64>() / ratios.len() as f64
+                    };
+                    prior
+                })
+                .collect(),
+        }
+    }
+}
+
+/// How much wider than its visible cells an object of the class' median footprint would
+/// appear at the object's estimated yaw and range, metres (0 if no wider).
+pub fn hidden_extent_m(o: &ViewObject, prior: &ClassPrior) -> f64 {
+    let c = &o.corners;
+    let axis = |p: [f64; 3], q: [f64; 3]| {
+        let d = [q[0] - p[0], q[1] - p[1]];
+        let len = d[0].hypot(d[1]);
+        if len > 1e-9 {
+            (len, [d[0] / len, d[1] / len])
+        } else {
+            (0.0, [1.0, 0.0])
+        }
+    };
+    let ((l0, u0), (l1, u1)) = (axis(c[0], c[1]), axis(c[1], c[2]));
+    let (long, short) = if l0 >= l1 { (u0, u1) } else { (u1, u0) };
+    let range = o.centre_range();
+    if range <= 1e-9 {
+        return 0.0;
+    }
+    let across = [-o.box_centre[1] / range, o.box_centre[0] / range];
+    let dot = |u: [f64; 2]| (u[0] * across[0] + u[1] * across[1]).abs();
+    let expected = prior.footprint_m[0] * dot(long) + prior.footprint_m[1] * dot(short);
+    let visible = (o.cells_azimuth[1] - o.cells_azimuth[0]) * range;
+    (expected - visible).max(0.0)
+}
+
+/// The azimuth interval `a`'s whole box is expected to span given `b`: widened at an edge
+/// `b` hides by the hidden extent, at other edges by the class' free widening.
+pub fn completed_azimuth(a: &ViewObject, occluded_by_b: [bool; 2], prior: &ClassPrior) -> [f64; 2] {
+    let range = a.centre_range().max(1e-9);
+    let hidden = hidden_extent_m(a, prior);
+    let widen = |occluded: bool| {
+        if occluded {
+            (prior.hidden_fraction * hidden).max(prior.free_widening_m)
+        } else {
+            prior.free_widening_m
+        }
+    };
+    let lo = a.azimuth[0] - widen(occluded_by_b[0]) / range;
+    let hi = a.azimuth[1] + widen(occluded_by_b[1]) / range;
+    if lo <= hi {
+        [lo, hi]
+    } else {
+        let m = 0.5 * (a.azimuth[0] + a.azimuth[1]);
+        [m, m]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::objects::OrientedBox;
+
+    fn vp() -> Viewpoint {
+        Viewpoint {
+            position: [0.0; 3],
+            yaw_rad: 0.0,
+        }
+    }
+
+    /// A car's near side: cells along y at x = `x`, from y0 to y1.
+    fn side(id: u32, x: f64, y0: f64, y1: f64) -> ViewObject {
+        let mut cells = Vec::new();
+        let mut y = y0;
+        while y <= y1 + 1e-9 {
+            for z in [0.3, 0.6, 0.9] {
+                cells.push([x, y, z]);
+            }
+            y += 0.1;
+        }
+        let bbox = OrientedBox {
+            centre: [x + 0.05, 0.5 * (y0 + y1), 0.6],
+            half_extents: [0.5 * (y1 - y0), 0.05, 0.3],
+            yaw_rad: std::f64::consts::FRAC_PI_2,
+        };
+        ViewObject::new(id, Class::Car, &cells, &bbox, &vp())
+    }
+
+    #[test]
+    fn annotated_box_view_matches_its_corners() {
+        let b = AnnotatedBox {
+            centre: [10.0, 0.0, 1.0],
+            half_extents: [1.0, 2.0, 1.0],
+            yaw_rad: 0.0,
+        };
+        let v = b.view(&vp());
+        assert!((v.centre_range - 10.0).abs() < 1e-12);
+        assert!((v.near_range - 9.0f64.hypot(2.0)).abs() < 1e-12);
+        assert!((v.azimuth[1] - 2.0f64.atan2(9.0)).abs() < 1e-12);
+        assert!((v.azimuth[0] + 2.0f64.atan2(9.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn priors_recover_a_constant_offset_and_footprint() {
+        // Every car is seen by its near side only; the annotated box is 1.8 m deep.
+        let objects: Vec<ViewObject> = (0..6)
+            .map(|i| {
+                side(
+                    i,
+                    10.0 + f64::from(i),
+                    -10.0 + 4.0 * f64::from(i),
+                    -7.0 + 4.0 * f64::from(i),
+                )
+            })
+            .collect();
+        let boxes: Vec<Option<AnnotatedBox>> = objects
+            .iter()
+            .map(|o| {
+                Some(AnnotatedBox {
+                    centre: [o.box_centre[0] + 0.9, o.box_centre[1], 0.75],
+                    half_extents: [1.5, 0.9, 0.75],
+                    yaw_rad: std::f64::consts::FRAC_PI_2,
+                })
+            })
+            .collect();
+        let v = vp();
+        let priors = ClassPriors::learn([(&v, &objects[..], &boxes[..])]);
+        let car = priors.get(Class::Car);
+        assert_eq!(car.samples, 6);
+        assert!(
+            (car.footprint_m[0] - 3.0).abs() < 1e-12 && (car.footprint_m[1] - 1.8).abs() < 1e-12
+        );
+        // The box centre moved 0.9 m along x: about 0.9 m farther.
+        assert!((car.centre_range_offset_m - 0.9).abs() < 0.1, "{car:?}");
+        assert_eq!(priors.get(Class::Tree), ClassPrior::default());
+    }
+
+    #[test]
+    fn a_hidden_edge_extends_to_the_class_footprint() {
+        // 1 m of a 4 m car visible, side-on: 3 m hidden.
+        let a = side(1, 20.0, 0.0, 1.0);
+        let prior = ClassPrior {
+            samples: 10,
+            footprint_m: [4.0, 1.8],
+            hidden_fraction: 0.5,
+            ..ClassPrior::default()
+        };
+        let hidden = hidden_extent_m(&a, &prior);
+        assert!((hidden - 3.0).abs() < 0.15, "{hidden}");
+        let free = completed_azimuth(&a, [false, false], &prior);
+        assert_eq!(free, a.azimuth);
+        let right = completed_azimuth(&a, [true, false], &prior);
+        // Half of the hidden 3 m (the prior's hidden fraction), at the occluded edge only.
+        let widened = (a.azimuth[0] - right[0]) * a.centre_range();
+        assert!(
+            (widened - 1.5).abs() < 0.1 && right[1] == a.azimuth[1],
+            "{widened}"
+        );
+    }
+}
