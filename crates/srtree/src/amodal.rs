@@ -13,6 +13,10 @@
 //!   hides the object (the box corners of a round crown lie outside its visible outline),
 //! - the median footprint of the annotated boxes (long × short side).
 //!
+//! Classes whose annotated boxes are squares in one map orientation about the thing's foot
+//! (tree crowns: the trunk marks the centre, the visible crown width the side) get their
+//! box predicted from the contact point instead ([`FootBox`]).
+//!
 //! At an edge where a nearer object hides the object's cells ([`crate::features::edge_occlusion`])
 //! the object is assumed to continue behind it until its lateral extent reaches that of
 //! the class' median footprint at the estimated yaw ([`hidden_extent_m`]).
@@ -93,6 +97,57 @@ pub struct ClassPrior {
     /// Mean share of the [`hidden_extent_m`] by which the annotated box's azimuth
     /// interval is wider at an edge another object hides.
     pub hidden_fraction: f64,
+    /// Set if the class' annotated boxes are squares about the thing's foot in fixed map
+    /// axes (round things such as tree crowns): the box is then predicted from the foot.
+    #[serde(default)]
+    pub foot_box: Option<FootBox>,
+}
+
+/// How annotated boxes of a round class sit: a square about the contact point (a trunk's
+/// foot) whose side follows the visible width, in fixed map axes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct FootBox {
+    /// Yaw of the annotated boxes in the map frame, radians (modulo a quarter turn).
+    pub map_yaw_rad: f64,
+    /// Median ratio of the annotated half side to half the visible width (the cells'
+    /// azimuth extent at the contact point's range).
+    pub half_side_ratio: f64,
+}
+
+/// Half the visible width of an object at its contact point's range, metres.
+fn visible_half_width(o: &ViewObject) -> f64 {
+    0.5 * (o.cells_azimuth[1] - o.cells_azimuth[0]) * o.contact[0].hypot(o.contact[1])
+}
+
+impl FootBox {
+    /// The predicted box of `o` in its view frame.
+    pub fn predict(&self, o: &ViewObject) -> AnnotatedBox {
+        let half = self.half_side_ratio * visible_half_width(o);
+        AnnotatedBox {
+            centre: o.contact,
+            half_extents: [half, half, 0.0],
+            yaw_rad: self.map_yaw_rad - o.view_yaw_rad,
+        }
+    }
+}
+
+/// The view frame itself as a viewpoint (boxes already in view coordinates).
+const VIEW_FRAME: Viewpoint = Viewpoint {
+    position: [0.0; 3],
+    yaw_rad: 0.0,
+};
+
+/// How `a`'s annotated box is expected to look given which of its edges `b` hides: the
+/// foot box for round classes, else the estimated box completed by the class prior.
+pub fn completed_view(a: &ViewObject, occluded_by_b: [bool; 2], prior: &ClassPrior) -> BoxView {
+    if let Some(foot) = &prior.foot_box {
+        return foot.predict(a).view(&VIEW_FRAME);
+    }
+    BoxView {
+        azimuth: completed_azimuth(a, occluded_by_b, prior),
+        near_range: a.near_range + prior.near_range_offset_m,
+        centre_range: a.centre_range() + prior.centre_range_offset_m,
+    }
 }
 
 /// One [`ClassPrior`] per class (indexed by class id).
@@ -141,6 +196,16 @@ impl ClassPriors {
             /// Widening at edges another object hides, metres at the centre's range, and
             /// the object (scene, index).
             occluded: Vec<(f64, usize, usize)>,
+            /// Annotated yaw times 4 as a unit vector (a square's yaw is modulo π/2).
+            yaw4: [f64; 2],
+            /// Side difference of the annotated footprint over its longer side.
+            squareness: Vec<f64>,
+            /// Top-view distance of the annotated centre to the contact point, and to the
+            /// estimated box centre (as estimated, without the range offset).
+            to_foot: Vec<f64>,
+            to_centre: Vec<f64>,
+            /// Annotated half side over half the visible width.
+            half_ratio: Vec<f64>,
         }
         let scenes: Vec<_> = scenes.into_iter().collect();
         let mut acc: Vec<Acc> = (0..Class::COUNT).map(|_| Acc::default()).collect();
@@ -178,6 +243,17 @@ impl ClassPriors {
                 let (h0, h1) = (b.half_extents[0], b.half_extents[1]);
                 a.long.push(2.0 * h0.max(h1));
                 a.short.push(2.0 * h0.min(h1));
+                a.yaw4[0] += (4.0 * b.yaw_rad).cos();
+                a.yaw4[1] += (4.0 * b.yaw_rad).sin();
+                a.squareness.push((h0 - h1).abs() / h0.max(h1).max(1e-9));
+                let c = viewpoint.to_view(b.centre);
+                let top = |p: [f64; 3]| (p[0] - c[0]).hypot(p[1] - c[1]);
+                a.to_foot.push(top(o.contact));
+                a.to_centre.push(top(o.box_centre));
+                let visible = visible_half_width(o);
+                if visible > 1e-3 {
+                    a.half_ratio.push(h0.max(h1) / visible);
+                }
             }
         }
         ClassPriors {
@@ -195,7 +271,19 @@ impl ClassPriors {
                         free_widening_m: median(a.free),
                         footprint_m: [median(a.long), median(a.short)],
                         hidden_fraction: 0.0,
+                        foot_box: None,
                     };
+                    // Round things: square boxes in one map orientation about the foot.
+                    let concentration = a.yaw4[0].hypot(a.yaw4[1]) / samples as f64;
+                    if median(a.squareness.clone()) < 0.05
+                        && concentration >= 0.95
+                        && median(a.to_foot.clone()) < median(a.to_centre.clone())
+                    {
+                        prior.foot_box = Some(FootBox {
+                            map_yaw_rad: 0.25 * a.yaw4[1].atan2(a.yaw4[0]),
+                            half_side_ratio: median(a.half_ratio.clone()),
+                        });
+                    }
                     // Edges with at least 0.5 m hidden by the footprint prior.
                     let ratios: Vec<f64> = a
                         .occluded
@@ -342,6 +430,61 @@ mod tests {
         // The box centre moved 0.9 m along x: about 0.9 m farther.
         assert!((car.centre_range_offset_m - 0.9).abs() < 0.1, "{car:?}");
         assert_eq!(priors.get(Class::Tree), ClassPrior::default());
+        // Oblong boxes: no foot box.
+        assert_eq!(car.foot_box, None);
+    }
+
+    /// A tree at (x, y): a trunk column and the near half of a crown ring of radius r.
+    fn tree(id: u32, x: f64, y: f64, r: f64) -> ViewObject {
+        let mut cells: Vec<[f64; 3]> = (0..30).map(|k| [x, y, 0.1 * f64::from(k)]).collect();
+        let towards = (-y).atan2(-x);
+        for k in 0..=60 {
+            let t =
+                towards - std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * f64::from(k) / 60.0;
+            cells.push([x + r * t.cos(), y + r * t.sin(), 4.0]);
+        }
+        // The estimated box covers the visible near half: its centre is nearer than the trunk.
+        let range = x.hypot(y);
+        let bbox = OrientedBox {
+            centre: [x - 0.5 * r * x / range, y - 0.5 * r * y / range, 2.0],
+            half_extents: [r, 0.5 * r, 2.0],
+            yaw_rad: y.atan2(x) + std::f64::consts::FRAC_PI_2,
+        };
+        ViewObject::new(id, Class::Tree, &cells, &bbox, &vp())
+    }
+
+    #[test]
+    fn round_classes_get_a_foot_box_in_map_axes() {
+        let objects: Vec<ViewObject> = (0..6)
+            .map(|i| tree(i, 15.0 + f64::from(i), -12.0 + 5.0 * f64::from(i), 2.0))
+            .collect();
+        let boxes: Vec<Option<AnnotatedBox>> = objects
+            .iter()
+            .map(|o| {
+                Some(AnnotatedBox {
+                    centre: [o.contact[0], o.contact[1], 2.0],
+                    half_extents: [2.0, 2.0, 2.0],
+                    yaw_rad: 0.0,
+                })
+            })
+            .collect();
+        let v = vp();
+        let priors = ClassPriors::learn([(&v, &objects[..], &boxes[..])]);
+        let foot = priors.get(Class::Tree).foot_box;
+        let Some(foot) = foot else {
+            panic!("no foot box: {:?}", priors.get(Class::Tree));
+        };
+        assert!(foot.map_yaw_rad.abs() < 1e-9, "{foot:?}");
+        assert!((foot.half_side_ratio - 1.0).abs() < 0.05, "{foot:?}");
+        // The prediction is the annotated box.
+        let b = foot.predict(&objects[2]).view(&VIEW_FRAME);
+        let truth = boxes[2].map(|b| b.view(&v));
+        let truth = truth.unwrap_or(b);
+        assert!((b.centre_range - truth.centre_range).abs() < 1e-9);
+        assert!(
+            (b.azimuth[0] - truth.azimuth[0]).abs() < 0.01
+                && (b.azimuth[1] - truth.azimuth[1]).abs() < 0.01
+        );
     }
 
     #[test]

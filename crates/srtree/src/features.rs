@@ -39,7 +39,7 @@
 //! Cost per pair: O(|a| log |hull b| + |b|) with objects subsampled to at most
 //! [`MAX_FEATURE_CELLS`] cells for the hull tests.
 
-use crate::amodal::{completed_azimuth, hidden_extent_m, ClassPriors};
+use crate::amodal::{completed_view, hidden_extent_m, ClassPriors};
 use crate::graph::Viewpoint;
 use crate::objects::{MapObject, OrientedBox};
 use crate::SrtreeError;
@@ -154,6 +154,8 @@ pub struct ViewObject {
     pub near_range: f64,
     /// Convex hulls of the cells projected along x (y–z), y (x–z) and z (x–y).
     pub hulls: [Vec<[f64; 2]>; 3],
+    /// Yaw of the viewing direction in the map frame, radians.
+    pub view_yaw_rad: f64,
 }
 
 impl ViewObject {
@@ -211,6 +213,7 @@ impl ViewObject {
             cells_azimuth,
             near_range,
             hulls,
+            view_yaw_rad: viewpoint.yaw_rad,
         }
     }
 
@@ -511,13 +514,13 @@ pub fn pair_features(
     f[41] = half(a_by_b);
     f[42] = half(b_by_a);
     let (pa, pb) = (priors.get(a.class), priors.get(b.class));
-    f[43] = overlap_of_narrower(
-        completed_azimuth(a, a_by_b, &pa),
-        completed_azimuth(b, b_by_a, &pb),
+    let (va, vb) = (
+        completed_view(a, a_by_b, &pa),
+        completed_view(b, b_by_a, &pb),
     );
-    f[44] = (a.centre_range() + pa.centre_range_offset_m)
-        - (b.centre_range() + pb.centre_range_offset_m);
-    f[45] = (a.near_range + pa.near_range_offset_m) - (b.near_range + pb.near_range_offset_m);
+    f[43] = overlap_of_narrower(va.azimuth, vb.azimuth);
+    f[44] = va.centre_range - vb.centre_range;
+    f[45] = va.near_range - vb.near_range;
     let behind = |o: &ViewObject, e: [bool; 2], p| {
         if e[0] || e[1] {
             hidden_extent_m(o, p).min(50.0)
