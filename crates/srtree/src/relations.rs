@@ -97,10 +97,16 @@ pub struct RelationModel {
     pub rules: Vec<Rule>,
 }
 
+/// The rule's verdict enters the classifier as 0 or this: four standard deviations of a
+/// scaled feature, so that the L2 penalty lets the classifier lean on the rule rather than
+/// spread its weight over the many features that approximate it (on three datasets the
+/// SVM with a 0/1 verdict was worse than the rule alone; with 0/4 it is as good or better).
+pub const RULE_SCALE: f32 = 4.0;
+
 /// The classifier input of a relation: the scaled features, then its rule's verdict.
 fn with_rule(mut x: Vec<f32>, raw: &[f64; FEATURE_COUNT], rule: Option<&Rule>) -> Vec<f32> {
     if let Some(rule) = rule {
-        x.push(f32::from(u8::from(rule.fires(raw))));
+        x.push(RULE_SCALE * f32::from(u8::from(rule.fires(raw))));
     }
     x
 }

@@ -10,7 +10,10 @@
 //! against the training labels, lets each rule keep its few best extensions (so that one
 //! strong prefix cannot fill the beam with near-copies) and keeps the
 //! [`RuleOptions::beam`] best of them; the best rule seen wins, and its thresholds are
-//! then chosen again one at a time given all the other tests (RIPPER's optimisation). Cost per step: O(B · F · n log n) for beam B, F features and n pairs.
+//! then chosen again one at a time given all the other tests (RIPPER's optimisation).
+//! Before the search, 0/1 features with a value that (almost) no true positive has become
+//! preconditions ([`preconditions`]: both things in front, neither a ground surface), so
+//! the search spends its tests on what discriminates among the remaining pairs. Cost per step: O(B · F · n log n) for beam B, F features and n pairs.
 //!
 //! Labels with symmetric annotator noise (each flipped with probability ε) make the F1
 //! against them favour rules that cover too much: a region of n pairs holds about εn
@@ -60,6 +63,9 @@ pub struct RuleOptions {
     pub min_gain: f64,
     /// Rules kept per step.
     pub beam: usize,
+    /// A 0/1 feature value holding at most this share of the true positives is excluded
+    /// before the search ([`preconditions`]).
+    pub precondition_share: f64,
 }
 
 impl Default for RuleOptions {
@@ -68,6 +74,7 @@ impl Default for RuleOptions {
             max_tests: 6,
             min_gain: 0.002,
             beam: 16,
+            precondition_share: 0.01,
         }
     }
 }
@@ -174,15 +181,58 @@ impl Rule {
         if positives <= 0.0 {
             return Rule::default();
         }
-        grow(raw, y, all, positives, noise, options)
+        let pre = preconditions(raw, y, &all, positives, noise, options.precondition_share);
+        let covered: Vec<usize> = all.into_iter().filter(|&i| pre.fires(&raw[i])).collect();
+        grow(raw, y, covered, pre, positives, noise, options)
     }
 }
 
-/// Beam search and refinement of one rule over the pairs `covered`.
+/// Tests on 0/1 features whose excluded value holds at most `share` of the (noise-corrected)
+/// true positives, give or take two standard deviations of the flips there: necessary conditions (Behind needs both things in front and neither a
+/// ground surface), taken before the search so that its tests go to what discriminates.
+fn preconditions(
+    raw: &[[f64; FEATURE_COUNT]],
+    y: &[bool],
+    all: &[usize],
+    positives: f64,
+    noise: Noise,
+    share: f64,
+) -> Rule {
+    let mut rule = Rule::default();
+    let binary = (0..FEATURE_COUNT)
+        .filter(|&k| all.iter().all(|&i| raw[i][k] == 0.0 || raw[i][k] == 1.0))
+        .collect::<Vec<usize>>();
+    for k in binary {
+        for value in [0.0, 1.0] {
+            let region: Vec<usize> = all
+                .iter()
+                .copied()
+                .filter(|&i| raw[i][k] == value)
+                .collect();
+            let labelled = region.iter().filter(|&&i| y[i]).count();
+            // Two standard deviations of the flipped labels' count as slack.
+            let slack = 2.0 * (noise.rate * region.len() as f64).sqrt() / (1.0 - 2.0 * noise.rate);
+            if !region.is_empty()
+                && region.len() < all.len()
+                && noise.true_positives(labelled, region.len()) <= share * positives + slack
+            {
+                rule.tests.push(Test {
+                    feature: k,
+                    threshold: 0.5,
+                    above: value == 0.0,
+                });
+            }
+        }
+    }
+    rule
+}
+
+/// Beam search and refinement of one rule over the pairs `covered`, which pass `pre`.
 fn grow(
     raw: &[[f64; FEATURE_COUNT]],
     y: &[bool],
     covered: Vec<usize>,
+    pre: Rule,
     positives: f64,
     noise: Noise,
     options: &RuleOptions,
@@ -190,8 +240,8 @@ fn grow(
     let labelled = covered.iter().filter(|&&i| y[i]).count();
     let start = noise.f1(labelled, covered.len(), positives);
     let pool = covered.clone();
-    let mut best = (start, Rule::default());
-    let mut beam: Vec<(f64, Rule, Vec<usize>)> = vec![(best.0, Rule::default(), covered)];
+    let mut best = (start, pre.clone());
+    let mut beam: Vec<(f64, Rule, Vec<usize>)> = vec![(best.0, pre.clone(), covered)];
     for _ in 0..options.max_tests {
         // Each rule of the beam proposes its best extensions, at most `per_parent` of
         // them, so that one strong prefix cannot fill the beam with near-copies of itself.
@@ -307,6 +357,27 @@ mod tests {
         let predicted: Vec<bool> = raw.iter().map(|r| rule.fires(r)).collect();
         assert_eq!(predicted, y, "{rule:?}");
         assert_eq!(rule.tests.len(), 3);
+    }
+
+    #[test]
+    fn a_value_no_positive_has_becomes_a_precondition() {
+        // x7 ∈ {0, 1}: every positive has x7 = 1; x0 decides among those.
+        let (mut raw, mut y) = (Vec::new(), Vec::new());
+        for i in 0..400 {
+            let (a, c) = (f64::from(i % 20) / 20.0, f64::from(u8::from(i % 3 != 0)));
+            raw.push(vector(a, 0.0, c));
+            y.push(c == 1.0 && a > 0.6);
+        }
+        let rule = Rule::learn(&raw, &y, 0.05, &RuleOptions::default());
+        assert_eq!(
+            rule.tests.first().map(|t| (t.feature, t.above)),
+            Some((7, true)),
+            "{rule:?}"
+        );
+        assert!(
+            raw.iter().zip(&y).all(|(r, &t)| rule.fires(r) == t),
+            "{rule:?}"
+        );
     }
 
     #[test]
