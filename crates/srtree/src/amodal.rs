@@ -275,13 +275,13 @@ impl ClassPriors {
                     };
                     // Round things: square boxes in one map orientation about the foot.
                     let concentration = a.yaw4[0].hypot(a.yaw4[1]) / samples as f64;
-                    if median(a.squareness.clone()) < 0.05
+                    if median(a.squareness) < 0.05
                         && concentration >= 0.95
-                        && median(a.to_foot.clone()) < median(a.to_centre.clone())
+                        && median(a.to_foot) < median(a.to_centre)
                     {
                         prior.foot_box = Some(FootBox {
                             map_yaw_rad: 0.25 * a.yaw4[1].atan2(a.yaw4[0]),
-                            half_side_ratio: median(a.half_ratio.clone()),
+                            half_side_ratio: median(a.half_ratio),
                         });
                     }
                     // Edges with at least 0.5 m hidden by the footprint prior.

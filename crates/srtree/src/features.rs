@@ -397,7 +397,11 @@ pub fn edge_occlusion(a: &ViewObject, b: &ViewObject) -> [bool; 2] {
 /// Fraction (0, ½, 1) of the two lateral edges of `a`'s cells at which `b` hides `a`
 /// ([`edge_occlusion`]).
 pub fn edges_occluded_by(a: &ViewObject, b: &ViewObject) -> f64 {
-    let e = edge_occlusion(a, b);
+    edge_share(edge_occlusion(a, b))
+}
+
+/// Fraction (0, ½, 1) of two edges that are set.
+fn edge_share(e: [bool; 2]) -> f64 {
     f64::from(u8::from(e[0]) + u8::from(e[1])) / 2.0
 }
 
@@ -510,9 +514,8 @@ pub fn pair_features(
         is_ground(b.class) && contact_m <= context.nearest_ground_m,
     ));
     let (a_by_b, b_by_a) = (edge_occlusion(a, b), edge_occlusion(b, a));
-    let half = |e: [bool; 2]| f64::from(u8::from(e[0]) + u8::from(e[1])) / 2.0;
-    f[41] = half(a_by_b);
-    f[42] = half(b_by_a);
+    f[41] = edge_share(a_by_b);
+    f[42] = edge_share(b_by_a);
     let (pa, pb) = (priors.get(a.class), priors.get(b.class));
     let (va, vb) = (
         completed_view(a, a_by_b, &pa),

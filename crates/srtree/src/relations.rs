@@ -103,12 +103,11 @@ pub struct RelationModel {
 /// SVM with a 0/1 verdict was worse than the rule alone; with 0/4 it is as good or better).
 pub const RULE_SCALE: f32 = 4.0;
 
-/// The classifier input of a relation: the scaled features, then its rule's verdict.
-fn with_rule(mut x: Vec<f32>, raw: &[f64; FEATURE_COUNT], rule: Option<&Rule>) -> Vec<f32> {
+/// Appends a relation's rule verdict to its scaled features (the classifier's input).
+fn push_rule(x: &mut Vec<f32>, raw: &[f64; FEATURE_COUNT], rule: Option<&Rule>) {
     if let Some(rule) = rule {
         x.push(RULE_SCALE * f32::from(u8::from(rule.fires(raw))));
     }
-    x
 }
 
 /// The candidate pairs of a scene: every ordered pair with a non-ground subject.
@@ -219,7 +218,11 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         let xr: Vec<Vec<f32>> = x
             .par_iter()
             .zip(&raw)
-            .map(|(v, r)| with_rule(v.clone(), r, rule.as_ref()))
+            .map(|(v, r)| {
+                let mut v = v.clone();
+                push_rule(&mut v, r, rule.as_ref());
+                v
+            })
             .collect();
         rules.extend(rule);
         let cv: CvResult = cross_validate(
@@ -300,11 +303,13 @@ impl RelationModel {
         let raw = raw_features(objects, &pairs, &self.priors, self.hull_tolerance_m);
         let mut svm = Assignment::empty(objects.len());
         for (&(a, b), r) in pairs.iter().zip(&raw) {
-            let x = self.scaler.scale(r);
+            let mut x = self.scaler.scale(r);
+            let scaled = x.len();
             for (k, rel) in Relation::BASE.into_iter().enumerate() {
                 if let Some(s) = self.svms.get(k) {
-                    let xk = with_rule(x.clone(), r, self.rules.get(k));
-                    svm.set(rel, a, b, s.predict(&xk));
+                    push_rule(&mut x, r, self.rules.get(k));
+                    svm.set(rel, a, b, s.predict(&x));
+                    x.truncate(scaled);
                 }
             }
         }

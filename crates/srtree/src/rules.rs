@@ -188,8 +188,9 @@ impl Rule {
 }
 
 /// Tests on 0/1 features whose excluded value holds at most `share` of the (noise-corrected)
-/// true positives, give or take two standard deviations of the flips there: necessary conditions (Behind needs both things in front and neither a
-/// ground surface), taken before the search so that its tests go to what discriminates.
+/// true positives, give or take two standard deviations of the flips there: necessary
+/// conditions (Behind needs both things in front and neither a ground surface), taken
+/// before the search so that its tests go to what discriminates.
 fn preconditions(
     raw: &[[f64; FEATURE_COUNT]],
     y: &[bool],
@@ -246,13 +247,15 @@ fn grow(
         // Each rule of the beam proposes its best extensions, at most `per_parent` of
         // them, so that one strong prefix cannot fill the beam with near-copies of itself.
         let per_parent = (options.beam / beam.len()).max(2);
-        let mut next: Vec<(f64, Rule, Test)> = beam
+        // (score, parent in the beam, test extending it)
+        let mut next: Vec<(f64, usize, Test)> = beam
             .par_iter()
-            .flat_map_iter(|(_, rule, covered)| {
-                let mut children: Vec<(f64, Rule, Test)> = (0..FEATURE_COUNT)
+            .enumerate()
+            .flat_map_iter(|(parent, (_, _, covered))| {
+                let mut children: Vec<(f64, usize, Test)> = (0..FEATURE_COUNT)
                     .flat_map(|k| best_tests(raw, y, covered, positives, noise, k))
                     .flatten()
-                    .map(|(s, t)| (s, rule.clone(), t))
+                    .map(|(s, t)| (s, parent, t))
                     .collect();
                 children.sort_by(|a, b| b.0.total_cmp(&a.0));
                 children.truncate(per_parent);
@@ -261,26 +264,22 @@ fn grow(
             .collect();
         next.sort_by(|a, b| b.0.total_cmp(&a.0));
         let mut kept: Vec<(f64, Rule, Vec<usize>)> = Vec::new();
-        for (s, mut rule, test) in next {
+        for (s, parent, test) in next {
             if kept.len() >= options.beam.max(1) {
                 break;
             }
+            let (_, parent_rule, parent_covered) = &beam[parent];
+            let mut rule = parent_rule.clone();
             rule.tests.push(test);
             let key = rule.key();
-            let duplicate = kept.iter().any(|(ks, kr, _)| *ks == s && kr.key() == key);
-            if duplicate {
+            if kept.iter().any(|(ks, kr, _)| *ks == s && kr.key() == key) {
                 continue;
             }
-            let covered: Vec<usize> = beam
+            let covered: Vec<usize> = parent_covered
                 .iter()
-                .find(|(_, r, _)| r.tests[..] == rule.tests[..rule.tests.len() - 1])
-                .map(|(_, _, c)| {
-                    c.iter()
-                        .copied()
-                        .filter(|&i| test.passes(&raw[i]))
-                        .collect()
-                })
-                .unwrap_or_default();
+                .copied()
+                .filter(|&i| test.passes(&raw[i]))
+                .collect();
             kept.push((s, rule, covered));
         }
         if kept.is_empty() {
