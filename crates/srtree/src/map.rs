@@ -18,8 +18,10 @@
 //! cuboids of integer keys, ≈ 1.6 bytes per cell). A key is found by binary search.
 //! [`SrMap::memory`] counts every byte the map holds (allocated capacities).
 //!
-//! **Insertion.** One batch (a cloud, or [`SrMap::insert_scans`]' list of scans) sorts
-//! its points by (cell code, scan, point) with a parallel radix sort, finds each cell once
+//! **Insertion.** One batch (a cloud, or [`SrMap::insert_scans`]' list of scans) joins
+//! consecutive points of a scan that share a cell into runs, and sorts the runs by (cell
+//! code, scan, point) with a parallel radix sort on the batch's short codes (the Morton
+//! order on ≈ 3·log₂(extent) bits, see `codes.rs`), finds each cell once
 //! (binary search, or created in Morton order) and applies its points in insertion order,
 //! slices of cells in parallel on copies that are merged in order: the result equals
 //! inserting point by point, scan by scan. With ray casting the same is done scan by scan, and a
@@ -49,18 +51,19 @@
 //! # Ok::<(), srtree::SrtreeError>(())
 //! ```
 
+mod codes;
 mod packed;
 
 use crate::dirichlet::{majority, DirichletModel};
 use crate::error::{Result, SrtreeError};
+use codes::BatchCodes;
 use geodata::classes::Class;
 use geodata::cloud::PointCloud;
-use packed::{morton, unmorton, KeyBox, PackedTree, Visit};
+use packed::{morton, KeyBox, PackedTree, Visit};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
 /// Largest number of children of an R-tree node (M of the thesis).
 pub const NODE_CAPACITY: usize = 16;
@@ -409,7 +412,7 @@ impl SrMap {
         map.colours = colours;
         map.dirichlet = dirichlet;
         map.relations = relations;
-        map.index_new_cells(0);
+        map.index_new_cells(0, false);
         Ok(map)
     }
 
@@ -505,7 +508,7 @@ impl SrMap {
         let table = &self.histograms;
         self.cells
             .par_iter_mut()
-            .for_each(|c| c.label = choose_label(model, &expand_histogram(table, c.histogram_ref)));
+            .for_each(|c| c.label = label_of(model, table, c.histogram_ref));
     }
 
     /// Checks the columns, the origin and (with `positions`) every position: finite and
@@ -624,9 +627,9 @@ impl SrMap {
             // Scan by scan: the misses of a scan must see the hits of the scans before it.
             for (s, (cloud, origin)) in scans.iter().enumerate() {
                 let scan = s as u32 + 1;
-                let order = self.sorted_points(&clouds[s..=s])?;
+                let (order, codes) = self.sorted_points(&clouds[s..=s])?;
                 total.touched_cells +=
-                    self.update_endpoints(&clouds[s..=s], scan, &order, &mut batch);
+                    self.update_endpoints(&clouds[s..=s], scan, (&order, &codes), &mut batch);
                 if let Some(origin) = origin {
                     let (rays, misses) = self.cast_rays(*origin, &cloud.positions, scan, &batch);
                     total.rays += rays;
@@ -636,43 +639,91 @@ impl SrMap {
         } else {
             // Hits only commute between cells: all points at once, sorted by cell and then
             // in insertion order, so new cells come out in Morton order.
-            let order = self.sorted_points(&clouds)?;
-            total.touched_cells += self.update_endpoints(&clouds, 1, &order, &mut batch);
+            let (order, codes) = self.sorted_points(&clouds)?;
+            total.touched_cells += self.update_endpoints(&clouds, 1, (&order, &codes), &mut batch);
         }
         drop(batch);
         total.new_cells = self.cells.len() - old_len;
-        total.bulk_loaded = self.index_new_cells(old_len);
+        // Without rays, the cells are created in code order, which is Morton order.
+        total.bulk_loaded = self.index_new_cells(old_len, !rays);
         Ok(total)
     }
 
-    /// (cell code, point number) of every point of `clouds` (see [`PointNumbering`]),
-    /// sorted: by cell, then in insertion order. A position that is not finite or outside
-    /// the grid is an error.
-    fn sorted_points(&self, clouds: &[&PointCloud]) -> Result<Vec<Item>> {
+    /// The runs of consecutive points of one cloud in one cell (see [`Item`]) of `clouds`,
+    /// sorted: by cell, then in insertion order; the codes are the batch's [`BatchCodes`].
+    /// A position that is not finite or outside the grid is an error.
+    fn sorted_points(&self, clouds: &[&PointCloud]) -> Result<(Vec<Item>, BatchCodes)> {
         let r = self.options.resolution_m;
-        let mut order = Vec::with_capacity(clouds.iter().map(|c| c.len()).sum());
-        let outside = AtomicBool::new(false);
-        let numbering = PointNumbering::new(clouds);
-        for (s, cloud) in clouds.iter().enumerate() {
-            order.par_extend(cloud.positions.par_iter().enumerate().map(|(i, p)| {
-                let number = numbering.number(s, i);
-                if !self.inside_grid(p) {
-                    outside.store(true, AtomicOrdering::Relaxed);
-                    return Item(0, number);
+        let limit_m = f64::from(KEY_LIMIT) * r;
+        // The positions' bounding box, and whether all are finite and inside the grid.
+        type Bounds = ([f64; 3], [f64; 3], bool);
+        let empty: Bounds = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3], true);
+        let bounds = |ps: &[[f64; 3]]| {
+            let (mut lo, mut hi, mut inside) = empty;
+            for p in ps {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                    inside &= p[a].abs() < limit_m;
                 }
-                Item(morton(p.map(|v| floor_i32(v / r))), number)
-            }));
-        }
-        if outside.into_inner() {
-            let limit_m = f64::from(KEY_LIMIT) * r;
+            }
+            (lo, hi, inside)
+        };
+        let merge = |x: Bounds, y: Bounds| -> Bounds {
+            (
+                std::array::from_fn(|a| x.0[a].min(y.0[a])),
+                std::array::from_fn(|a| x.1[a].max(y.1[a])),
+                x.2 && y.2,
+            )
+        };
+        let chunks = || {
+            clouds.par_iter().enumerate().flat_map(|(s, c)| {
+                c.positions
+                    .par_chunks(POINT_CHUNK)
+                    .enumerate()
+                    .map(move |(j, ps)| (s, j * POINT_CHUNK, ps))
+            })
+        };
+        let (lo, hi, inside) = chunks()
+            .map(|(_, _, ps)| bounds(ps))
+            .reduce(|| empty, merge);
+        if !inside {
             for cloud in clouds {
                 if let Some(index) = cloud.positions.iter().position(|p| !self.inside_grid(p)) {
                     return Err(self.position_error(index, cloud.positions[index], limit_m));
                 }
             }
         }
+        if lo[0] > hi[0] {
+            return Ok((Vec::new(), BatchCodes::new([0; 3], [0; 3])));
+        }
+        // Division and floor are monotone: every key lies in the box of the corner keys.
+        let key = |p: &[f64; 3]| p.map(|v| floor_i32(v / r));
+        let codes = BatchCodes::new(key(&lo), key(&hi));
+        let numbering = PointNumbering::new(clouds);
+        // Runs of consecutive points in one cell, chunk by chunk.
+        let parts: Vec<Vec<Item>> = chunks()
+            .map_init(Vec::new, |run: &mut Vec<Item>, (s, start, ps)| {
+                run.clear();
+                let mut last_key = None;
+                for (k, p) in ps.iter().enumerate() {
+                    let key = key(p);
+                    if last_key == Some(key) {
+                        if let Some(last) = run.last_mut().filter(|x| x.2 < u16::MAX) {
+                            last.2 += 1;
+                            continue;
+                        }
+                    }
+                    last_key = Some(key);
+                    run.push(Item(codes.code(key), numbering.number(s, start + k), 0));
+                }
+                run.to_vec()
+            })
+            .collect();
+        let mut order = parts.concat();
+        drop(parts);
         radix_sort_by_code(&mut order);
-        Ok(order)
+        Ok((order, codes))
     }
 
     /// Endpoint updates of sorted points (see [`SrMap::sorted_points`]; `clouds[s]` is scan
@@ -682,11 +733,11 @@ impl SrMap {
         &mut self,
         clouds: &[&PointCloud],
         first: u32,
-        order: &[Item],
+        (order, codes): (&[Item], &BatchCodes),
         batch: &mut Batch,
     ) -> usize {
         if !batch.hashed {
-            return self.update_endpoints_parallel(clouds, first, order);
+            return self.update_endpoints_parallel(clouds, first, (order, codes));
         }
         let distinct = order.chunk_by(|a, b| a.code() == b.code()).count();
         self.cells.reserve(distinct);
@@ -698,7 +749,7 @@ impl SrMap {
         let numbering = PointNumbering::new(clouds);
         let mut touched = 0;
         for points in order.chunk_by(|a, b| a.code() == b.code()) {
-            let ci = self.cell_for_code(points[0].code(), batch) as usize;
+            let ci = self.cell_for_key(codes.key(points[0].code()), batch) as usize;
             let mut colour = self.colours.get(ci).copied();
             let (t, scan) = apply_points(
                 &mut self.cells[ci],
@@ -715,8 +766,11 @@ impl SrMap {
             batch.last_scan[ci] = scan;
             if labelled {
                 let cell = &mut self.cells[ci];
-                let h = expand_histogram(&self.histograms, cell.histogram_ref);
-                cell.label = choose_label(self.dirichlet.as_ref(), &h);
+                cell.label = label_of(
+                    self.dirichlet.as_ref(),
+                    &self.histograms,
+                    cell.histogram_ref,
+                );
             }
         }
         touched
@@ -730,7 +784,7 @@ impl SrMap {
         &mut self,
         clouds: &[&PointCloud],
         first: u32,
-        order: &[Item],
+        (order, codes): (&[Item], &BatchCodes),
     ) -> usize {
         let labelled = clouds.iter().any(|c| c.label.is_some());
         let numbering = PointNumbering::new(clouds);
@@ -743,7 +797,13 @@ impl SrMap {
                 .map(|slice| {
                     slice
                         .chunk_by(|a, b| a.code() == b.code())
-                        .map(|g| this.find(g[0].code()).unwrap_or(NEW_CELL))
+                        .map(|g| {
+                            if this.runs.is_empty() {
+                                return NEW_CELL;
+                            }
+                            this.find(morton(codes.key(g[0].code())))
+                                .unwrap_or(NEW_CELL)
+                        })
                         .collect()
                 })
                 .collect()
@@ -790,7 +850,7 @@ impl SrMap {
                 for (points, &ci) in slice.chunk_by(|a, b| a.code() == b.code()).zip(&found) {
                     let (mut cell, mut colour) = if ci == NEW_CELL {
                         (
-                            Cell::empty(unmorton(points[0].code())),
+                            Cell::empty(codes.key(points[0].code())),
                             ColourSum::default(),
                         )
                     } else {
@@ -817,8 +877,7 @@ impl SrMap {
                     u.origin.resize(u.histograms.len(), NEW_HISTOGRAM);
                     u.touched += t;
                     if labelled {
-                        let h = expand_histogram(&u.histograms, cell.histogram_ref);
-                        cell.label = choose_label(model, &h);
+                        cell.label = label_of(model, &u.histograms, cell.histogram_ref);
                     }
                     if ci == NEW_CELL {
                         if cell.histogram_ref & POOLED != 0 {
@@ -876,14 +935,15 @@ impl SrMap {
         touched
     }
 
-    /// The id of the cell with this code in the batch's hash index, created when missing.
-    fn cell_for_code(&mut self, code: u64, batch: &mut Batch) -> u32 {
+    /// The id of the cell with this key in the batch's hash index, created when missing.
+    fn cell_for_key(&mut self, key: [i32; 3], batch: &mut Batch) -> u32 {
+        let code = morton(key);
         if let Some(&ci) = batch.index.get(&code) {
             return ci;
         }
         // insert_scans checked that the cell count stays below 2³².
         let ci = self.cells.len() as u32;
-        self.cells.push(Cell::empty(unmorton(code)));
+        self.cells.push(Cell::empty(key));
         if self.coloured {
             self.colours.push(ColourSum::default());
         }
@@ -963,9 +1023,10 @@ impl SrMap {
     }
 
     /// Makes the cells from `old_len` on a run and merges it with the runs before it while
-    /// the one before is less than twice as large. Returns whether the whole map was packed
-    /// anew (which also releases spare capacity).
-    fn index_new_cells(&mut self, old_len: usize) -> bool {
+    /// the one before is less than twice as large (`sorted`: the new cells are in Morton
+    /// order already). Returns whether the whole map was packed anew (which also releases
+    /// spare capacity).
+    fn index_new_cells(&mut self, old_len: usize, sorted: bool) -> bool {
         let len = self.cells.len();
         if len == old_len {
             return false;
@@ -979,7 +1040,9 @@ impl SrMap {
                 break;
             }
         }
-        self.sort_from(start);
+        if !(sorted && start == old_len) {
+            self.sort_from(start);
+        }
         let tree = PackedTree::build(&self.cells[start..], |c| c.key);
         self.runs.push(Run {
             start,
@@ -1226,7 +1289,7 @@ impl SrMap {
         self.colours.truncate(if with_colours { kept } else { 0 });
         self.histograms = table;
         self.runs.clear();
-        self.index_new_cells(0);
+        self.index_new_cells(0, false);
         before - kept
     }
 
@@ -1251,14 +1314,15 @@ fn floor_i32(q: f64) -> i32 {
     }
 }
 
-/// A point to insert: its cell code and its number ([`PointNumbering`]), packed in 12
-/// bytes (the sort moves every point several times: a quarter less memory traffic than
-/// a padded 16-byte pair).
+/// Consecutive points of one cloud in one cell: their cell code, the first one's number
+/// ([`PointNumbering`]) and how many follow it, packed in 14 bytes (the sort moves every
+/// item several times; a scan's neighbouring points often share a cell, so a run is a
+/// third fewer items to sort on the real scans).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-#[repr(C, packed(4))]
-struct Item(u64, u32);
+#[repr(C, packed(2))]
+struct Item(u64, u32, u16);
 
-const _: () = assert!(std::mem::size_of::<Item>() == 12);
+const _: () = assert!(std::mem::size_of::<Item>() == 14);
 
 impl Item {
     /// The cell code.
@@ -1267,10 +1331,16 @@ impl Item {
         self.0
     }
 
-    /// The point number.
+    /// The first point's number.
     #[inline]
     fn number(self) -> u32 {
         self.1
+    }
+
+    /// Points in the run.
+    #[inline]
+    fn len(self) -> usize {
+        usize::from(self.2) + 1
     }
 }
 
@@ -1337,6 +1407,9 @@ impl PointNumbering {
     }
 }
 
+/// Points per chunk of the parallel passes over the positions.
+const POINT_CHUNK: usize = 1 << 14;
+
 /// Fewest points per slice of a parallel endpoint update (small in tests, to have many).
 #[cfg(not(test))]
 const MIN_SLICE: usize = 1 << 14;
@@ -1373,7 +1446,8 @@ fn global_ref(remap: &[u32], r: u32) -> u32 {
     }
 }
 
-/// Applies one cell's points (sorted by scan, then point; `clouds[s]` is scan `first + s`):
+/// Applies one cell's runs of points (sorted by scan, then point; `clouds[s]` is scan
+/// `first + s`):
 /// one hit per scan, then hit count, label histogram, object vote and colour per point.
 /// Returns (scans touching the cell, last scan).
 fn apply_points(
@@ -1397,17 +1471,24 @@ fn apply_points(
             cell.log_odds = (cell.log_odds + hit).min(max);
         }
         let cloud = clouds[c];
-        cell.hits = cell.hits.saturating_add(1);
+        let run = i..i + x.len();
+        cell.hits = cell.hits.saturating_add(x.len() as u32);
         if let Some(l) = &cloud.label {
-            add_label(histograms, &mut cell.histogram_ref, l[i]);
+            for &l in &l[run.clone()] {
+                add_label(histograms, &mut cell.histogram_ref, l);
+            }
         }
         if let Some(o) = &cloud.object {
-            if o[i] != 0 {
-                cell.add_object(o[i]);
+            for &o in &o[run.clone()] {
+                if o != 0 {
+                    cell.add_object(o);
+                }
             }
         }
         if let (Some(c), Some(sum)) = (&cloud.rgb, colour.as_deref_mut()) {
-            sum.add(c[i]);
+            for &c in &c[run] {
+                sum.add(c);
+            }
         }
     }
     (touched, scan)
@@ -1453,7 +1534,7 @@ fn radix_sort_by_code(items: &mut [Item]) {
 
 /// Bits per radix digit.
 const DIGIT: usize = 11;
-/// Buckets this small are sorted least significant digit first (16 bytes each: 128 KiB).
+/// Buckets this small are sorted least significant digit first (14 bytes each: 112 KiB).
 const IN_CACHE: usize = 1 << 13;
 
 /// Stable sort of `a` by the low `bits` bits of the codes (the others are equal); `b` is
@@ -1615,6 +1696,19 @@ fn digit_counts(a: &[Item], shift: usize, width: usize) -> Vec<usize> {
             x
         },
     )
+}
+
+/// The label of a cell's histogram reference (see [`choose_label`]; without a model, a
+/// one-class histogram is its class).
+fn label_of(model: Option<&DirichletModel>, table: &[Histogram], r: u32) -> u8 {
+    if model.is_none() && r & POOLED == 0 {
+        return if r & 0xffff > 0 {
+            ((r >> 16) & 0xff) as u8
+        } else {
+            0
+        };
+    }
+    choose_label(model, &expand_histogram(table, r))
 }
 
 /// The label of a histogram: the Dirichlet choice, or the majority without a model.
@@ -1795,7 +1889,15 @@ pub(crate) mod tests {
     /// from a plain per-point loop.
     #[test]
     fn batch_insertion_equals_a_point_by_point_reference() {
-        let clouds: Vec<PointCloud> = (0..3).map(|s| random_cloud(3000, 2.0, 40 + s)).collect();
+        let mut clouds: Vec<PointCloud> = (0..3).map(|s| random_cloud(3000, 2.0, 40 + s)).collect();
+        // A scan-like cloud: neighbours often share a cell (runs of points).
+        let mut walk = random_cloud(3000, 2.0, 43);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(44);
+        for i in 1..walk.len() {
+            let step: [f64; 3] = std::array::from_fn(|_| rng.gen_range(-0.03..0.03));
+            walk.positions[i] = std::array::from_fn(|a| walk.positions[i - 1][a] + step[a]);
+        }
+        clouds.push(walk);
         let mut map = SrMap::new(MapOptions::default()).unwrap();
         let batch: Vec<(&PointCloud, Option<[f64; 3]>)> =
             clouds.iter().map(|c| (c, None)).collect();
@@ -1830,6 +1932,7 @@ pub(crate) mod tests {
             }
         }
         assert_eq!(map.len(), want.len());
+        assert!(map.cells().is_sorted_by_key(|c| morton(c.key)));
         let mut mixed = 0;
         for (i, c) in map.cells().iter().enumerate() {
             let w = want[&c.key];
@@ -1846,6 +1949,22 @@ pub(crate) mod tests {
         }
         assert!(mixed > 0 && mixed < map.len());
         assert_eq!(map.histogram_table().len(), mixed);
+    }
+
+    #[test]
+    fn a_run_longer_than_an_item_holds_is_split() {
+        let n = usize::from(u16::MAX) + 5000;
+        let mut cloud = random_cloud(n, 1.0, 45);
+        cloud.positions.fill([0.05, 0.05, 0.05]);
+        let mut map = SrMap::new(MapOptions::default()).unwrap();
+        map.insert_cloud(&cloud, None).unwrap();
+        assert_eq!(map.len(), 1);
+        assert_eq!(map.cells()[0].hits, n as u32);
+        let (mut table, mut r) = (Vec::new(), 0);
+        for &l in cloud.label.as_ref().unwrap() {
+            add_label(&mut table, &mut r, l);
+        }
+        assert_eq!(map.histogram(&map.cells()[0]), expand_histogram(&table, r));
     }
 
     #[test]
@@ -1882,7 +2001,7 @@ pub(crate) mod tests {
             (60_000, u64::MAX >> 1),
         ] {
             let mut items: Vec<Item> = (0..n)
-                .map(|i| Item(rng.gen_range(0..spread) | 7 << 50, i))
+                .map(|i| Item(rng.gen_range(0..spread) | 7 << 50, i, 0))
                 .collect();
             let mut want = items.clone();
             want.sort_by_key(|x| x.code());

@@ -16,21 +16,33 @@ use std::ops::Range;
 const M: usize = super::NODE_CAPACITY;
 
 /// Offset added to a key before interleaving (keys are in `(−2²⁰, 2²⁰)`).
-const MORTON_BIAS: i64 = 1 << 20;
+pub(super) const MORTON_BIAS: i64 = 1 << 20;
+
+/// The bits of each byte value spread to every third bit.
+static SPREAD_BYTE: [u64; 256] = {
+    let mut table = [0u64; 256];
+    let mut v = 0;
+    while v < 256 {
+        let mut bit = 0;
+        while bit < 8 {
+            table[v] |= ((v as u64 >> bit) & 1) << (3 * bit);
+            bit += 1;
+        }
+        v += 1;
+    }
+    table
+};
 
 /// Spreads the low 21 bits of `v` to every third bit.
-fn spread(v: u64) -> u64 {
-    let mut x = v & 0x1f_ffff;
-    x = (x | x << 32) & 0x001f_0000_0000_ffff;
-    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
-    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
-    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
-    x = (x | x << 2) & 0x1249_2492_4924_9249;
-    x
+#[inline]
+pub(super) fn spread(v: u64) -> u64 {
+    SPREAD_BYTE[(v & 0xff) as usize]
+        | SPREAD_BYTE[((v >> 8) & 0xff) as usize] << 24
+        | SPREAD_BYTE[((v >> 16) & 0x1f) as usize] << 48
 }
 
 /// Inverse of [`spread`].
-fn compact(v: u64) -> u64 {
+pub(super) fn compact(v: u64) -> u64 {
     let mut x = v & 0x1249_2492_4924_9249;
     x = (x | x >> 2) & 0x10c3_0c30_c30c_30c3;
     x = (x | x >> 4) & 0x100f_00f0_0f00_f00f;
@@ -47,6 +59,7 @@ pub(crate) fn morton(key: [i32; 3]) -> u64 {
 }
 
 /// The key of a Morton code (inverse of [`morton`]).
+#[cfg(test)]
 pub(crate) fn unmorton(code: u64) -> [i32; 3] {
     [0, 1, 2].map(|k| (compact(code >> k) as i64 - MORTON_BIAS) as i32)
 }
@@ -241,6 +254,12 @@ mod tests {
         assert_eq!(morton([0, 1, 0]) - morton([0, 0, 0]), 2);
         assert_eq!(morton([0, 0, 1]) - morton([0, 0, 0]), 4);
         assert!(morton([-1, 0, 0]) < morton([0, 0, 0]));
+        for _ in 0..1000 {
+            let v: u64 = rng.gen_range(0..1 << 21);
+            let bit_by_bit = (0..21).fold(0, |x, b| x | ((v >> b) & 1) << (3 * b));
+            assert_eq!(spread(v), bit_by_bit);
+            assert_eq!(compact(bit_by_bit), v);
+        }
     }
 
     #[test]
