@@ -664,8 +664,8 @@ impl SrMap {
                 for a in 0..3 {
                     lo[a] = lo[a].min(p[a]);
                     hi[a] = hi[a].max(p[a]);
-                    inside &= p[a].abs() < limit_m;
                 }
+                inside &= self.inside_grid(p);
             }
             (lo, hi, inside)
         };
@@ -701,7 +701,8 @@ impl SrMap {
         let key = |p: &[f64; 3]| p.map(|v| floor_i32(v / r));
         let codes = BatchCodes::new(key(&lo), key(&hi));
         let numbering = PointNumbering::new(clouds);
-        // Runs of consecutive points in one cell, chunk by chunk.
+        // Runs of consecutive points in one cell, chunk by chunk (into a scratch vector per
+        // thread, so that only exact-size vectors are allocated).
         let parts: Vec<Vec<Item>> = chunks()
             .map_init(Vec::new, |run: &mut Vec<Item>, (s, start, ps)| {
                 run.clear();
@@ -792,18 +793,21 @@ impl SrMap {
         // The stored cell of every group ([`NEW_CELL`]: created), per slice.
         let found: Vec<Vec<u32>> = {
             let this = &*self;
+            // A map without runs has no cell to find.
+            let stored = !this.runs.is_empty();
             slices
                 .par_iter()
                 .map(|slice| {
                     slice
                         .chunk_by(|a, b| a.code() == b.code())
                         .map(|g| {
-                            if this.runs.is_empty() {
-                                return NEW_CELL;
+                            if stored {
+                                this.find(morton(codes.key(g[0].code())))
+                            } else {
+                                None
                             }
-                            this.find(morton(codes.key(g[0].code())))
-                                .unwrap_or(NEW_CELL)
                         })
+                        .map(|ci| ci.unwrap_or(NEW_CELL))
                         .collect()
                 })
                 .collect()

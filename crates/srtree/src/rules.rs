@@ -13,7 +13,8 @@
 //! then chosen again one at a time given all the other tests (RIPPER's optimisation).
 //! Before the search, 0/1 features with a value that (almost) no true positive has become
 //! preconditions ([`preconditions`]: both things in front, neither a ground surface), so
-//! the search spends its tests on what discriminates among the remaining pairs. Cost per step: O(B · F · n log n) for beam B, F features and n pairs.
+//! the search spends its tests on what discriminates among the remaining pairs. Cost per
+//! step: O(B · F · n log n) for beam B, F features and n pairs.
 //!
 //! Labels with symmetric annotator noise (each flipped with probability ε) make the F1
 //! against them favour rules that cover too much: a region of n pairs holds about εn
@@ -241,8 +242,8 @@ fn grow(
     let labelled = covered.iter().filter(|&&i| y[i]).count();
     let start = noise.f1(labelled, covered.len(), positives);
     let pool = covered.clone();
-    let mut best = (start, pre.clone());
-    let mut beam: Vec<(f64, Rule, Vec<usize>)> = vec![(best.0, pre.clone(), covered)];
+    let mut beam: Vec<(f64, Rule, Vec<usize>)> = vec![(start, pre.clone(), covered)];
+    let mut best = (start, pre);
     for _ in 0..options.max_tests {
         // Each rule of the beam proposes its best extensions, at most `per_parent` of
         // them, so that one strong prefix cannot fill the beam with near-copies of itself.
