@@ -589,6 +589,39 @@ fn acceptable(
     !placed.iter().any(|other| rings_overlap(ring, other))
 }
 
+/// A tag key or value as XML attribute text: `& < > " '` escaped by quick-xml; tab, line
+/// feed and carriage return as character references (a reader's attribute-value
+/// normalisation would turn them into spaces); characters XML 1.0 cannot hold at all (the
+/// other C0 controls, U+FFFE, U+FFFF) replaced by U+FFFD. Plain text is returned borrowed.
+fn xml_attribute(value: &str) -> std::borrow::Cow<'_, str> {
+    let escaped = quick_xml::escape::escape(value);
+    let needs_reference = |c: char| c < ' ' || c == '\u{FFFE}' || c == '\u{FFFF}';
+    if !escaped.contains(needs_reference) {
+        return escaped;
+    }
+    let mut out = String::with_capacity(escaped.len() + 16);
+    for c in escaped.chars() {
+        match c {
+            '\t' => out.push_str("&#9;"),
+            '\n' => out.push_str("&#10;"),
+            '\r' => out.push_str("&#13;"),
+            c if needs_reference(c) => out.push('\u{FFFD}'),
+            c => out.push(c),
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+/// One `<tag k=".." v=".."/>` line, key and value escaped.
+fn write_tag(xml: &mut String, key: &str, value: &str) {
+    let _ = writeln!(
+        xml,
+        "    <tag k=\"{}\" v=\"{}\"/>",
+        xml_attribute(key),
+        xml_attribute(value)
+    );
+}
+
 fn write_xml(b: &Builder, frame: &LocalFrame, half: f64) -> String {
     let mut xml = String::with_capacity(64 * b.points.len() + 4096);
     let (min_lat, min_lon) = frame.to_wgs84([-half - 20.0, -half - 20.0]);
@@ -609,7 +642,7 @@ fn write_xml(b: &Builder, frame: &LocalFrame, half: f64) -> String {
             let _ = writeln!(xml, "    <nd ref=\"{}\"/>", node + 1);
         }
         for (key, value) in &w.tags {
-            let _ = writeln!(xml, "    <tag k=\"{key}\" v=\"{value}\"/>");
+            write_tag(&mut xml, key, value);
         }
         xml.push_str("  </way>\n");
     }
@@ -626,7 +659,7 @@ fn write_xml(b: &Builder, frame: &LocalFrame, half: f64) -> String {
             inner + 1
         );
         for (key, value) in tags {
-            let _ = writeln!(xml, "    <tag k=\"{key}\" v=\"{value}\"/>");
+            write_tag(&mut xml, key, value);
         }
         xml.push_str("  </relation>\n");
     }
@@ -712,6 +745,99 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Every `<tag>` of an OSM XML text as quick-xml reads it back (unescaped).
+    fn tags_read_back(xml: &str) -> Vec<(String, String)> {
+        let mut reader = quick_xml::Reader::from_str(xml);
+        let mut tags = Vec::new();
+        loop {
+            match reader.read_event().unwrap() {
+                quick_xml::events::Event::Empty(e) if e.name().as_ref() == b"tag" => {
+                    let value = |key: &[u8]| {
+                        let attr = e.try_get_attribute(key).unwrap().unwrap();
+                        attr.unescape_value().unwrap().into_owned()
+                    };
+                    tags.push((value(b"k"), value(b"v")));
+                }
+                quick_xml::events::Event::Eof => return tags,
+                _ => {}
+            }
+        }
+    }
+
+    /// Issue 16: the writer put tag keys and values into attributes unescaped, so a `"`,
+    /// `&` or `<` in a name gave a file no XML reader accepts.
+    #[test]
+    fn nasty_tag_values_round_trip_through_writer_and_reader() {
+        let nasty = [
+            "a \"quoted\" & 'single' <tag/> > end",
+            "line one\nline two\r\n\ttabbed  &amp; already escaped",
+            "unicode: Straße, 東京, Ελλάδα, 🚲",
+            "",
+        ];
+        let frame = LocalFrame::new(48.0, 11.0).unwrap();
+        let square = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let mut ways = Vec::new();
+        for (k, value) in nasty.iter().enumerate() {
+            let first = 4 * k;
+            ways.push(Way {
+                nodes: vec![first, first + 1, first + 2, first + 3, first],
+                tags: vec![
+                    ("building", value.to_string()),
+                    ("name", value.to_string()),
+                    ("k&<\"'>", value.to_string()),
+                ],
+            });
+        }
+        ways.push(Way {
+            nodes: vec![0, 2],
+            tags: vec![
+                ("highway", nasty[0].to_string()),
+                ("name", nasty[1].to_string()),
+            ],
+        });
+        let points = (0..nasty.len())
+            .flat_map(|k| square.iter().map(move |p| [p[0] + 20.0 * k as f64, p[1]]))
+            .collect();
+        let b = Builder {
+            points,
+            ways,
+            relations: vec![(
+                0,
+                1,
+                vec![("name", "control \u{1} and \u{FFFF}".to_string())],
+            )],
+            street_segments: Vec::new(),
+        };
+        let xml = write_xml(&b, &frame, 100.0);
+        // Every key and value, exactly (the characters XML cannot hold become U+FFFD).
+        let expected: Vec<(String, String)> = b
+            .ways
+            .iter()
+            .flat_map(|w| w.tags.iter())
+            .chain(b.relations.iter().flat_map(|r| r.2.iter()))
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .map(|(k, v)| (k, v.replace(['\u{1}', '\u{FFFF}'], "\u{FFFD}")))
+            .collect();
+        assert_eq!(tags_read_back(&xml), expected);
+        // And through urbansem's own reader.
+        let map = OsmMap::from_xml_str(&xml).unwrap();
+        let names: Vec<&str> = map
+            .buildings
+            .iter()
+            .filter_map(|b| b.name.as_deref())
+            .collect();
+        let values: Vec<&str> = map.buildings.iter().map(|b| b.building.as_str()).collect();
+        assert_eq!(names, nasty.to_vec());
+        assert_eq!(values, nasty.to_vec());
+        assert_eq!(map.highways[0].highway, nasty[0]);
+        assert_eq!(map.highways[0].name.as_deref(), Some(nasty[1]));
+        // Plain text is not touched (the generated city stays byte for byte the same).
+        assert!(matches!(
+            xml_attribute("Lindenstraße 12"),
+            std::borrow::Cow::Borrowed(_)
+        ));
     }
 
     #[test]

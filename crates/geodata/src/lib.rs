@@ -11,12 +11,14 @@
 //! - [`cloud`]: the column-wise [`cloud::PointCloud`] and its PLY/PCD/LAS/LAZ/KITTI IO.
 //! - [`mercator`]: scaled-Mercator georeferencing used by the KITTI and MCD datasets.
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
+//! - [`fsio`]: atomic output files (written beside the target, renamed into place).
 //! - [`sim`]: the urban scan simulator (scene from a map, ray-cast scanner, datasets with truth).
 
 pub mod city;
 pub mod classes;
 pub mod cloud;
 pub mod datasets;
+pub mod fsio;
 pub mod mercator;
 pub mod osm;
 pub mod projection;

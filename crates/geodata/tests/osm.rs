@@ -68,6 +68,19 @@ fn counts_match_pyosmium() {
     assert_eq!(m.stats.open_building_ways, 44);
 }
 
+/// Building outlines and holes as libosmium's area assembler builds them (pyosmium 4.3,
+/// `area` callback on areas with `building=*` other than `no`: outer and inner rings; see
+/// `osmium_read` in `scripts/osm_roundtrip.py`). Before the osmium-style assembly Monaco
+/// had two more outlines: two self-crossing building ways osmium (and now urbansem) skips.
+#[test]
+fn outlines_and_holes_match_pyosmium_areas() {
+    for (map, outlines, holes) in [(kth(), 72, 1), (monaco(), 23_327, 2), (helsinki(), 446, 72)] {
+        let map_holes: usize = map.buildings.iter().map(|b| b.inners.len()).sum();
+        assert_eq!((map.buildings.len(), map_holes), (outlines, holes));
+    }
+    assert_eq!(monaco().stats.skipped_building_ways_crossing, 2);
+}
+
 #[test]
 fn bounds_define_the_frame() {
     let m = kth();
@@ -80,16 +93,35 @@ fn bounds_define_the_frame() {
 fn skipped_elements_are_counted() {
     let h = helsinki();
     let s = &h.stats;
-    let outlines_from_ways = h
+    // A way touching itself gives several outlines: count the ways.
+    let ways_with_outlines = h
         .buildings
         .iter()
         .filter(|b| b.kind == geodata::osm::ElementKind::Way)
-        .count();
+        .map(|b| b.osm_id)
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
     assert_eq!(
-        outlines_from_ways
+        ways_with_outlines
             + s.skipped_building_ways_missing_nodes
-            + s.skipped_building_ways_degenerate,
+            + s.skipped_building_ways_degenerate
+            + s.skipped_building_ways_crossing,
         s.building_ways
+    );
+    let relations_with_outlines = h
+        .buildings
+        .iter()
+        .filter(|b| b.kind == geodata::osm::ElementKind::Relation)
+        .map(|b| b.osm_id)
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    assert_eq!(
+        relations_with_outlines
+            + s.skipped_building_relations_missing_members
+            + s.skipped_building_relations_unclosed
+            + s.skipped_building_relations_crossing
+            + s.skipped_building_relations_degenerate,
+        s.building_relations
     );
     assert!(
         s.skipped_building_ways_missing_nodes > 0,

@@ -68,10 +68,13 @@ impl SimDataset {
             .get("map")
             .and_then(Value::as_str)
             .ok_or_else(|| dataset_err(&meta_path, "missing string \"map\""))?;
-        let mut map_path = PathBuf::from(map);
-        if !map_path.exists() && dir.join(map).exists() {
-            map_path = dir.join(map);
-        }
+        // Relative to the dataset folder first (how `sim dataset` records its own map),
+        // then as given (relative to the working directory).
+        let map_path = if dir.join(map).exists() {
+            dir.join(map)
+        } else {
+            PathBuf::from(map)
+        };
         let truth_path = dir.join("truth.json");
         let truth_v = read_json(&truth_path)?;
         let obj = truth_v

@@ -40,6 +40,18 @@ pub enum GenerateError {
         /// The line.
         text: String,
     },
+    /// A token position that is not a number or exceeds what the file can hold.
+    #[error("{file}:{line}: token position {value:?} is not a number below {limit} (the number of token facts): positions count tokens within a citation")]
+    BadPosition {
+        /// The data file.
+        file: String,
+        /// 1-based line.
+        line: usize,
+        /// The position as written.
+        value: String,
+        /// The exclusive upper bound: the number of token facts.
+        limit: usize,
+    },
     /// A data file without any fact.
     #[error("{file}: no {expected} facts")]
     Empty {
@@ -199,7 +211,7 @@ fn mfoilp_facts<'a>(
     name: &str,
     arity: usize,
     expected: &'static str,
-) -> Result<Vec<Vec<&'a str>>, GenerateError> {
+) -> Result<Vec<(usize, Vec<&'a str>)>, GenerateError> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
@@ -212,7 +224,7 @@ fn mfoilp_facts<'a>(
                         .iter()
                         .all(|a| !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric())) =>
             {
-                out.push(args)
+                out.push((i + 1, args))
             }
             _ => {
                 return Err(GenerateError::BadFact {
@@ -284,10 +296,21 @@ pub fn ie_evidence_from_mfoilp(
     let mut out = String::new();
     let mut words: Vec<&str> = Vec::new();
     let mut max_pos = 0usize;
-    for a in &tok {
+    for (line, a) in &tok {
         let _ = writeln!(out, "Token(T{},P{},B{})", a[0], a[1], a[2]);
         words.push(a[0]);
-        max_pos = max_pos.max(a[1].parse().unwrap_or(0));
+        // `LessThan` below is quadratic in the largest position: a position must be a
+        // position of some token, so it is below the number of token facts.
+        let position = a[1].parse::<usize>().ok().filter(|&p| p < tok.len());
+        let Some(position) = position else {
+            return Err(GenerateError::BadPosition {
+                file: "tokens".to_owned(),
+                line: *line,
+                value: a[1].to_owned(),
+                limit: tok.len(),
+            });
+        };
+        max_pos = max_pos.max(position);
     }
     words.sort_unstable();
     words.dedup();
@@ -309,14 +332,14 @@ pub fn ie_evidence_from_mfoilp(
             let _ = writeln!(out, "LessThan({},{})", pos(i), pos(j));
         }
     }
-    for a in &sim {
+    for (_, a) in &sim {
         let _ = writeln!(
             out,
             "SimilarTitle(B{},P{},P{},B{},P{},P{})",
             a[0], a[1], a[2], a[3], a[4], a[5]
         );
     }
-    for a in &cand {
+    for (_, a) in &cand {
         let _ = writeln!(out, "JntInfCandidate(B{},P{},B{})", a[0], a[1], a[2]);
     }
     Ok(out)
@@ -611,6 +634,34 @@ mod tests {
         assert!(!ev.contains("IsDate(Tneural)") && !ev.contains("Next(P03"));
         let e = ie_evidence_from_mfoilp("token(\"a b\",00,1).\n", "x", "y").unwrap_err();
         assert!(e.to_string().starts_with("tokens:1: expected"), "{e}");
+    }
+
+    /// Issue 16: a token position of 4294967295 in mfoilp's `tokens` made the generator
+    /// write a `LessThan` line for every pair of positions up to it (quadratic in a number
+    /// read from the file: gigabytes, then an abort). A position must be below the number
+    /// of token facts.
+    #[test]
+    fn issue16_huge_token_position_is_an_error() {
+        for bad in ["4294967295", "99999999999999999999999", "2"] {
+            let tokens = format!("token(\"a\",00,1).\ntoken(\"b\",{bad},1).\n");
+            let e = ie_evidence_from_mfoilp(
+                &tokens,
+                "similartitle(1,00,00,1,00,00).\n",
+                "jntinfcandidate(1,00,1).\n",
+            )
+            .unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    GenerateError::BadPosition {
+                        line: 2,
+                        limit: 2,
+                        ..
+                    }
+                ),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]

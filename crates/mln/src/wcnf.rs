@@ -108,7 +108,11 @@ pub fn write_wcnf(
             soft.push((weight, vec![-y]));
         }
     }
-    let top = soft.iter().map(|(w, _)| w).sum::<u64>() + 1;
+    // Saturating: weights near u64::MAX (a huge |w|·scale) must not wrap the hard weight.
+    let top = soft
+        .iter()
+        .fold(0u64, |acc, (w, _)| acc.saturating_add(*w))
+        .saturating_add(1);
     let variables = (n + aux) as usize;
     writeln!(
         out,

@@ -21,6 +21,7 @@
 //! ```
 
 use crate::maxflow::{Capacity, Graph};
+use crate::polynomial::{Literal, Polynomial};
 use crate::qpbo::Qpbo;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -111,6 +112,26 @@ impl QuadraticInstance {
         Some(g)
     }
 
+    /// The same function as a [`Polynomial`] in literal form, as a user writes it in an
+    /// `.opb` file: `E0 x̄ᵢ + E1 xᵢ` per variable and one term `E_ab` per non-zero entry of
+    /// each pair's table (a Potts pair becomes `λ xᵢ x̄ⱼ + λ x̄ᵢ xⱼ`).
+    pub fn to_polynomial(&self) -> Polynomial {
+        let lit = |v: u32, value: bool| Literal::new(v, value);
+        let mut f = Polynomial::new(self.num_vars);
+        f.reserve_terms(2 * self.num_vars + 2 * self.pairs.len());
+        for (i, u) in self.unary.iter().enumerate() {
+            let i = i as u32;
+            f.add_term(f64::from(u[0]), &[lit(i, false)]);
+            f.add_term(f64::from(u[1]), &[lit(i, true)]);
+        }
+        for p in &self.pairs {
+            for (k, &e) in p.e.iter().enumerate() {
+                f.add_term(f64::from(e), &[lit(p.i, k >= 2), lit(p.j, k % 2 == 1)]);
+            }
+        }
+        f
+    }
+
     /// Energy of `x`, in `i64`.
     pub fn energy(&self, x: &[bool]) -> i64 {
         let mut e = 0i64;
@@ -150,8 +171,10 @@ impl QuadraticInstance {
                 bytes.extend_from_slice(&v.to_le_bytes());
             }
         }
-        let mut f = std::fs::File::create(&path).map_err(err)?;
+        // Written beside the target and renamed into place: never a half-written file.
+        let mut f = tempfile::NamedTempFile::new_in(dir).map_err(err)?;
         f.write_all(&bytes).map_err(err)?;
+        f.persist(&path).map_err(|e| err(e.error))?;
         Ok(path)
     }
 }

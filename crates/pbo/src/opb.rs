@@ -114,6 +114,9 @@ pub struct OpbProblem {
     pub names: Vec<String>,
     /// The objective sense in the file.
     pub sense: Sense,
+    /// The header's `#variable=` count, if any. When it exceeds the file's length, only the
+    /// variables of the objective are in [`OpbProblem::names`] (the others are free).
+    pub declared: Option<usize>,
 }
 
 impl OpbProblem {
@@ -133,73 +136,210 @@ pub fn read_opb(path: &Path) -> Result<OpbProblem, OpbError> {
     parse_opb(&text, &label)
 }
 
-/// A token with its 1-based line and column.
+/// A token with its 1-based line; the column is computed only for error messages.
+#[derive(Clone, Copy)]
 struct Token<'a> {
     text: &'a str,
     line: usize,
-    col: usize,
+    /// The whole line the token is on.
+    line_text: &'a str,
+}
+
+impl Token<'_> {
+    /// Byte offset of the token in its line.
+    fn offset(&self) -> usize {
+        self.text.as_ptr() as usize - self.line_text.as_ptr() as usize
+    }
+
+    /// 1-based column in characters (counted once, when an error needs it).
+    fn col(&self) -> usize {
+        self.line_text
+            .get(..self.offset())
+            .map_or(1, |before| before.chars().count() + 1)
+    }
+
+    /// 1-based column just after the token.
+    fn end_col(&self) -> usize {
+        self.col() + self.text.chars().count()
+    }
+}
+
+/// The tokens of the non-comment lines, produced lazily: linear in the text even when the
+/// whole objective is one line (no position is recounted per token).
+struct Tokens<'a> {
+    lines: std::iter::Enumerate<std::str::Lines<'a>>,
+    rest: &'a str,
+    line: usize,
+    line_text: &'a str,
+}
+
+impl<'a> Tokens<'a> {
+    fn new(text: &'a str) -> Self {
+        Tokens {
+            lines: text.lines().enumerate(),
+            rest: "",
+            line: 0,
+            line_text: "",
+        }
+    }
+}
+
+impl<'a> Iterator for Tokens<'a> {
+    type Item = Token<'a>;
+
+    fn next(&mut self) -> Option<Token<'a>> {
+        loop {
+            self.rest = trim_start_fast(self.rest);
+            if !self.rest.is_empty() {
+                break;
+            }
+            let (i, line) = self.lines.next()?;
+            if line.trim_start().starts_with('*') {
+                continue;
+            }
+            self.line = i + 1;
+            self.line_text = line;
+            self.rest = line;
+        }
+        // `;` is a token of its own.
+        let len = if self.rest.starts_with(';') {
+            1
+        } else {
+            token_len(self.rest)
+        };
+        let (text, rest) = self.rest.split_at(len);
+        self.rest = rest;
+        Some(Token {
+            text,
+            line: self.line,
+            line_text: self.line_text,
+        })
+    }
+}
+
+/// Whether an ASCII byte is whitespace as `char::is_whitespace` says (which includes the
+/// vertical tab that `u8::is_ascii_whitespace` leaves out).
+fn is_ascii_space(b: u8) -> bool {
+    b.is_ascii_whitespace() || b == 0x0B
+}
+
+/// `str::trim_start`, with a byte loop over ASCII (the tokenizer's hot path).
+fn trim_start_fast(s: &str) -> &str {
+    let skip = s.bytes().take_while(|&b| is_ascii_space(b)).count();
+    // `skip` ends at an ASCII byte, a char boundary; non-ASCII space is left to std.
+    s.get(skip..).map_or("", str::trim_start)
+}
+
+/// Length in bytes of the token at the start of `s`: up to whitespace or `;`.
+fn token_len(s: &str) -> usize {
+    let bytes = s.as_bytes();
+    let mut i = 0;
+    while let Some(&b) = bytes.get(i) {
+        if b < 0x80 {
+            if is_ascii_space(b) || b == b';' {
+                return i;
+            }
+            i += 1;
+        } else {
+            match s.get(i..).and_then(|r| r.chars().next()) {
+                Some(c) if c.is_whitespace() => return i,
+                Some(c) => i += c.len_utf8(),
+                None => return i,
+            }
+        }
+    }
+    i
+}
+
+/// The `* #variable= N` and `* #constant= c` header values of the comment lines.
+struct Header {
+    declared: Option<usize>,
+    constant: Option<f64>,
+}
+
+fn read_header(text: &str, path: &str) -> Result<Header, OpbError> {
+    let mut header = Header {
+        declared: None,
+        constant: None,
+    };
+    for (i, line) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let Some(comment) = line.trim_start().strip_prefix('*') else {
+            continue;
+        };
+        if let Some(n) = header_value(comment, "#variable=") {
+            let n = n.parse::<usize>().map_err(|_| OpbError::Syntax {
+                path: path.to_owned(),
+                line: line_no,
+                col: column_of(line, "#variable="),
+                message: format!("expected a variable count after #variable=, found {n:?}"),
+            })?;
+            header.declared = Some(n);
+        }
+        if let Some(c) = header_value(comment, "#constant=") {
+            let col = column_of(line, "#constant=") + "#constant=".len();
+            header.constant = Some(parse_coefficient(c, path, line_no, || col)?);
+        }
+    }
+    Ok(header)
+}
+
+/// 1-based character column of `key` in `line` (1 when absent).
+fn column_of(line: &str, key: &str) -> usize {
+    line.find(key)
+        .map_or(1, |at| line[..at].chars().count() + 1)
+}
+
+/// How variable names become indices.
+enum Naming {
+    /// No header: names are free-form, numbered in order of first appearance.
+    Free(FxHashMap<String, u32>),
+    /// A header declares `x1 … xN` and N fits the file: `xk` is variable `k - 1`.
+    Declared(usize),
+    /// A header declares more variables than the file could mention: only the variables of
+    /// the objective are kept, numbered in order of first appearance and re-sorted by `k`
+    /// at the end (the others do not occur in the objective, so any value is optimal).
+    DeclaredSparse {
+        declared: usize,
+        index: FxHashMap<u64, u32>,
+        numbers: Vec<u64>,
+    },
+}
+
+/// The `k` of a canonical name `xk` (`k ≥ 1`), if the name is one.
+fn canonical_number(name: &str) -> Option<u64> {
+    let digits = name.strip_prefix('x')?;
+    if digits.is_empty() || digits.starts_with('0') || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
 }
 
 /// Parses `.opb` text; `path` labels error messages.
+///
+/// Linear time in the text. A `#variable= N` header allocates names for `x1 … xN` only when
+/// `N` is at most the text's length in bytes; a larger header (a file can mention at most
+/// that many variables) keeps just the variables of the objective and records `N` in
+/// [`OpbProblem::declared`].
 pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
-    let mut declared: Option<usize> = None;
-    let mut constant_comment: Option<f64> = None;
-    let mut tokens: Vec<Token<'_>> = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let trimmed = line.trim_start();
-        if let Some(comment) = trimmed.strip_prefix('*') {
-            if let Some(n) = header_value(comment, "#variable=") {
-                let n = n.parse::<usize>().map_err(|_| OpbError::Syntax {
-                    path: path.to_owned(),
-                    line: line_no,
-                    col: line.find("#variable=").map_or(1, |c| c + 1),
-                    message: format!("expected a variable count after #variable=, found {n:?}"),
-                })?;
-                declared = Some(n);
-            }
-            if let Some(c) = header_value(comment, "#constant=") {
-                let col = line.find("#constant=").map_or(1, |c| c + 11);
-                constant_comment = Some(parse_coefficient(c, path, line_no, col)?);
-            }
-            continue;
-        }
-        let mut rest = line;
-        let mut offset = 0;
-        loop {
-            let start = rest.len() - rest.trim_start().len();
-            rest = &rest[start..];
-            offset += start;
-            if rest.is_empty() {
-                break;
-            }
-            // `;` and `:`-terminated keywords are tokens of their own.
-            let len = if rest.starts_with(';') {
-                1
-            } else {
-                rest.find(|c: char| c.is_whitespace() || c == ';')
-                    .unwrap_or(rest.len())
-            };
-            tokens.push(Token {
-                text: &rest[..len],
-                line: line_no,
-                col: line[..offset].chars().count() + 1,
-            });
-            rest = &rest[len..];
-            offset += len;
-        }
-    }
-
+    let header = read_header(text, path)?;
     let mut names: Vec<String> = Vec::new();
-    let mut index: FxHashMap<String, u32> = FxHashMap::default();
-    if let Some(n) = declared {
-        for k in 1..=n {
-            index.insert(format!("x{k}"), k as u32 - 1);
-            names.push(format!("x{k}"));
+    let mut naming = match header.declared {
+        None => Naming::Free(FxHashMap::default()),
+        Some(n) if n <= text.len() => {
+            names = (1..=n).map(|k| format!("x{k}")).collect();
+            Naming::Declared(n)
         }
-    }
+        Some(n) => Naming::DeclaredSparse {
+            declared: n,
+            index: FxHashMap::default(),
+            numbers: Vec::new(),
+        },
+    };
     let mut poly = Polynomial::new(names.len());
-    let mut it = tokens.iter().peekable();
+    // A term takes at least 4 bytes (`+1 x`); reserve for a typical 16.
+    poly.reserve_terms(text.len() / 16);
+    let mut it = Tokens::new(text).peekable();
     let Some(first) = it.next() else {
         return Err(OpbError::NoObjective {
             path: path.to_owned(),
@@ -212,14 +352,14 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
             return Err(if other.ends_with(':') {
                 syntax(
                     path,
-                    first,
+                    &first,
                     format!("unknown objective {other:?}: expected `min:` or `max:`"),
                 )
             } else {
                 OpbError::Constraint {
                     path: path.to_owned(),
                     line: first.line,
-                    col: first.col,
+                    col: first.col(),
                     found: other.to_owned(),
                 }
             })
@@ -227,24 +367,27 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
     };
     let sign = if sense == Sense::Maximize { -1.0 } else { 1.0 };
     let mut closed = false;
+    let mut last = first;
+    let mut lits = Vec::new();
     while let Some(tok) = it.next() {
+        last = tok;
         if tok.text == ";" {
             closed = true;
             break;
         }
         let coeff = if starts_number(tok.text) {
-            parse_coefficient(tok.text, path, tok.line, tok.col)?
+            parse_coefficient(tok.text, path, tok.line, || tok.col())?
         } else {
             return Err(syntax(
                 path,
-                tok,
+                &tok,
                 format!(
                     "expected a coefficient (like +3 or -2.5) or `;`, found {:?}",
                     tok.text
                 ),
             ));
         };
-        let mut lits = Vec::new();
+        lits.clear();
         while let Some(next) = it.peek() {
             if next.text == ";" || starts_number(next.text) {
                 break;
@@ -260,23 +403,49 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
                     format!("expected a literal like x3 or ~x3, found {:?}", next.text),
                 ));
             }
-            let var = match index.get(name) {
-                Some(&v) => v,
-                None => {
-                    if let Some(n) = declared {
-                        return Err(OpbError::UnknownVariable {
-                            path: path.to_owned(),
-                            line: next.line,
-                            col: next.col,
-                            name: name.to_owned(),
-                            declared: n,
-                        });
+            let unknown = |declared: usize| OpbError::UnknownVariable {
+                path: path.to_owned(),
+                line: next.line,
+                col: next.col(),
+                name: name.to_owned(),
+                declared,
+            };
+            let var = match &mut naming {
+                Naming::Free(index) => match index.get(name) {
+                    Some(&v) => v,
+                    None => {
+                        let v = u32::try_from(names.len()).map_err(|_| {
+                            syntax(path, next, "more than 2^32 variables".to_owned())
+                        })?;
+                        names.push(name.to_owned());
+                        index.insert(name.to_owned(), v);
+                        v
                     }
-                    let v = names.len() as u32;
-                    names.push(name.to_owned());
-                    index.insert(name.to_owned(), v);
-                    v
-                }
+                },
+                Naming::Declared(n) => match canonical_number(name) {
+                    // k ≤ n ≤ text length, so k - 1 fits in u32 for any text we can hold.
+                    Some(k) if k as usize <= *n => u32::try_from(k - 1)
+                        .map_err(|_| syntax(path, next, "more than 2^32 variables".to_owned()))?,
+                    _ => return Err(unknown(*n)),
+                },
+                Naming::DeclaredSparse {
+                    declared,
+                    index,
+                    numbers,
+                } => match canonical_number(name) {
+                    Some(k) if k <= *declared as u64 => match index.get(&k) {
+                        Some(&v) => v,
+                        None => {
+                            let v = u32::try_from(numbers.len()).map_err(|_| {
+                                syntax(path, next, "more than 2^32 variables".to_owned())
+                            })?;
+                            numbers.push(k);
+                            index.insert(k, v);
+                            v
+                        }
+                    },
+                    _ => return Err(unknown(*declared)),
+                },
             };
             lits.push(if negated {
                 Literal::neg(var)
@@ -288,13 +457,10 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
         poly.add_term(sign * coeff, &lits);
     }
     if !closed {
-        let (line, col) = tokens
-            .last()
-            .map_or((1, 1), |t| (t.line, t.col + t.text.len()));
         return Err(OpbError::Syntax {
             path: path.to_owned(),
-            line,
-            col,
+            line: last.line,
+            col: last.end_col(),
             message: "objective not terminated: expected `;`".to_owned(),
         });
     }
@@ -302,15 +468,45 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
         return Err(OpbError::Constraint {
             path: path.to_owned(),
             line: extra.line,
-            col: extra.col,
+            col: extra.col(),
             found: extra.text.to_owned(),
         });
     }
-    if let Some(c) = constant_comment {
+    if let Some(c) = header.constant {
         poly.add_constant(sign * c);
     }
+    if let Naming::DeclaredSparse { numbers, .. } = naming {
+        // Renumber the kept variables in the order of their declared index.
+        let mut order: Vec<u32> = (0..numbers.len() as u32).collect();
+        order.sort_unstable_by_key(|&v| numbers[v as usize]);
+        let mut new_of_old = vec![0u32; numbers.len()];
+        for (new, &old) in order.iter().enumerate() {
+            new_of_old[old as usize] = new as u32;
+        }
+        let mut sorted = Polynomial::new(numbers.len());
+        sorted.add_constant(poly.constant());
+        let mut mapped = Vec::new();
+        for (term, coeff) in poly.terms() {
+            mapped.clear();
+            mapped.extend(
+                term.iter()
+                    .map(|l| Literal::new(new_of_old[l.var() as usize], !l.is_negated())),
+            );
+            sorted.add_term(coeff, &mapped);
+        }
+        poly = sorted;
+        names = order
+            .iter()
+            .map(|&v| format!("x{}", numbers[v as usize]))
+            .collect();
+    }
     poly.add_vars(names.len().saturating_sub(poly.num_vars()));
-    Ok(OpbProblem { poly, names, sense })
+    Ok(OpbProblem {
+        poly,
+        names,
+        sense,
+        declared: header.declared,
+    })
 }
 
 /// Writes a problem as `.opb` text (header, constant comment, one `min:`/`max:` line).
@@ -370,29 +566,44 @@ fn is_identifier(name: &str) -> bool {
             .all(|c| c.is_alphanumeric() || matches!(c, '_' | '[' | ']' | '.' | '#' | '@'))
 }
 
-fn parse_coefficient(text: &str, path: &str, line: usize, col: usize) -> Result<f64, OpbError> {
-    let bad = || OpbError::BadCoefficient {
+fn parse_coefficient(
+    text: &str,
+    path: &str,
+    line: usize,
+    col: impl FnOnce() -> usize,
+) -> Result<f64, OpbError> {
+    let t = text.strip_prefix('+').unwrap_or(text);
+    let (negative, digits) = match t.strip_prefix('-') {
+        Some(d) => (true, d),
+        None => (false, t),
+    };
+    // Integers of up to 15 digits are exact in f64: read them without the float parser.
+    if !digits.is_empty() && digits.len() <= 15 && digits.bytes().all(|b| b.is_ascii_digit()) {
+        let v = digits
+            .bytes()
+            .fold(0i64, |v, b| v * 10 + i64::from(b - b'0')) as f64;
+        return Ok(if negative { -v } else { v });
+    }
+    // A number starts with a digit or a point after its sign; this also keeps out the
+    // `inf`, `infinity` and `nan` that Rust's float parser would accept.
+    let parsed = if digits.starts_with(|c: char| c.is_ascii_digit() || c == '.') {
+        t.parse::<f64>().ok().filter(|v| v.is_finite())
+    } else {
+        None
+    };
+    parsed.ok_or_else(|| OpbError::BadCoefficient {
         path: path.to_owned(),
         line,
-        col,
+        col: col(),
         text: text.to_owned(),
-    };
-    let t = text.strip_prefix('+').unwrap_or(text);
-    let lower = t.to_ascii_lowercase();
-    if lower.contains("nan") || lower.contains("inf") {
-        return Err(bad());
-    }
-    match t.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(bad()),
-    }
+    })
 }
 
 fn syntax(path: &str, tok: &Token<'_>, message: String) -> OpbError {
     OpbError::Syntax {
         path: path.to_owned(),
         line: tok.line,
-        col: tok.col,
+        col: tok.col(),
         message,
     }
 }

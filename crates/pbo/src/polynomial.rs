@@ -123,7 +123,55 @@ pub struct Polynomial {
     num_vars: usize,
     constant: f64,
     terms: Vec<Term>,
-    index: FxHashMap<Box<[Literal]>, usize>,
+    index: TermIndex,
+}
+
+/// Monomial → position in `Polynomial::terms`. Monomials of one or two literals (the bulk
+/// of every real function) are keyed by their packed literals, so a lookup reads no
+/// pointer; longer ones by their literal slice.
+#[derive(Debug, Clone, Default)]
+struct TermIndex {
+    short: FxHashMap<u64, usize>,
+    long: FxHashMap<Box<[Literal]>, usize>,
+}
+
+impl TermIndex {
+    /// The packed key of a sorted monomial of one or two literals. A single literal `a`
+    /// is `(u32::MAX, a)`: no sorted pair starts with the largest literal.
+    fn short_key(lits: &[Literal]) -> Option<u64> {
+        match lits {
+            [a] => Some((u64::from(u32::MAX) << 32) | u64::from(a.0)),
+            [a, b] => Some((u64::from(a.0) << 32) | u64::from(b.0)),
+            _ => None,
+        }
+    }
+
+    fn get(&self, lits: &[Literal]) -> Option<usize> {
+        match Self::short_key(lits) {
+            Some(k) => self.short.get(&k).copied(),
+            None => self.long.get(lits).copied(),
+        }
+    }
+
+    fn insert(&mut self, lits: &[Literal], pos: usize) {
+        match Self::short_key(lits) {
+            Some(k) => {
+                self.short.insert(k, pos);
+            }
+            None => {
+                self.long.insert(lits.into(), pos);
+            }
+        }
+    }
+
+    fn reserve(&mut self, additional: usize) {
+        self.short.reserve(additional);
+    }
+
+    fn clear(&mut self) {
+        self.short.clear();
+        self.long.clear();
+    }
 }
 
 /// Sorts literals, drops repeats (l·l = l); returns `None` if x·x̄ makes the product zero.
@@ -177,10 +225,56 @@ impl Polynomial {
         if coeff == 0.0 {
             return;
         }
+        // Up to four literals are sorted on the stack: the lookup of an existing monomial
+        // allocates nothing (file readers add millions of short terms).
+        if literals.len() <= 4 {
+            let mut buf = [Literal(0); 4];
+            let lits = &mut buf[..literals.len()];
+            lits.copy_from_slice(literals);
+            lits.sort_unstable();
+            let mut n = 0;
+            for i in 0..lits.len() {
+                if n > 0 && lits[n - 1] == lits[i] {
+                    continue;
+                }
+                if n > 0 && lits[n - 1].var() == lits[i].var() {
+                    return; // x · x̄ = 0
+                }
+                lits[n] = lits[i];
+                n += 1;
+            }
+            self.add_sorted_slice(coeff, &buf[..n]);
+            return;
+        }
         let Some(lits) = normalize(literals) else {
             return;
         };
         self.add_normalized(coeff, lits);
+    }
+
+    /// Reserves room for `additional` more terms.
+    pub fn reserve_terms(&mut self, additional: usize) {
+        self.terms.reserve(additional);
+        self.index.reserve(additional);
+    }
+
+    /// Adds a term given as sorted literals on distinct variables, allocating only when
+    /// the monomial is new.
+    fn add_sorted_slice(&mut self, coeff: f64, lits: &[Literal]) {
+        let Some(last) = lits.last() else {
+            self.constant += coeff;
+            return;
+        };
+        self.num_vars = self.num_vars.max(last.var() as usize + 1);
+        if let Some(pos) = self.index.get(lits) {
+            self.terms[pos].coeff += coeff;
+        } else {
+            self.index.insert(lits, self.terms.len());
+            self.terms.push(Term {
+                literals: lits.into(),
+                coeff,
+            });
+        }
     }
 
     /// Adds a term whose literals are already sorted and on distinct variables.
@@ -193,10 +287,10 @@ impl Polynomial {
             self.num_vars = self.num_vars.max(last.var() as usize + 1);
         }
         let key: Box<[Literal]> = lits.into_boxed_slice();
-        if let Some(&pos) = self.index.get(&key) {
+        if let Some(pos) = self.index.get(&key) {
             self.terms[pos].coeff += coeff;
         } else {
-            self.index.insert(key.clone(), self.terms.len());
+            self.index.insert(&key, self.terms.len());
             self.terms.push(Term {
                 literals: key,
                 coeff,
@@ -219,7 +313,7 @@ impl Polynomial {
             Some(lits) => self
                 .index
                 .get(lits.as_slice())
-                .map_or(0.0, |&i| self.terms[i].coeff),
+                .map_or(0.0, |i| self.terms[i].coeff),
             None => 0.0,
         }
     }
@@ -369,7 +463,7 @@ impl Polynomial {
         self.terms.retain(|t| t.coeff.abs() > tolerance);
         self.index.clear();
         for (i, t) in self.terms.iter().enumerate() {
-            self.index.insert(t.literals.clone(), i);
+            self.index.insert(&t.literals, i);
         }
     }
 

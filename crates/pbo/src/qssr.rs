@@ -25,6 +25,7 @@ use crate::qpbo::{ImproveOptions, Label, ProbeOptions, Qpbo};
 use crate::quadratize::{quadratize, Quadratization, Quadratizer};
 use crate::tabu::{enumerate_minimum, tabu_search, TabuOptions};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::time::Instant;
 
 /// Options of [`solve`].
@@ -195,7 +196,8 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
     let occurring = f.occurring_vars();
     let num_occurring = occurring.iter().filter(|&&o| o).count();
     let mut persistent: Vec<Option<bool>> = vec![None; n];
-    let mut residual = f.clone();
+    // Borrowed until the first fixing: a quadratic input is never copied.
+    let mut residual: Cow<'_, Polynomial> = Cow::Borrowed(f);
     let mut rounds = Vec::new();
     let mut seconds = PhaseSeconds::default();
     let mut lower_bound = f64::NEG_INFINITY;
@@ -207,10 +209,13 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
         }
         let free_variables = residual.occurring_vars().iter().filter(|&&o| o).count();
         let t0 = Instant::now();
-        let quad = quadratize(&residual, options.quadratizer);
+        // A quadratic residual goes to QPBO as it is (no slack, no copy).
+        let quad = (residual.num_higher_order_terms() > 0)
+            .then(|| quadratize(&residual, options.quadratizer));
+        let quad_poly: &Polynomial = quad.as_ref().map_or(&*residual, |q| &q.poly);
         let seconds_quadratize = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let mut inst = build_qpbo(&quad.poly);
+        let mut inst = build_qpbo(quad_poly);
         inst.qpbo.solve();
         if options.weak_persistencies {
             inst.qpbo.compute_weak_persistencies();
@@ -257,7 +262,7 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
         rounds.push(QssrRound {
             free_variables,
             higher_order_terms: residual.num_higher_order_terms(),
-            slacks: quad.num_slacks(),
+            slacks: quad.as_ref().map_or(0, Quadratization::num_slacks),
             fixed_by_qpbo,
             fixed_by_probe,
             lower_bound: bound,
@@ -268,7 +273,7 @@ pub fn solve(f: &Polynomial, options: &QssrOptions) -> QssrResult {
         if fixed_by_qpbo + fixed_by_probe == 0 {
             break;
         }
-        residual = residual.fix(&newly);
+        residual = Cow::Owned(residual.fix(&newly));
     }
 
     let t2 = Instant::now();

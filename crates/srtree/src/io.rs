@@ -49,6 +49,11 @@ const HISTOGRAM_BYTES: usize = 2 * Class::COUNT;
 /// Bytes of one colour sum.
 const COLOUR_BYTES: usize = 16;
 
+/// The checksum stored in the last 8 bytes of a map file: FNV-1a 64 of every byte before it.
+pub fn checksum(bytes: &[u8]) -> u64 {
+    fnv1a(bytes)
+}
+
 fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
@@ -132,7 +137,7 @@ pub fn encode_map(map: &SrMap) -> Vec<u8> {
 /// Writes a map file.
 pub fn write_map(path: impl AsRef<Path>, map: &SrMap) -> Result<()> {
     let path = path.as_ref();
-    std::fs::write(path, encode_map(map)).map_err(io_err(path))
+    geodata::fsio::write_atomic(path, encode_map(map)).map_err(io_err(path))
 }
 
 /// A bounds-checked little-endian reader naming the file and offset in its errors.
@@ -309,7 +314,10 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
         let object_votes = r.u16("object votes")?;
         let tail = r.array::<2>("label")?;
         let label = tail[0];
-        if key.iter().any(|k| k.abs() > KEY_LIMIT) {
+        if key
+            .iter()
+            .any(|k| k.unsigned_abs() > KEY_LIMIT.unsigned_abs())
+        {
             return Err(r.malformed(
                 at,
                 format!("cell key {key:?} outside the grid (|key| ≤ {KEY_LIMIT})"),
@@ -588,5 +596,26 @@ mod tests {
             read_map("/nonexistent/map.srt"),
             Err(SrtreeError::Io { .. })
         ));
+    }
+
+    /// Issue 16 (found by the `srt` fuzz target): a cell key of `i32::MIN` overflowed
+    /// `abs()` in the grid check (a panic with overflow checks; without them the wrapped
+    /// value passed the check and the key went on, outside the grid). It is a Malformed
+    /// error naming the cell's offset.
+    #[test]
+    fn issue_16_cell_key_i32_min_is_refused() {
+        let good = encode_map(&sample_map());
+        for axis in 0..3 {
+            let mut bytes = good.clone();
+            let at = 53 + 4 * axis;
+            bytes[at..at + 4].copy_from_slice(&i32::MIN.to_le_bytes());
+            let n = bytes.len();
+            let sum = checksum(&bytes[..n - 8]);
+            bytes[n - 8..].copy_from_slice(&sum.to_le_bytes());
+            match decode_map(&bytes, Path::new("min.srt")) {
+                Err(SrtreeError::Malformed { offset, .. }) => assert_eq!(offset, 53),
+                other => panic!("expected a Malformed error at offset 53, got {other:?}"),
+            }
+        }
     }
 }

@@ -85,10 +85,12 @@ impl StreetsDataset {
             });
         }
         let given = PathBuf::from(&meta.map);
-        let map_path = if given.exists() {
-            given
-        } else if dir.join(&given).exists() {
+        // Relative to the dataset folder first (how `sim dataset` records its own map),
+        // then as given (relative to the working directory).
+        let map_path = if dir.join(&given).exists() {
             dir.join(&given)
+        } else if given.exists() {
+            given
         } else {
             return Err(StreetsError::Dataset {
                 path: meta_path,

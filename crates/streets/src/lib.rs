@@ -114,6 +114,14 @@ pub enum StreetsError {
         /// What is wrong.
         message: String,
     },
+    /// A model file is not valid JSON of a [`model::StreetModel`] or holds a value out of range.
+    #[error("the model {path}: {message}")]
+    Model {
+        /// Model file.
+        path: PathBuf,
+        /// What is wrong (JSON line and column, or the field and its accepted range).
+        message: String,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {cause}")]
     Io {

@@ -17,6 +17,7 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 
 /// What counts as street.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -379,6 +380,161 @@ pub struct Estimates {
     pub exact: bool,
 }
 
+/// Narrowest corridor bin a model file may ask for, metres (the thesis uses 0.2).
+pub const MIN_BIN_M: f64 = 0.05;
+/// Most corridor columns a model file may ask for (the thesis' 40 m corridor has 200).
+pub const MAX_CORRIDOR_COLS: usize = 1000;
+
+impl StreetModel {
+    /// Reads a model written by `urbansem streets train` (JSON) and checks every value
+    /// [`StreetModel::estimate`] relies on: feature dimensions, finite numbers, positive
+    /// scales, and a corridor of at most [`MAX_CORRIDOR_COLS`] bins of at least
+    /// [`MIN_BIN_M`]. `path` names the file in errors.
+    pub fn from_json(bytes: &[u8], path: &Path) -> Result<StreetModel> {
+        let model: StreetModel =
+            serde_json::from_slice(bytes).map_err(|e| StreetsError::Model {
+                path: path.to_path_buf(),
+                message: format!("line {} column {}: {e}", e.line(), e.column()),
+            })?;
+        model.check().map_err(|message| StreetsError::Model {
+            path: path.to_path_buf(),
+            message,
+        })?;
+        Ok(model)
+    }
+
+    /// The first value out of range, described with its field and the accepted range.
+    fn check(&self) -> std::result::Result<(), String> {
+        let range = |name: &str, v: f64, ok: bool, accepted: &str| {
+            if ok {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{name} = {v} is out of range (expected {accepted})"
+                ))
+            }
+        };
+        let positive =
+            |name: &str, v: f64| range(name, v, v.is_finite() && v > 0.0, "a finite number > 0");
+        let finite = |name: &str, v: f64| range(name, v, v.is_finite(), "a finite number");
+        let g = &self.geometry;
+        positive("geometry.corridor.width_m", g.corridor.width_m)?;
+        range(
+            "geometry.corridor.bin_m",
+            g.corridor.bin_m,
+            g.corridor.bin_m.is_finite() && g.corridor.bin_m >= MIN_BIN_M,
+            "a finite number >= 0.05",
+        )?;
+        let cols = g.corridor.width_m / g.corridor.bin_m;
+        range(
+            "geometry.corridor.width_m / bin_m",
+            cols,
+            cols.round() <= MAX_CORRIDOR_COLS as f64,
+            "at most 1000 columns",
+        )?;
+        let radius = g.corridor.intersection_radius_m;
+        range(
+            "geometry.corridor.intersection_radius_m",
+            radius,
+            radius.is_finite() && radius >= 0.0,
+            "a finite number >= 0",
+        )?;
+        let window = g.features.ground_window_m;
+        range(
+            "geometry.features.ground_window_m",
+            window,
+            window.is_finite() && (0.0..=g.corridor.width_m).contains(&window),
+            "a finite number from 0 to the corridor width",
+        )?;
+        range(
+            "geometry.max_width_m",
+            g.max_width_m,
+            g.max_width_m.is_finite() && g.max_width_m > 0.0 && g.max_width_m <= g.corridor.width_m,
+            "a finite number > 0, at most the corridor width",
+        )?;
+        positive("geometry.sigma_m", g.sigma_m)?;
+        finite("geometry.max_turn_deg", g.max_turn_deg)?;
+        let t = &g.tempering;
+        positive("geometry.tempering.tau", t.tau)?;
+        range(
+            "geometry.tempering.floor_nats",
+            t.floor_nats,
+            t.floor_nats > 0.0,
+            "a number > 0 or null",
+        )?;
+        range(
+            "geometry.tempering.prior_weight",
+            t.prior_weight,
+            t.prior_weight.is_finite() && t.prior_weight >= 0.0,
+            "a finite number >= 0",
+        )?;
+        range(
+            "geometry.tempering.coupling_cap_nats",
+            t.coupling_cap_nats,
+            t.coupling_cap_nats > 0.0,
+            "a number > 0 or null",
+        )?;
+        let c = &self.classifier;
+        for (name, v) in [("mean", &c.scaler.mean), ("std", &c.scaler.std)] {
+            if v.len() != FEATURE_DIMS {
+                return Err(format!(
+                    "classifier.scaler.{name} has {} values, expected {FEATURE_DIMS}",
+                    v.len()
+                ));
+            }
+        }
+        for (k, (&m, &s)) in c.scaler.mean.iter().zip(&c.scaler.std).enumerate() {
+            finite(&format!("classifier.scaler.mean[{k}]"), f64::from(m))?;
+            positive(&format!("classifier.scaler.std[{k}]"), f64::from(s))?;
+        }
+        let svm = &c.svm;
+        if svm.dims != FEATURE_DIMS {
+            return Err(format!(
+                "classifier.svm.dims = {}, expected {FEATURE_DIMS}",
+                svm.dims
+            ));
+        }
+        if Some(svm.support.len()) != svm.coef.len().checked_mul(FEATURE_DIMS) {
+            return Err(format!(
+                "classifier.svm.support has {} values for {} coefficients of {FEATURE_DIMS} features",
+                svm.support.len(),
+                svm.coef.len()
+            ));
+        }
+        range(
+            "classifier.svm.gamma",
+            svm.gamma,
+            svm.gamma.is_finite() && svm.gamma >= 0.0,
+            "a finite number >= 0",
+        )?;
+        finite("classifier.svm.rho", svm.rho)?;
+        if let Some(k) = svm.coef.iter().position(|v| !v.is_finite()) {
+            return Err(format!(
+                "classifier.svm.coef[{k}] = {} is not finite",
+                svm.coef[k]
+            ));
+        }
+        if let Some(k) = svm.support.iter().position(|v| !v.is_finite()) {
+            return Err(format!(
+                "classifier.svm.support[{k}] = {} is not finite",
+                svm.support[k]
+            ));
+        }
+        let counts = c.confusion.counts;
+        if counts.iter().flatten().any(|&n| n > u64::MAX / 4) {
+            return Err(format!(
+                "classifier.confusion.counts {counts:?} holds a count above 2^62"
+            ));
+        }
+        let p = &self.prior;
+        finite("prior.mean_offset_m", p.mean_offset_m)?;
+        positive("prior.sigma_offset_m", p.sigma_offset_m)?;
+        finite("prior.mean_log_width", p.mean_log_width)?;
+        positive("prior.sigma_log_width", p.sigma_log_width)?;
+        Ok(())
+    }
+}
+
 impl StreetModel {
     /// Estimates offset and width of every segment of `map` that `cloud` covers.
     pub fn estimate(
@@ -522,5 +678,78 @@ pub fn default_mcmc(seed: u64) -> McmcOptions {
     McmcOptions {
         seed,
         ..McmcOptions::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::potentials::Confusion;
+    use crate::svm::TrainStats;
+
+    fn small_model() -> StreetModel {
+        StreetModel {
+            target: Target::DrivingArea,
+            geometry: GeometryOptions::default(),
+            classifier: BinClassifier {
+                scaler: Scaler {
+                    mean: vec![0.0; FEATURE_DIMS],
+                    std: vec![1.0; FEATURE_DIMS],
+                },
+                svm: Svm {
+                    gamma: 0.1,
+                    dims: FEATURE_DIMS,
+                    support: vec![0.5; 2 * FEATURE_DIMS],
+                    coef: vec![1.0, -1.0],
+                    rho: 0.0,
+                    stats: TrainStats::default(),
+                },
+                confusion: Confusion {
+                    counts: [[90, 10], [5, 95]],
+                },
+            },
+            prior: GeometryPrior::fit(&[(0.0, 7.0), (0.5, 9.0)]),
+        }
+    }
+
+    /// Issue 16: a model file is a reader like any other — it comes back equal, and a file
+    /// `estimate` could not use (a scaler without features would make `Scaler::apply` call
+    /// `chunks_exact_mut(0)`; a tiny bin, corridors of billions of bins) is an error naming
+    /// the file and the field.
+    #[test]
+    fn issue_16_model_files_are_checked_when_read() {
+        let model = small_model();
+        let path = Path::new("m.json");
+        let bytes = serde_json::to_vec(&model).unwrap();
+        assert_eq!(StreetModel::from_json(&bytes, path).unwrap(), model);
+
+        let mut no_features = model.clone();
+        no_features.classifier.scaler.mean.clear();
+        let mut tiny_bin = model.clone();
+        tiny_bin.geometry.corridor.bin_m = 1e-6;
+        let mut short_support = model.clone();
+        short_support.classifier.svm.support.pop();
+        let mut zero_sigma = model.clone();
+        zero_sigma.prior.sigma_log_width = 0.0;
+        for (bad, field) in [
+            (no_features, "classifier.scaler.mean"),
+            (tiny_bin, "geometry.corridor.bin_m"),
+            (short_support, "classifier.svm.support"),
+            (zero_sigma, "prior.sigma_log_width"),
+        ] {
+            let bytes = serde_json::to_vec(&bad).unwrap();
+            let err = StreetModel::from_json(&bytes, path).unwrap_err();
+            let message = err.to_string();
+            assert!(matches!(err, StreetsError::Model { .. }), "{message}");
+            assert!(
+                message.contains("m.json") && message.contains(field),
+                "{message}"
+            );
+        }
+        let err =
+            StreetModel::from_json(b"{\"target\": \"driving_area\",\n  \"geometry\": 7}", path)
+                .unwrap_err()
+                .to_string();
+        assert!(err.contains("m.json") && err.contains("line 2"), "{err}");
     }
 }

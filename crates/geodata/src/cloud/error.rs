@@ -79,7 +79,7 @@ pub enum CloudError {
         value: String,
     },
     /// A point has a NaN or infinite coordinate.
-    #[error("{path}: point {point} has a non-finite position {position:?}; fix the file or read with ReadOptions {{ drop_non_finite: true }}")]
+    #[error("{path}: point {point} has a non-finite position {position:?} (PCL marks the invalid points of organized clouds so); skip and count such points with ReadOptions {{ drop_non_finite: true }} (`--drop-non-finite` on the command line)")]
     NonFinite {
         /// The file.
         path: PathBuf,
@@ -98,7 +98,7 @@ pub enum CloudError {
         /// The value found.
         value: u64,
     },
-    /// Data after the last announced point.
+    /// Data after the last announced point (PLY; PCD ignores it, as PCL does).
     #[error("{path}: {at}: {extra} bytes after the last point; the header count is wrong or the file is not this format")]
     TrailingData {
         /// The file.

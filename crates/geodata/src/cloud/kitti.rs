@@ -7,8 +7,9 @@
 
 use super::{io_err, path_buf, read_full, CloudError, Location, PointCloud, PointRecord};
 use super::{Columns, Precision, ReadOptions, ReadReport, Result, Sink};
+use crate::fsio::AtomicFile;
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Write};
+use std::io::{BufReader, Write};
 use std::path::Path;
 
 /// Bytes per point of a KITTI `.bin`.
@@ -64,8 +65,7 @@ pub fn read_kitti_bin(path: &Path, options: &ReadOptions) -> Result<(PointCloud,
 /// Writes a KITTI `.bin` scan (positions as f32, intensity or 0).
 pub fn write_kitti_bin(path: &Path, cloud: &PointCloud) -> Result<()> {
     cloud.check_columns()?;
-    let file = File::create(path).map_err(io_err(path))?;
-    let mut w = BufWriter::with_capacity(1 << 16, file);
+    let mut w = AtomicFile::create(path).map_err(io_err(path))?;
     for (i, p) in cloud.positions.iter().enumerate() {
         let intensity = cloud
             .intensity
@@ -82,7 +82,7 @@ pub fn write_kitti_bin(path: &Path, cloud: &PointCloud) -> Result<()> {
         }
         w.write_all(&rec).map_err(io_err(path))?;
     }
-    w.flush().map_err(io_err(path))
+    w.commit().map_err(io_err(path))
 }
 
 /// Reads a per-point label file (u32 little-endian per point); `expected_points` checks its size.
@@ -115,12 +115,11 @@ pub fn read_label_file(path: &Path, expected_points: Option<usize>) -> Result<Ve
 
 /// Writes a per-point label file (u32 little-endian per point).
 pub fn write_label_file(path: &Path, labels: &[u32]) -> Result<()> {
-    let file = File::create(path).map_err(io_err(path))?;
-    let mut w = BufWriter::new(file);
+    let mut w = AtomicFile::create(path).map_err(io_err(path))?;
     for l in labels {
         w.write_all(&l.to_le_bytes()).map_err(io_err(path))?;
     }
-    w.flush().map_err(io_err(path))
+    w.commit().map_err(io_err(path))
 }
 
 #[cfg(test)]
@@ -156,6 +155,35 @@ mod tests {
                 e,
                 CloudError::Truncated {
                     at: Location::Byte(0),
+                    ..
+                }
+            ),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn label_files_are_checked_against_the_scan() {
+        // KITTI files have no header count: the file's length is the count. A label file is
+        // read whole (its size bounds the allocation) and then compared with the scan's.
+        let dir = std::env::temp_dir().join(format!("urbansem-kitti-l-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.label");
+        write_label_file(&p, &[1, 2, 70_000]).unwrap();
+        assert_eq!(read_label_file(&p, Some(3)).unwrap(), vec![1, 2, 70_000]);
+        for expected in [2, 4, usize::MAX] {
+            let e = read_label_file(&p, Some(expected)).unwrap_err();
+            assert!(matches!(e, CloudError::Header { .. }), "{e}");
+        }
+        let bytes = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &bytes[..7]).unwrap();
+        let e = read_label_file(&p, None).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                CloudError::Truncated {
+                    at: Location::Byte(4),
+                    point: 1,
                     ..
                 }
             ),

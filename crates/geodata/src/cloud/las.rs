@@ -25,6 +25,13 @@
 //! * `raw_label` and `object` (u32) are stored in 4 extra bytes each.
 //! * `rgb` is stored as 16-bit colour (value × 257) and read back as the high byte.
 //!
+//! Before the `las` crate sees a file, the header's counts and offsets are checked against the
+//! file's length (the crate allocates by them): uncompressed point data must hold the point
+//! count, the first EVLR (which the crate reads whole) must fit, and a LAZ chunk table must not
+//! announce more chunks than the compressed data can hold. So an inflated count is an error
+//! naming the byte, never an allocation, and reading is linear in the file (times the
+//! decompression ratio for LAZ).
+//!
 //! The extra bytes are described by a standard Extra Bytes VLR (`LASF_Spec`, record 4).
 //! A VLR (`user_id` "urbansem", record 1) lists the columns and the extra-byte layout; a
 //! LAS file without it (another tool's) is read as intensity (u16), rgb (if the format has
@@ -33,8 +40,10 @@
 use super::{io_err, path_buf, CloudError, Location, PointCloud, PointRecord};
 use super::{Columns, Precision, ReadOptions, ReadReport, Result, Sink};
 use crate::classes::Class;
+use crate::fsio::AtomicFile;
 use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Reader, Transform, Vector, Version, Vlr, Writer};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// Grid step of written LAS positions, metres.
@@ -158,9 +167,122 @@ fn extra_bytes_vlr(c: &Columns) -> Vlr {
     }
 }
 
+/// Byte offset of `offset_to_point_data` in a LAS header.
+const OFFSET_TO_POINT_DATA_AT: u64 = 96;
+/// Bytes of an EVLR header; its u64 record length is at byte 20 of it.
+const EVLR_HEADER_BYTES: u64 = 60;
+/// Fewest bytes a LAZ chunk takes: its arithmetic decoder starts by reading 4 bytes.
+const LAZ_MIN_CHUNK_BYTES: u64 = 4;
+
+/// What [`check_layout`] learnt: the point count and record length the crate will use.
+struct Layout {
+    points: u64,
+    record_bytes: u64,
+}
+
+fn read_at<const N: usize>(path: &Path, r: &mut (impl Read + Seek), at: u64) -> Result<[u8; N]> {
+    let mut b = [0u8; N];
+    r.seek(SeekFrom::Start(at)).map_err(io_err(path))?;
+    r.read_exact(&mut b).map_err(io_err(path))?;
+    Ok(b)
+}
+
+/// Checks the counts and offsets of a LAS/LAZ header against the file's length, before the
+/// `las` crate allocates or loops by them (see the module doc).
+fn check_layout(path: &Path, r: &mut (impl Read + Seek), file_len: u64) -> Result<Layout> {
+    let raw = las::raw::Header::read_from(&mut *r).map_err(las_err(path, Location::Byte(0)))?;
+    let header_err = |at: u64, message: String| CloudError::Header {
+        path: path_buf(path),
+        at: Location::Byte(at),
+        message,
+    };
+    let data_start = u64::from(raw.offset_to_point_data);
+    if data_start > file_len {
+        return Err(header_err(
+            OFFSET_TO_POINT_DATA_AT,
+            format!("the point data starts at byte {data_start}, past the end of the file ({file_len} bytes)"),
+        ));
+    }
+    // The crate's rule: the legacy count unless it is 0 in a LAS 1.4 header.
+    let legacy = u64::from(raw.number_of_point_records);
+    let points = match raw.large_file {
+        Some(large) if legacy == 0 => large.number_of_point_records,
+        _ => legacy,
+    };
+    let record_bytes = u64::from(raw.point_data_record_length);
+    let compressed = raw.point_data_record_format & 0x80 != 0;
+    let available = file_len - data_start;
+    let need = points.checked_mul(record_bytes);
+    if !compressed && need.is_none_or(|need| need > available) {
+        let whole = available / record_bytes.max(1);
+        return Err(CloudError::Truncated {
+            path: path_buf(path),
+            at: Location::Byte(data_start + whole * record_bytes),
+            point: usize::try_from(whole).unwrap_or(usize::MAX),
+            expected: usize::try_from(points).unwrap_or(usize::MAX),
+        });
+    }
+    if need.and_then(|need| need.checked_add(data_start)).is_none() {
+        return Err(header_err(
+            OFFSET_TO_POINT_DATA_AT,
+            format!("{points} points of {record_bytes} bytes overflow a file offset"),
+        ));
+    }
+    if let Some(evlr) = raw.evlr.filter(|e| e.number_of_evlrs > 0) {
+        let start = evlr.start_of_first_evlr;
+        let fits = |len: u64| {
+            start
+                .checked_add(EVLR_HEADER_BYTES)
+                .and_then(|end| end.checked_add(len))
+                .is_some_and(|end| end <= file_len)
+        };
+        let len = if fits(0) {
+            u64::from_le_bytes(read_at(path, r, start + 20)?)
+        } else {
+            0
+        };
+        if !fits(0) || !fits(len) {
+            return Err(header_err(
+                start,
+                format!(
+                    "the first EVLR (at byte {start}, {len} bytes of data) does not fit in the file ({file_len} bytes)"
+                ),
+            ));
+        }
+    }
+    if compressed && available >= 8 {
+        // Where the laz crate looks for the chunk table: an offset at the start of the point
+        // data or, when that one is not past it, in the file's last 8 bytes.
+        let mut table = i64::from_le_bytes(read_at(path, r, data_start)?);
+        if table <= data_start as i64 {
+            table = i64::from_le_bytes(read_at(path, r, file_len - 8)?);
+        }
+        let table = u64::try_from(table).unwrap_or(0);
+        if table > data_start && table.saturating_add(8) <= file_len {
+            let chunks = u64::from(u32::from_le_bytes(read_at(path, r, table + 4)?));
+            let room = table - data_start;
+            if chunks.saturating_mul(LAZ_MIN_CHUNK_BYTES) > room {
+                return Err(header_err(
+                    table + 4,
+                    format!(
+                        "the LAZ chunk table announces {chunks} chunks, but the compressed points take only {room} bytes"
+                    ),
+                ));
+            }
+        }
+    }
+    r.seek(SeekFrom::Start(0)).map_err(io_err(path))?;
+    Ok(Layout {
+        points,
+        record_bytes,
+    })
+}
+
 /// Reads a LAS or LAZ file.
 pub fn read_las(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadReport)> {
-    let file = std::fs::File::open(path).map_err(io_err(path))?;
+    let mut file = std::fs::File::open(path).map_err(io_err(path))?;
+    let file_len = file.metadata().map_err(io_err(path))?.len();
+    let layout = check_layout(path, &mut file, file_len)?;
     let mut reader = Reader::new(std::io::BufReader::with_capacity(1 << 16, file))
         .map_err(las_err(path, Location::Byte(0)))?;
     let header = reader.header();
@@ -177,8 +299,20 @@ pub fn read_las(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
         .transpose()?;
     let format = *header.point_format();
     let n = usize::try_from(header.number_of_points()).unwrap_or(usize::MAX);
-    let file_len = std::fs::metadata(path).map_err(io_err(path))?.len();
-    let capacity = n.min(usize::try_from(file_len).unwrap_or(0));
+    if header.number_of_points() != layout.points {
+        // check_layout mirrors the crate's rule for the count; never trust a count it did not check.
+        return Err(CloudError::Header {
+            path: path_buf(path),
+            at: Location::Byte(0),
+            message: format!(
+                "the las crate reads {} points where the header checks found {}",
+                header.number_of_points(),
+                layout.points
+            ),
+        });
+    }
+    // A LAS record takes `record_bytes` in the file (LAZ: fewer; the vector then grows).
+    let capacity = n.min(usize::try_from(file_len / layout.record_bytes.max(1)).unwrap_or(0));
     let (columns, precision) = ours.unwrap_or((
         Columns {
             intensity: true,
@@ -268,6 +402,11 @@ pub fn write_las(path: &Path, cloud: &PointCloud) -> Result<()> {
         Format::new(if c.rgb { 7 } else { 6 }).map_err(las_err(path, Location::Byte(0)))?;
     format.extra_bytes = extra_len(&c) as u16;
     builder.point_format = format;
+    // LAZ by extension, as `las::Writer::from_path` decides.
+    builder.point_format.is_compressed = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("laz"));
     builder.generating_software = "urbansem".into();
     let bounds = cloud.bounds();
     let offset = |k: usize| {
@@ -298,7 +437,9 @@ pub fn write_las(path: &Path, cloud: &PointCloud) -> Result<()> {
     let header = builder
         .into_header()
         .map_err(las_err(path, Location::Byte(0)))?;
-    let mut writer = Writer::from_path(path, header).map_err(las_err(path, Location::Byte(0)))?;
+    // Written beside the target and renamed into place when complete.
+    let file = AtomicFile::create(path).map_err(io_err(path))?;
+    let mut writer = Writer::new(file, header).map_err(las_err(path, Location::Byte(0)))?;
     let unit = cloud
         .intensity
         .as_ref()
@@ -350,7 +491,10 @@ pub fn write_las(path: &Path, cloud: &PointCloud) -> Result<()> {
             .write_point(point)
             .map_err(las_err(path, Location::Point(i)))?;
     }
-    writer.close().map_err(las_err(path, Location::Byte(0)))
+    let file = writer
+        .into_inner()
+        .map_err(las_err(path, Location::Byte(0)))?;
+    file.commit().map_err(io_err(path))
 }
 
 #[cfg(test)]
@@ -376,5 +520,124 @@ mod tests {
             Some((c, Precision::F64))
         );
         assert_eq!(parse_descriptor(b"columns=foo;precision=f32"), None);
+    }
+
+    /// A small LAS (or LAZ) file written by [`write_las`], as bytes.
+    fn small_file(name: &str, n: usize) -> (std::path::PathBuf, Vec<u8>) {
+        let dir = std::env::temp_dir().join(format!("urbansem-las-unit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(name);
+        let mut c = PointCloud::with_columns(
+            Columns {
+                intensity: true,
+                ..Columns::default()
+            },
+            Precision::F64,
+            n,
+        );
+        for i in 0..n {
+            c.push(&PointRecord {
+                position: [i as f64, 0.5 * i as f64, -1.0],
+                intensity: i as f32,
+                ..PointRecord::default()
+            });
+        }
+        write_las(&p, &c).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        (p, bytes)
+    }
+
+    /// Sets the point count of a LAS 1.4 header: legacy field (byte 107) 0, u64 field (247).
+    fn set_count(bytes: &mut [u8], n: u64) {
+        bytes[107..111].copy_from_slice(&0u32.to_le_bytes());
+        bytes[247..255].copy_from_slice(&n.to_le_bytes());
+    }
+
+    fn read(p: &Path, bytes: &[u8]) -> Result<(PointCloud, ReadReport)> {
+        std::fs::write(p, bytes).unwrap();
+        read_las(p, &ReadOptions::default())
+    }
+
+    #[test]
+    fn inflated_counts_and_truncated_files_are_errors() {
+        // Each returns at once with an error, never allocating for or looping over the count.
+        let (p, bytes) = small_file("a.las", 10);
+        let start = u64::from(u32::from_le_bytes(bytes[96..100].try_into().unwrap()));
+        let record = u64::from(u16::from_le_bytes(bytes[105..107].try_into().unwrap()));
+        assert_eq!(read(&p, &bytes).unwrap().0.len(), 10);
+        for n in [11, 1 << 40, u64::MAX] {
+            let mut b = bytes.clone();
+            set_count(&mut b, n);
+            match read(&p, &b) {
+                Err(CloudError::Truncated {
+                    at: Location::Byte(at),
+                    point: 10,
+                    ..
+                }) => assert_eq!(at, start + 10 * record),
+                other => panic!("count {n}: {other:?}"),
+            }
+        }
+        // Cut inside the seventh point.
+        match read(&p, &bytes[..(start + 6 * record + 3) as usize]) {
+            Err(CloudError::Truncated {
+                at: Location::Byte(at),
+                point: 6,
+                expected: 10,
+                ..
+            }) => assert_eq!(at, start + 6 * record),
+            other => panic!("{other:?}"),
+        }
+        // A first EVLR announcing 2⁶² bytes (the crate would allocate them).
+        let mut b = bytes.clone();
+        b[235..243].copy_from_slice(&(bytes.len() as u64).to_le_bytes());
+        b[243..247].copy_from_slice(&1u32.to_le_bytes());
+        let mut evlr = [0u8; 60];
+        evlr[20..28].copy_from_slice(&(1u64 << 62).to_le_bytes());
+        b.extend_from_slice(&evlr);
+        match read(&p, &b) {
+            Err(CloudError::Header {
+                at: Location::Byte(at),
+                ..
+            }) => assert_eq!(at, bytes.len() as u64),
+            other => panic!("{other:?}"),
+        }
+        // The point data starting past the end of the file.
+        let mut b = bytes.clone();
+        b[96..100].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(matches!(
+            read(&p, &b),
+            Err(CloudError::Header {
+                at: Location::Byte(96),
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn inflated_laz_counts_are_errors() {
+        let (p, bytes) = small_file("a.laz", 100);
+        assert_eq!(read(&p, &bytes).unwrap().0.len(), 100);
+        // More points than the compressed data holds: the decompressor runs out of data.
+        for n in [101, 1 << 40, u64::MAX / 2] {
+            let mut b = bytes.clone();
+            set_count(&mut b, n);
+            assert!(read(&p, &b).is_err(), "count {n}");
+        }
+        // A chunk table announcing 2³² - 1 chunks (the laz crate would allocate 64 GiB).
+        let start = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;
+        let table = i64::from_le_bytes(bytes[start..start + 8].try_into().unwrap()) as usize;
+        let mut b = bytes.clone();
+        b[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
+        match read(&p, &b) {
+            Err(CloudError::Header {
+                at: Location::Byte(at),
+                ..
+            }) => assert_eq!(at, table as u64 + 4),
+            other => panic!("{other:?}"),
+        }
+        // Truncated anywhere: an error, never a panic.
+        for cut in [0, 100, start, start + 8, start + 40, bytes.len() - 1] {
+            assert!(read(&p, &bytes[..cut]).is_err(), "cut at {cut}");
+        }
     }
 }

@@ -7,20 +7,30 @@
 //! back (the copy may overlap the output being written). The compressor is a greedy
 //! single-hash matcher (3-byte hash, window 8 KiB, matches up to 264 bytes): O(n).
 
+/// The most bytes one byte of LZF data can decompress to.
+///
+/// A literal chunk of 1 + k bytes yields k bytes, a 2-byte back reference at most 8 and a
+/// 3-byte one at most 7 + 255 + 2 = 264 bytes: each chunk yields at most 88 bytes per input
+/// byte, so an honest uncompressed size is at most 88 × the compressed size.
+pub const MAX_EXPANSION: usize = 88;
+
 /// Why an LZF stream could not be decompressed; `at` is the input offset of the bad chunk.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum LzfError {
     /// The input ends inside a chunk.
+    #[error("the LZF data ends inside the chunk at compressed byte {at}")]
     Truncated {
         /// Input offset of the chunk.
         at: usize,
     },
     /// A back reference points before the start of the output.
+    #[error("the LZF chunk at compressed byte {at} refers to data before the start")]
     BadReference {
         /// Input offset of the chunk.
         at: usize,
     },
     /// The output would exceed the announced size.
+    #[error("the LZF chunk at compressed byte {at} decompresses past the header's size")]
     Overflow {
         /// Input offset of the chunk.
         at: usize,
@@ -28,6 +38,9 @@ pub enum LzfError {
 }
 
 /// Decompresses `input` into exactly `out_len` bytes.
+///
+/// O(`input.len()` + `out_len`); allocates `out_len` bytes, so a caller reading sizes from a
+/// file checks `out_len` ≤ [`MAX_EXPANSION`] × `input.len()` first.
 pub fn decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, LzfError> {
     let mut out: Vec<u8> = Vec::with_capacity(out_len);
     let mut ip = 0usize;
@@ -159,5 +172,20 @@ mod tests {
         }
         let zeros = vec![0u8; 100_000];
         assert!(compress(&zeros).len() < 1500);
+    }
+
+    #[test]
+    fn longest_back_references_reach_the_expansion_bound() {
+        // One literal, then back references of the longest length (7 + 255 + 2 = 264 bytes
+        // from 3 input bytes) at distance 1: the best ratio LZF has.
+        let mut s = vec![0u8, b'a'];
+        for _ in 0..1000 {
+            s.extend_from_slice(&[7 << 5, 255, 0]);
+        }
+        let n = 1 + 264 * 1000;
+        let out = decompress(&s, n).unwrap();
+        assert!(out.iter().all(|&b| b == b'a'));
+        assert!(n <= MAX_EXPANSION * s.len());
+        assert!(n > (MAX_EXPANSION - 1) * s.len());
     }
 }

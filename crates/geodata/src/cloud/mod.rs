@@ -12,10 +12,16 @@
 //! [`ReadOptions::drop_non_finite`] is set, in which case the point is skipped and counted
 //! in [`ReadReport::dropped_non_finite`].
 //!
+//! Every reader takes time linear in its file and never allocates or loops for a count the
+//! file's length cannot hold: header counts (PLY `element`, PCD `POINTS`, the uncompressed
+//! size of PCD `binary_compressed`, the LAS point count, EVLR and LAZ chunk-table sizes) are
+//! checked against the bytes that follow before anything is sized by them, and a count too
+//! large is an error naming the file and the line or byte.
+//!
 //! | format | positions | intensity | rgb | label | raw_label | object |
 //! |---|---|---|---|---|---|---|
 //! | PLY (ascii, binary LE/BE) | float/double | float | uchar red green blue | uchar | uint | uint |
-//! | PCD (ascii, binary, binary_compressed) | F4/F8 | F4 | U4 `rgb` (0x00RRGGBB; F4-packed accepted) | U1 | U4 | U4 |
+//! | PCD (ascii, binary, binary_compressed; read as PCL does, see [`pcd`]) | F4/F8 (read: any numeric) | F4 | U4 `rgb` (0x00RRGGBB; F4-packed `rgb`/`rgba` and U1 `r g b` read) | U1 | U4 (read: also a wider `label`) | U4 |
 //! | LAS/LAZ 1.4 (format 6/7) | integer grid, 0.1 mm | u16 field + exact f32 in extra bytes | u16 ×257 | classification (see [`las`]) | extra bytes | extra bytes |
 //! | KITTI `.bin` | f32 | f32 reflectance | – | separate uint32 label file | separate | – |
 //!

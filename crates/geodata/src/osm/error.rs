@@ -40,8 +40,8 @@ pub enum OsmError {
         /// Number of elements not closed.
         open_elements: usize,
     },
-    /// A required attribute is missing or not a number.
-    #[error("{source_name}: bad attribute `{attribute}` = {value:?} on <{element}> at byte {byte_offset}; expected a number")]
+    /// A required attribute is missing, not a number, out of range, or given twice.
+    #[error("{source_name}: bad attribute `{attribute}` = {value:?} on <{element}> at byte {byte_offset}; expected {expected}")]
     BadAttribute {
         /// File name (or `<string>`).
         source_name: String,
@@ -53,6 +53,8 @@ pub enum OsmError {
         attribute: String,
         /// Value found (empty when missing).
         value: String,
+        /// What the attribute must be (`a number`, `a latitude in [-90, 90]`, …).
+        expected: &'static str,
     },
     /// The document root is not `<osm>` or the document is empty.
     #[error("{source_name}: not an OSM XML document (no <osm> root element)")]

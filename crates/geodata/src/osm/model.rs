@@ -19,8 +19,9 @@ pub enum ElementKind {
 
 /// One building outline (one outer ring with its holes).
 ///
-/// A multipolygon relation with several outer rings yields several `Building`s with the same
-/// `osm_id`.
+/// An element whose area has several outer rings (a multipolygon relation with several
+/// outer rings, or a way that touches itself, as in a figure eight) yields several
+/// `Building`s with the same `osm_id`; see [`super`] for how rings are assembled.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Building {
     /// Id of the OSM way or relation.
@@ -122,7 +123,8 @@ pub struct OsmStats {
     pub ways: usize,
     /// Relations in the file.
     pub relations: usize,
-    /// Closed ways with `building=*` other than `no` (counted whether or not their nodes resolve).
+    /// Closed ways with `building=*` other than `no` (counted whether or not their nodes
+    /// resolve): first and last node the same, or at the same location.
     pub building_ways: usize,
     /// `type=multipolygon` relations with `building=*` other than `no`.
     pub building_relations: usize,
@@ -132,12 +134,22 @@ pub struct OsmStats {
     pub open_building_ways: usize,
     /// Building ways skipped because a node reference was missing from the file.
     pub skipped_building_ways_missing_nodes: usize,
-    /// Building ways skipped because the ring has < 3 distinct vertices or zero area.
+    /// Building ways skipped because no area is left: fewer than 3 distinct locations, or
+    /// every segment cancels against its way back.
     pub skipped_building_ways_degenerate: usize,
+    /// Building ways skipped because two of their segments cross, overlap, or touch away
+    /// from a shared node (osmium declares these invalid too).
+    pub skipped_building_ways_crossing: usize,
     /// Building relations skipped because a member way or node was missing from the file.
     pub skipped_building_relations_missing_members: usize,
-    /// Building relations skipped because their outer ways do not join into closed rings.
+    /// Building relations skipped because their member ways do not join into closed rings.
     pub skipped_building_relations_unclosed: usize,
+    /// Building relations skipped because segments of their member ways cross, overlap, or
+    /// touch away from a shared node.
+    pub skipped_building_relations_crossing: usize,
+    /// Building relations skipped because no area is left: all segments cancel in pairs,
+    /// or a member way cancels out entirely (a way listed twice, a duplicated ring).
+    pub skipped_building_relations_degenerate: usize,
     /// Highway ways skipped because a node reference was missing from the file.
     pub skipped_highway_ways_missing_nodes: usize,
     /// Highway ways with fewer than two nodes.

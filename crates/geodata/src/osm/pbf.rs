@@ -6,6 +6,14 @@
 //! objects: dense nodes, ways and relations go straight into the raw element tables, and
 //! only the tags urbansem keeps are copied. That makes it about twice as fast as decoding
 //! through a generic protobuf layer (osmpbf), which the tests use as the reference.
+//!
+//! Linear time, bounded memory: every size the file declares is checked before anything is
+//! allocated for it — a blob header against the format's 64 KiB, a blob against the format's
+//! 32 MiB *and* against the bytes left in the file, an uncompressed size against the 32 MiB
+//! and what its zlib data can inflate to (at most 1032:1) — so a header claiming 4 GB in a
+//! 100-byte file is an error naming blob and byte offset, never an allocation. The blobs
+//! are held in memory (the file's size), each decoded payload once (≤ 32 MiB per blob), and
+//! every count inside a block is bounded by the bytes that encode it.
 
 use super::{is_kept_key, OsmError, RawData, RawNode, RawRelation, RawWay};
 use rayon::prelude::*;
@@ -16,6 +24,8 @@ use std::path::Path;
 const MAX_HEADER_BYTES: usize = 64 * 1024;
 /// Largest compressed or uncompressed blob the format allows (32 MiB).
 const MAX_BLOB_BYTES: usize = 32 * 1024 * 1024;
+/// Largest ratio of inflated to deflated size zlib can reach (deflate's limit is 1032:1).
+const MAX_ZLIB_RATIO: usize = 1032;
 /// Required features this reader understands.
 const KNOWN_FEATURES: [&str; 3] = ["OsmSchema-V0.6", "DenseNodes", "HistoricalInformation"];
 
@@ -140,12 +150,18 @@ struct Block<'a> {
 }
 
 impl Block<'_> {
+    // Wrapping: garbled offsets or granularities give a wrong (later rejected) coordinate,
+    // not an overflow.
     fn lat(&self, raw: i64) -> f64 {
-        1e-9 * (self.lat_offset + self.granularity * raw) as f64
+        1e-9 * self
+            .lat_offset
+            .wrapping_add(self.granularity.wrapping_mul(raw)) as f64
     }
 
     fn lon(&self, raw: i64) -> f64 {
-        1e-9 * (self.lon_offset + self.granularity * raw) as f64
+        1e-9 * self
+            .lon_offset
+            .wrapping_add(self.granularity.wrapping_mul(raw)) as f64
     }
 
     fn string(&self, index: u64) -> DecodeResult<&[u8]> {
@@ -413,13 +429,14 @@ fn blob_payload(blob: &[u8]) -> DecodeResult<Vec<u8>> {
     while let Some((number, field)) = m.next_field()? {
         match (number, field) {
             (1, Field::Bytes(b)) => raw = Some(b),
-            (2, Field::Varint(v)) => raw_size = Some(v as usize),
+            (2, Field::Varint(v)) => raw_size = Some(usize::try_from(v).unwrap_or(usize::MAX)),
             (3, Field::Bytes(b)) => zlib = Some(b),
             (4..=7, Field::Bytes(_)) => {
+                let names = ["lzma", "bzip2", "lz4", "zstd"];
+                let name = names.get(number as usize - 4).copied().unwrap_or("?");
                 return Err(format!(
-                    "blob compressed with {} (only raw and zlib blobs are supported)",
-                    ["lzma", "bzip2", "lz4", "zstd"][number as usize - 4]
-                ))
+                    "blob compressed with {name} (only raw and zlib blobs are supported)"
+                ));
             }
             _ => {}
         }
@@ -430,18 +447,33 @@ fn blob_payload(blob: &[u8]) -> DecodeResult<Vec<u8>> {
     let Some(zlib) = zlib else {
         return Err("blob holds no data".into());
     };
-    let size = raw_size.unwrap_or(zlib.len() * 4);
-    if size > MAX_BLOB_BYTES {
-        return Err(format!(
-            "blob claims {size} uncompressed bytes (the format allows {MAX_BLOB_BYTES})"
-        ));
+    let inflatable = zlib.len().saturating_mul(MAX_ZLIB_RATIO).saturating_add(64);
+    if let Some(size) = raw_size {
+        if size > MAX_BLOB_BYTES {
+            return Err(format!(
+                "blob claims {size} uncompressed bytes (the format allows {MAX_BLOB_BYTES})"
+            ));
+        }
+        if size > inflatable {
+            return Err(format!(
+                "blob claims {size} uncompressed bytes, more than its {} zlib bytes can hold",
+                zlib.len()
+            ));
+        }
     }
-    let mut out = Vec::with_capacity(size);
+    // Reserve what the data can hold, not what the header claims.
+    let capacity = raw_size.unwrap_or(4 * zlib.len()).min(inflatable);
+    let mut out = Vec::with_capacity(capacity);
     flate2::read::ZlibDecoder::new(zlib)
         .take(MAX_BLOB_BYTES as u64 + 1)
         .read_to_end(&mut out)
         .map_err(|e| format!("zlib data: {e}"))?;
-    if raw_size.is_some_and(|s| s != out.len()) {
+    if out.len() > MAX_BLOB_BYTES {
+        return Err(format!(
+            "zlib data inflates beyond the {MAX_BLOB_BYTES} bytes the format allows"
+        ));
+    }
+    if let Some(size) = raw_size.filter(|&s| s != out.len()) {
         return Err(format!(
             "zlib data inflates to {} bytes, the blob says {size}",
             out.len()
@@ -490,6 +522,16 @@ fn read_blobs(path: &Path) -> Result<Vec<RawBlob>, OsmError> {
         path: path.to_path_buf(),
         source,
     })?;
+    let metadata = file.metadata().map_err(|source| OsmError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    // A pipe or device has no length to check against; the format's limits still hold.
+    let file_len = if metadata.is_file() {
+        metadata.len()
+    } else {
+        u64::MAX
+    };
     let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
     let mut blobs = Vec::new();
     let mut offset = 0u64;
@@ -508,9 +550,18 @@ fn read_blobs(path: &Path) -> Result<Vec<RawBlob>, OsmError> {
             Err(e) => return Err(fail(format!("reading the blob header length: {e}"))),
         }
         let header_len = u32::from_be_bytes(len) as usize;
+        // Bytes of the file after the blob header's length field.
+        let left = file_len.saturating_sub(offset + 4);
         if header_len > MAX_HEADER_BYTES {
             return Err(fail(format!(
-                "blob header of {header_len} bytes (the format allows {MAX_HEADER_BYTES})"
+                "blob header of {header_len} bytes (the format allows {MAX_HEADER_BYTES}; \
+                 not a PBF file, or garbled)"
+            )));
+        }
+        if header_len as u64 > left {
+            return Err(fail(format!(
+                "blob header of {header_len} bytes, but the file has {left} bytes left \
+                 (truncated file?)"
             )));
         }
         let mut header = vec![0u8; header_len];
@@ -522,7 +573,7 @@ fn read_blobs(path: &Path) -> Result<Vec<RawBlob>, OsmError> {
         while let Some((number, field)) = m.next_field().map_err(&fail)? {
             match (number, field) {
                 (1, Field::Bytes(t)) => kind = Some(String::from_utf8_lossy(t).into_owned()),
-                (3, Field::Varint(v)) => data_size = Some(v as usize),
+                (3, Field::Varint(v)) => data_size = Some(usize::try_from(v).unwrap_or(usize::MAX)),
                 _ => {}
             }
         }
@@ -532,6 +583,12 @@ fn read_blobs(path: &Path) -> Result<Vec<RawBlob>, OsmError> {
         if data_size > MAX_BLOB_BYTES {
             return Err(fail(format!(
                 "blob of {data_size} bytes (the format allows {MAX_BLOB_BYTES})"
+            )));
+        }
+        let left = left.saturating_sub(header_len as u64);
+        if data_size as u64 > left {
+            return Err(fail(format!(
+                "blob of {data_size} bytes, but the file has {left} bytes left (truncated file?)"
             )));
         }
         let mut data = vec![0u8; data_size];
@@ -708,6 +765,164 @@ mod tests {
                 ours.relations == reference.relations,
                 "{name}: relations differ"
             );
+        }
+    }
+
+    /// Protobuf encoding helpers for hand-made files.
+    fn field_varint(number: u32, v: u64, out: &mut Vec<u8>) {
+        varint(u64::from(number) << 3, out);
+        varint(v, out);
+    }
+
+    fn field_bytes(number: u32, bytes: &[u8], out: &mut Vec<u8>) {
+        varint(u64::from(number) << 3 | 2, out);
+        varint(bytes.len() as u64, out);
+        out.extend_from_slice(bytes);
+    }
+
+    fn zigzag_encode(v: i64) -> u64 {
+        ((v << 1) ^ (v >> 63)) as u64
+    }
+
+    /// One file blob: length, `BlobHeader` (type, data size), then the `Blob` bytes.
+    fn file_blob(kind: &str, blob: &[u8], claimed_size: Option<u64>) -> Vec<u8> {
+        let mut header = Vec::new();
+        field_bytes(1, kind.as_bytes(), &mut header);
+        field_varint(3, claimed_size.unwrap_or(blob.len() as u64), &mut header);
+        let mut out = (header.len() as u32).to_be_bytes().to_vec();
+        out.extend(header);
+        out.extend_from_slice(blob);
+        out
+    }
+
+    /// A `Blob` holding `payload` zlib-compressed, claiming `raw_size`.
+    fn zlib_blob(payload: &[u8], raw_size: u64) -> Vec<u8> {
+        use std::io::Write;
+        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(payload).unwrap();
+        let mut blob = Vec::new();
+        field_varint(2, raw_size, &mut blob);
+        field_bytes(3, &enc.finish().unwrap(), &mut blob);
+        blob
+    }
+
+    /// A small valid file: a header blob and a zlib data blob with two dense nodes and a
+    /// tagged way. Returns the bytes and the end offset of the header blob.
+    fn small_pbf() -> (Vec<u8>, usize) {
+        let mut header_block = Vec::new();
+        field_bytes(4, b"OsmSchema-V0.6", &mut header_block);
+        field_bytes(4, b"DenseNodes", &mut header_block);
+        let mut raw_header = Vec::new();
+        field_bytes(1, &header_block, &mut raw_header);
+        let mut file = file_blob("OSMHeader", &raw_header, None);
+        let header_end = file.len();
+
+        let mut strings = Vec::new();
+        for s in [&b""[..], b"building", b"yes"] {
+            field_bytes(1, s, &mut strings);
+        }
+        let mut dense = Vec::new();
+        let packed = |values: &[i64]| {
+            let mut out = Vec::new();
+            let mut last = 0;
+            for &v in values {
+                varint(zigzag_encode(v - last), &mut out);
+                last = v;
+            }
+            out
+        };
+        field_bytes(1, &packed(&[10, 11]), &mut dense);
+        field_bytes(8, &packed(&[480_000_000, 480_010_000]), &mut dense);
+        field_bytes(9, &packed(&[110_000_000, 110_010_000]), &mut dense);
+        let mut way = Vec::new();
+        field_varint(1, 7, &mut way);
+        field_bytes(2, &[1], &mut way);
+        field_bytes(3, &[2], &mut way);
+        field_bytes(8, &packed(&[10, 11, 10]), &mut way);
+        let mut group = Vec::new();
+        field_bytes(2, &dense, &mut group);
+        field_bytes(3, &way, &mut group);
+        let mut block = Vec::new();
+        field_bytes(1, &strings, &mut block);
+        field_bytes(2, &group, &mut block);
+        file.extend(file_blob(
+            "OSMData",
+            &zlib_blob(&block, block.len() as u64),
+            None,
+        ));
+        (file, header_end)
+    }
+
+    fn temp_pbf(name: &str, bytes: &[u8]) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("urbansem-pbf-unit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    fn pbf_error(bytes: &[u8], name: &str) -> String {
+        match read_pbf(&temp_pbf(name, bytes)) {
+            Err(OsmError::Pbf { message, .. }) => message,
+            other => panic!("{name}: expected a PBF error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn small_hand_made_file_reads_back() {
+        let (bytes, _) = small_pbf();
+        let raw = read_pbf(&temp_pbf("small.osm.pbf", &bytes)).unwrap();
+        assert_eq!(raw.nodes.len(), 2);
+        assert!((raw.nodes[1].lat - 48.001).abs() < 1e-12);
+        assert_eq!(raw.ways.len(), 1);
+        assert_eq!(raw.ways[0].refs, vec![10, 11, 10]);
+        assert_eq!(raw.ways[0].tags, vec![("building".into(), "yes".into())]);
+    }
+
+    #[test]
+    fn inflated_sizes_are_errors_before_any_allocation() {
+        // Blob header length of 4 GB, and of 1000 bytes in a file of 20.
+        let mut bytes = u32::MAX.to_be_bytes().to_vec();
+        bytes.extend([0; 16]);
+        assert!(pbf_error(&bytes, "huge_header.pbf").contains("the format allows"));
+        let mut bytes = 1000u32.to_be_bytes().to_vec();
+        bytes.extend([0; 16]);
+        assert!(pbf_error(&bytes, "long_header.pbf").contains("16 bytes left"));
+        // A blob claiming 4 GB, and one claiming 30 MB, in a file of about 100 bytes.
+        let blob = [0u8; 64];
+        let huge = file_blob("OSMData", &blob, Some(4 << 30));
+        assert!(pbf_error(&huge, "huge_blob.pbf").contains("the format allows"));
+        let big = file_blob("OSMData", &blob, Some(30 << 20));
+        assert!(pbf_error(&big, "big_blob.pbf").contains("64 bytes left"));
+        // Uncompressed sizes beyond the format, and beyond what 10-odd zlib bytes can hold.
+        let (valid, header_end) = small_pbf();
+        for (raw_size, expected) in [
+            (4u64 << 30, "the format allows"),
+            (20 << 20, "zlib bytes can hold"),
+            (5, "the blob says 5"),
+        ] {
+            let mut bytes = valid[..header_end].to_vec();
+            bytes.extend(file_blob(
+                "OSMData",
+                &zlib_blob(b"0123456789", raw_size),
+                None,
+            ));
+            let message = pbf_error(&bytes, "raw_size.pbf");
+            assert!(message.contains(expected), "{raw_size}: {message}");
+        }
+    }
+
+    #[test]
+    fn every_truncation_is_an_error_not_a_panic() {
+        let (bytes, header_end) = small_pbf();
+        for cut in 1..bytes.len() {
+            let path = temp_pbf("cut.osm.pbf", &bytes[..cut]);
+            match read_pbf(&path) {
+                // Cut exactly between blobs: a shorter valid file (the header only).
+                Ok(raw) => assert!(cut == header_end && raw.nodes.is_empty(), "cut {cut}"),
+                Err(OsmError::Pbf { path: p, .. }) => assert_eq!(p, path),
+                Err(other) => panic!("cut {cut}: {other}"),
+            }
         }
     }
 

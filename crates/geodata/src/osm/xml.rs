@@ -1,9 +1,21 @@
 //! Streaming `.osm` XML reader (quick-xml events; the document is never held as a tree).
+//!
+//! Linear in the file: one pass over the events, each element's attributes scanned once
+//! (quick-xml's own duplicate-attribute check compares every attribute with all earlier
+//! ones, quadratic in an element's attribute count, so it is off; the attributes this reader
+//! uses are checked for repeats instead), error positions are the parser's byte offset (no
+//! line counting). Memory holds the kept elements only: nodes, ways with their node
+//! references, relations with their way members, and the tags in [`super::KEPT_KEYS`].
 
 use super::{is_kept_key, OsmError, RawData, RawNode, RawRelation, RawWay};
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::Reader;
 use std::io::BufRead;
+
+/// What a latitude attribute must be.
+const LATITUDE: &str = "a latitude in degrees within [-90, 90]";
+/// What a longitude attribute must be.
+const LONGITUDE: &str = "a longitude in degrees within [-180, 180]";
 
 /// The element whose children are being read.
 enum Current {
@@ -18,13 +30,20 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    fn bad(&self, element: &[u8], attribute: &str, value: &str) -> OsmError {
+    fn bad(
+        &self,
+        element: &[u8],
+        attribute: &str,
+        value: &str,
+        expected: &'static str,
+    ) -> OsmError {
         OsmError::BadAttribute {
             source_name: self.source_name.to_string(),
             byte_offset: self.offset,
             element: String::from_utf8_lossy(element).into_owned(),
             attribute: attribute.to_string(),
             value: value.to_string(),
+            expected,
         }
     }
 
@@ -36,20 +55,30 @@ impl Ctx<'_> {
         }
     }
 
-    /// Raw attribute values for the given keys (missing → `None`).
+    /// Raw attribute values for the given keys (missing → `None`); a key given twice is an
+    /// error. One pass over the element's attributes.
     fn attrs<const N: usize>(
         &self,
         e: &BytesStart<'_>,
         keys: [&[u8]; N],
     ) -> Result<[Option<String>; N], OsmError> {
         let mut out: [Option<String>; N] = std::array::from_fn(|_| None);
-        for attr in e.attributes() {
+        for attr in e.attributes().with_checks(false) {
             let attr = attr.map_err(|err| self.xml(err.to_string()))?;
             if let Some(i) = keys.iter().position(|k| *k == attr.key.as_ref()) {
                 let value = attr
                     .unescape_value()
                     .map_err(|err| self.xml(err.to_string()))?;
                 if let Some(slot) = out.get_mut(i) {
+                    if slot.is_some() {
+                        let name = String::from_utf8_lossy(attr.key.as_ref()).into_owned();
+                        return Err(self.bad(
+                            e.name().as_ref(),
+                            &name,
+                            &value,
+                            "one value, not two",
+                        ));
+                    }
                     *slot = Some(value.into_owned());
                 }
             }
@@ -66,7 +95,24 @@ impl Ctx<'_> {
         let text = value.map_or("", String::as_str);
         text.trim()
             .parse::<T>()
-            .map_err(|_| self.bad(element, name, text))
+            .map_err(|_| self.bad(element, name, text, "a number"))
+    }
+
+    /// A coordinate in degrees: a finite number of magnitude at most `limit`.
+    fn degrees(
+        &self,
+        element: &[u8],
+        name: &str,
+        value: Option<&String>,
+        limit: f64,
+        expected: &'static str,
+    ) -> Result<f64, OsmError> {
+        let v: f64 = self.number(element, name, value)?;
+        if v.abs() <= limit {
+            Ok(v)
+        } else {
+            Err(self.bad(element, name, value.map_or("", String::as_str), expected))
+        }
     }
 }
 
@@ -142,8 +188,8 @@ pub(crate) fn read_xml<R: BufRead>(input: R, source_name: &str) -> Result<RawDat
                 if lat.is_some() || lon.is_some() {
                     raw.nodes.push(RawNode {
                         id: ctx.number(name, "id", id.as_ref())?,
-                        lat: ctx.number(name, "lat", lat.as_ref())?,
-                        lon: ctx.number(name, "lon", lon.as_ref())?,
+                        lat: ctx.degrees(name, "lat", lat.as_ref(), 90.0, LATITUDE)?,
+                        lon: ctx.degrees(name, "lon", lon.as_ref(), 180.0, LONGITUDE)?,
                     });
                 }
             }
@@ -206,10 +252,10 @@ pub(crate) fn read_xml<R: BufRead>(input: R, source_name: &str) -> Result<RawDat
             b"bounds" => {
                 let [a, b, c, d] = ctx.attrs(e, [b"minlon", b"minlat", b"maxlon", b"maxlat"])?;
                 raw.bounds = Some([
-                    ctx.number(name, "minlon", a.as_ref())?,
-                    ctx.number(name, "minlat", b.as_ref())?,
-                    ctx.number(name, "maxlon", c.as_ref())?,
-                    ctx.number(name, "maxlat", d.as_ref())?,
+                    ctx.degrees(name, "minlon", a.as_ref(), 180.0, LONGITUDE)?,
+                    ctx.degrees(name, "minlat", b.as_ref(), 90.0, LATITUDE)?,
+                    ctx.degrees(name, "maxlon", c.as_ref(), 180.0, LONGITUDE)?,
+                    ctx.degrees(name, "maxlat", d.as_ref(), 90.0, LATITUDE)?,
                 ]);
             }
             _ => {}
@@ -282,5 +328,53 @@ mod tests {
             read_xml(r#"<html></html>"#.as_bytes(), "t"),
             Err(OsmError::NotOsm { .. })
         ));
+    }
+
+    #[test]
+    fn coordinates_must_be_finite_and_in_range() {
+        for (node, attribute) in [
+            r#"<node id="1" lat="NaN" lon="2"/>"#,
+            r#"<node id="1" lat="91" lon="2"/>"#,
+            r#"<node id="1" lat="1" lon="inf"/>"#,
+            r#"<node id="1" lat="1" lon="-180.5"/>"#,
+        ]
+        .iter()
+        .zip(["lat", "lat", "lon", "lon"])
+        {
+            let xml = format!("<osm>{node}</osm>");
+            match read_xml(xml.as_bytes(), "t") {
+                Err(OsmError::BadAttribute {
+                    attribute: a,
+                    expected,
+                    ..
+                }) => {
+                    assert_eq!(a, attribute);
+                    assert!(expected.contains("degrees"), "{expected}");
+                }
+                other => panic!("{node}: unexpected {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn a_used_attribute_given_twice_is_an_error_and_others_are_not_checked() {
+        assert!(matches!(
+            read_xml(r#"<osm><node id="1" lat="1" lat="2" lon="3"/></osm>"#.as_bytes(), "t"),
+            Err(OsmError::BadAttribute { attribute, .. }) if attribute == "lat"
+        ));
+        // Many unused attributes (and a repeated one) cost one pass, not one per pair.
+        let extra: String = (0..20_000).map(|i| format!(" a{i}=\"x\"")).collect();
+        let xml = format!(r#"<osm><node id="1" lat="1" lon="3"{extra} a0="y"/></osm>"#);
+        assert_eq!(read_xml(xml.as_bytes(), "t").unwrap().nodes.len(), 1);
+    }
+
+    #[test]
+    fn every_truncation_is_an_error_not_a_panic() {
+        let xml = r#"<?xml version="1.0"?><osm version="0.6"><bounds minlat="1" minlon="2" maxlat="3" maxlon="4"/><node id="1" lat="1.5" lon="2.5"/><way id="2"><nd ref="1"/><tag k="building" v="a &amp; b"/></way><relation id="3"><member type="way" ref="2" role="outer"/></relation></osm>"#;
+        assert!(read_xml(xml.as_bytes(), "t").is_ok());
+        for cut in 0..xml.len() {
+            let prefix = &xml.as_bytes()[..cut];
+            assert!(read_xml(prefix, "t").is_err(), "prefix of {cut} bytes read");
+        }
     }
 }

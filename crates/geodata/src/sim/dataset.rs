@@ -179,7 +179,9 @@ pub struct DatasetSummary {
     pub rays: usize,
     /// Points written.
     pub points: usize,
-    /// Seconds spent ray casting.
+    /// Seconds spent ray casting (not written to `dataset.json`, which must be the same
+    /// bytes for the same seed on every run).
+    #[serde(skip)]
     pub cast_seconds: f64,
 }
 
@@ -195,7 +197,7 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SimError> {
         path: path.to_path_buf(),
         source,
     })?;
-    std::fs::write(path, text + "\n").map_err(io_err(path))
+    crate::fsio::write_atomic(path, text + "\n").map_err(io_err(path))
 }
 
 fn scan_seed(seed: u64, index: usize) -> u64 {
