@@ -1,5 +1,6 @@
 //! `urbansem`: the one binary. It parses the command line, dispatches to a command module,
-//! and turns an error chain into a message and an exit code (2 for every error).
+//! and turns an error chain into a message and an exit code: 0 success, 1 an error while
+//! running (bad input file, I/O), 2 a usage error (clap's, or a [`cmd::UsageError`]).
 
 mod cmd;
 mod report;
@@ -53,7 +54,38 @@ enum Command {
     Bench(cmd::bench::BenchCommand),
 }
 
+/// Exit code of an error while running (a file that cannot be read, bad input data).
+const EXIT_RUNTIME: u8 = 1;
+/// Exit code of a usage error (unknown option, missing argument, contradictory options).
+const EXIT_USAGE: u8 = 2;
+
+/// Replaces Rust's panic message by a bug report request: a panic is a bug in urbansem,
+/// never the user's fault (bad input must give an error), so say so and where.
+fn install_panic_hook() {
+    std::panic::set_hook(Box::new(|info| {
+        let message = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "(no message)".to_owned());
+        let location = info
+            .location()
+            .map(|l| format!("{}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        let args: Vec<String> = std::env::args().collect();
+        eprintln!(
+            "error: internal error in urbansem {} (a bug, not a problem with your input): \
+             {message} at {location}\n  command: {}\n  please report it with this message and, \
+             if you can, the input files",
+            env!("CARGO_PKG_VERSION"),
+            args.join(" ")
+        );
+    }));
+}
+
 fn main() -> ExitCode {
+    install_panic_hook();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => cmd::demo::run(args),
@@ -72,7 +104,12 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("error: {err:#}");
-            ExitCode::from(2)
+            if err.downcast_ref::<cmd::UsageError>().is_some() {
+                eprintln!("(see `urbansem help` or `urbansem <command> --help`)");
+                ExitCode::from(EXIT_USAGE)
+            } else {
+                ExitCode::from(EXIT_RUNTIME)
+            }
         }
     }
 }

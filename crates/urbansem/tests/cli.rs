@@ -71,7 +71,7 @@ fn pbo_solve_json_has_the_documented_keys() {
 }
 
 #[test]
-fn bad_opb_input_exits_2_with_a_located_message() {
+fn bad_opb_input_exits_1_with_a_located_message() {
     let cases = [
         ("nan.opb", "min: +3 x1 x2\n +nan x3 ;\n", "nan.opb:2:2"),
         (
@@ -84,7 +84,7 @@ fn bad_opb_input_exits_2_with_a_located_message() {
     for (name, text, expect) in cases {
         let f = temp_file(name, text);
         let out = urbansem().args(["pbo", "solve"]).arg(&f).output().unwrap();
-        assert_eq!(out.status.code(), Some(2), "{name}");
+        assert_eq!(out.status.code(), Some(1), "{name}");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(expect), "{name}: {err}");
         assert!(!err.contains("panicked"), "{name}: {err}");
@@ -93,5 +93,244 @@ fn bad_opb_input_exits_2_with_a_located_message() {
         .args(["pbo", "solve", "/nonexistent/x.opb"])
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(1));
+}
+
+/// Issue 16: exit codes are 0 success, 1 runtime error with a message, 2 usage error.
+#[test]
+fn issue16_exit_codes_separate_usage_from_runtime_errors() {
+    let out = urbansem()
+        .args(["pbo", "solve", "--no-such-option"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "clap usage error");
+    let out = urbansem().args(["mln", "infer"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "missing required arguments");
+    let out = urbansem()
+        .args(["localize", "--map", "/nonexistent.osm"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "localize without --scan");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--scan"), "{err}");
+    let out = urbansem().arg("--version").output().unwrap();
+    assert_eq!(out.status.code(), Some(0));
+}
+
+/// Every file under `dir`, relative path → bytes, in path order.
+fn folder_bytes(dir: &std::path::Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Asserts two runs wrote the same file names with the same bytes.
+fn assert_same_files(run: &str, a: &[(String, Vec<u8>)], b: &[(String, Vec<u8>)]) {
+    assert_eq!(
+        a.iter().map(|f| &f.0).collect::<Vec<_>>(),
+        b.iter().map(|f| &f.0).collect::<Vec<_>>(),
+        "{run}: file lists differ"
+    );
+    for ((path, bytes_a), (_, bytes_b)) in a.iter().zip(b) {
+        assert!(
+            bytes_a == bytes_b,
+            "{run}: {path} differs between two runs with one seed"
+        );
+    }
+}
+
+fn run_ok(args: &[&str], out: &std::path::Path) {
+    let o = urbansem().args(args).arg(out).output().unwrap();
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// Issue 16: the same command with the same seed writes byte-identical files (`sim dataset`
+/// recorded its ray-casting time in dataset.json); timings go to stderr or timings.json.
+#[test]
+fn issue16_seeded_outputs_are_byte_identical() {
+    let root = std::env::temp_dir().join(format!("urbansem-repro-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let runs: [(&str, &[&str]); 4] = [
+        (
+            "city",
+            &["sim", "city", "--seed", "3", "--size-m", "400", "--out"],
+        ),
+        (
+            "localization",
+            &[
+                "sim",
+                "dataset",
+                "--kind",
+                "localization",
+                "--scans",
+                "2",
+                "--seed",
+                "5",
+                "--h-step-deg",
+                "2",
+                "--v-step-deg",
+                "2",
+                "--out",
+            ],
+        ),
+        (
+            "relations",
+            &[
+                "sim",
+                "dataset",
+                "--kind",
+                "relations",
+                "--scans",
+                "2",
+                "--train",
+                "1",
+                "--seed",
+                "5",
+                "--h-step-deg",
+                "2",
+                "--v-step-deg",
+                "2",
+                "--out",
+            ],
+        ),
+        (
+            "mln-fs",
+            &[
+                "mln", "generate", "fs", "--size", "20", "--seed", "4", "--out",
+            ],
+        ),
+    ];
+    for (name, args) in runs {
+        let (a, b) = (
+            root.join(format!("{name}-a")),
+            root.join(format!("{name}-b")),
+        );
+        let (a, b) = if name == "city" {
+            std::fs::create_dir_all(&a).unwrap();
+            std::fs::create_dir_all(&b).unwrap();
+            (a.join("city.osm"), b.join("city.osm"))
+        } else {
+            (a, b)
+        };
+        run_ok(args, &a);
+        run_ok(args, &b);
+        let parent = |p: &std::path::Path| {
+            if name == "city" {
+                p.parent().unwrap().to_path_buf()
+            } else {
+                p.to_path_buf()
+            }
+        };
+        let (fa, fb) = (folder_bytes(&parent(&a)), folder_bytes(&parent(&b)));
+        assert!(!fa.is_empty(), "{name}: no files written");
+        assert_same_files(name, &fa, &fb);
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Issue 16: two demo runs with one seed write the same data files; only the timings
+/// (`timings.json`) and the report page that quotes them (`index.html`) may differ.
+#[test]
+fn issue16_demo_data_files_are_byte_identical() {
+    let root = std::env::temp_dir().join(format!("urbansem-demo-repro-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let (a, b) = (root.join("a"), root.join("b"));
+    run_ok(&["demo", "--seed", "2", "--out"], &a);
+    run_ok(&["demo", "--seed", "2", "--out"], &b);
+    let keep = |files: Vec<(String, Vec<u8>)>| -> Vec<(String, Vec<u8>)> {
+        files
+            .into_iter()
+            .filter(|(p, _)| p != "index.html" && p != "timings.json")
+            .collect()
+    };
+    let (fa, fb) = (keep(folder_bytes(&a)), keep(folder_bytes(&b)));
+    assert!(
+        fa.iter().any(|(p, _)| p == "summary.json"),
+        "no summary.json"
+    );
+    assert!(b.join("timings.json").exists(), "no timings.json");
+    assert_same_files("demo", &fa, &fb);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Issue 16: a writer killed mid-way leaves the previous file intact and nothing partial
+/// under the target name (outputs are written beside the target and renamed into place).
+#[test]
+fn issue16_killed_writer_leaves_the_old_file_intact() {
+    use geodata::cloud::{read_cloud, write_cloud, PointCloud};
+    let dir = std::env::temp_dir().join(format!("urbansem-kill-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("in.ply");
+    let n = 2_000_000;
+    let cloud = PointCloud {
+        positions: (0..n)
+            .map(|i| [i as f64 * 1e-3, (i % 997) as f64, (i % 13) as f64])
+            .collect(),
+        ..PointCloud::default()
+    };
+    write_cloud(&input, &cloud).unwrap();
+    let target = dir.join("out.pcd");
+    let old = PointCloud {
+        positions: vec![[1.0, 2.0, 3.0]],
+        ..PointCloud::default()
+    };
+    let mut outcomes = Vec::new();
+    for delay_ms in [30u64, 150, 400, 900] {
+        write_cloud(&target, &old).unwrap();
+        let old_bytes = std::fs::read(&target).unwrap();
+        let mut child = urbansem()
+            .args(["cloud", "convert"])
+            .arg(&input)
+            .arg(&target)
+            .arg("--ascii")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        let now = std::fs::read(&target).unwrap();
+        if now == old_bytes {
+            outcomes.push("old");
+        } else {
+            // Only a complete conversion may replace the old file.
+            assert!(
+                status.success(),
+                "{delay_ms} ms: target changed but the writer was killed"
+            );
+            assert_eq!(read_cloud(&target).unwrap().len(), n, "{delay_ms} ms");
+            outcomes.push("new");
+        }
+        // The killed writer may leave its hidden temporary file; nothing else.
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let name = e.unwrap().file_name().to_string_lossy().into_owned();
+            assert!(
+                name == "in.ply" || name == "out.pcd" || name.ends_with(".partial"),
+                "unexpected file {name}"
+            );
+        }
+    }
+    assert!(
+        outcomes.contains(&"old"),
+        "no kill landed before the end: {outcomes:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -35,6 +35,9 @@ pub enum BenchCommand {
     Mln(MlnBenchArgs),
     /// SRTree map insertion and box queries on the real scans (peers: scripts/bench_srtree_octomap.py).
     Srtree(crate::cmd::srtree::SrtreeBenchArgs),
+    /// Every reader on inputs of three sizes (MB/s, growth per step) and the OPB grid end
+    /// to end beside thinqpbo.
+    Parsers(crate::cmd::bench_parsers::ParsersBenchArgs),
 }
 
 /// Options of `urbansem bench pbo`.
@@ -67,6 +70,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Pbo(args) => bench_pbo(&args),
         BenchCommand::Mln(args) => bench_mln(&args),
         BenchCommand::Srtree(args) => crate::cmd::srtree::bench_srtree(&args),
+        BenchCommand::Parsers(args) => crate::cmd::bench_parsers::run(&args),
     }
 }
 
@@ -176,7 +180,7 @@ fn time_maxflow(inst: &QuadraticInstance) -> Option<Outcome> {
     })
 }
 
-fn script_path() -> PathBuf {
+pub(crate) fn script_path() -> PathBuf {
     let in_cwd = PathBuf::from("scripts/bench_pbo_peers.py");
     if in_cwd.exists() {
         return in_cwd;
@@ -658,7 +662,9 @@ fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
         .filter(|s| !MLN_SETS.iter().any(|m| m.name == s.as_str()))
         .collect();
     if !unknown.is_empty() {
-        bail!("unknown MLN set(s) {unknown:?}: expected ie, lp, rc, kb, er, fs, neg-fs, id, kb3");
+        super::usage!(
+            "unknown MLN set(s) {unknown:?}: expected ie, lp, rc, kb, er, fs, neg-fs, id, kb3"
+        );
     }
     let mut rows: Vec<Value> = Vec::new();
     for set in MLN_SETS

@@ -221,7 +221,7 @@ fn convert(
             let map: fn(u32) -> Class = match set {
                 "mcd" => geodata::datasets::mcd::mcd_class,
                 "kitti360" | "kitti-360" => geodata::datasets::kitti360::kitti360_class,
-                other => bail!("unknown --label-set {other:?}; use mcd or kitti360"),
+                other => super::usage!("unknown --label-set {other:?}; use mcd or kitti360"),
             };
             cloud.label = Some(raw.iter().map(|&r| map(r).id()).collect());
         }

@@ -30,7 +30,7 @@ pub struct DemoArgs {
 pub(crate) struct StageOutput {
     /// Key of the stage's entry in `summary.json`.
     pub(crate) key: &'static str,
-    /// The stage's entry in `summary.json` (an object; `seconds` is added).
+    /// The stage's entry in `summary.json` (an object; its timings move to `timings.json`).
     pub(crate) summary: Value,
     /// Section title in `index.html`.
     pub(crate) title: &'static str,
@@ -77,34 +77,46 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     );
     let t0 = Instant::now();
     let mut summary = Map::new();
+    let mut timings = Map::new();
     let mut html = Html::default();
     for (name, stage) in stages {
         bar.set_message(name);
         let t = Instant::now();
         let out = stage(&args).with_context(|| format!("demo stage {name:?}"))?;
         let mut entry = out.summary;
-        if let Value::Object(m) = &mut entry {
+        let mut stage_timings = take_timings(&mut entry).unwrap_or_else(|| json!({}));
+        if let Value::Object(m) = &mut stage_timings {
             m.insert("seconds".into(), json!(t.elapsed().as_secs_f64()));
         }
         summary.insert(out.key.into(), entry);
+        timings.insert(out.key.into(), stage_timings);
         html.section(out.title, &out.text_html, &out.figures);
         for (name, bytes) in &out.files {
             let path = args.out.join(name);
-            std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))?;
+            geodata::fsio::write_atomic(&path, bytes)
+                .with_context(|| format!("writing {}", path.display()))?;
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
     summary.insert("seed".into(), json!(args.seed));
-    summary.insert("seconds_total".into(), json!(t0.elapsed().as_secs_f64()));
+    timings.insert("seconds_total".into(), json!(t0.elapsed().as_secs_f64()));
     let summary_path = args.out.join("summary.json");
-    std::fs::write(
+    geodata::fsio::write_atomic(
         &summary_path,
-        serde_json::to_string_pretty(&Value::Object(summary))?,
+        serde_json::to_string_pretty(&Value::Object(summary))? + "\n",
     )
     .with_context(|| format!("writing {}", summary_path.display()))?;
+    // Timings change from run to run; they live apart so that every other file is the same
+    // bytes for the same seed.
+    let timings_path = args.out.join("timings.json");
+    geodata::fsio::write_atomic(
+        &timings_path,
+        serde_json::to_string_pretty(&Value::Object(timings))? + "\n",
+    )
+    .with_context(|| format!("writing {}", timings_path.display()))?;
     let html_path = args.out.join("index.html");
-    std::fs::write(&html_path, html.finish("urbansem demo"))
+    geodata::fsio::write_atomic(&html_path, html.finish("urbansem demo"))
         .with_context(|| format!("writing {}", html_path.display()))?;
     println!(
         "demo finished in {:.1} s: {} and {}",
@@ -113,6 +125,43 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         html_path.display()
     );
     Ok(())
+}
+
+/// Whether a summary key holds a timing (seconds, or a rate per second).
+fn is_timing_key(key: &str) -> bool {
+    key.contains("second") || key.ends_with("_s") || key.ends_with("_per_s")
+}
+
+/// Moves every timing out of `value` into the returned value, keeping the nesting (arrays
+/// keep their length, with `null` where an element had none); `None` when there was none.
+fn take_timings(value: &mut Value) -> Option<Value> {
+    match value {
+        Value::Object(m) => {
+            let mut taken = Map::new();
+            let keys: Vec<String> = m.keys().cloned().collect();
+            for key in keys {
+                if is_timing_key(&key) {
+                    if let Some(v) = m.remove(&key) {
+                        taken.insert(key, v);
+                    }
+                } else if let Some(sub) = m.get_mut(&key).and_then(take_timings) {
+                    taken.insert(key, sub);
+                }
+            }
+            (!taken.is_empty()).then_some(Value::Object(taken))
+        }
+        Value::Array(items) => {
+            let taken: Vec<Value> = items
+                .iter_mut()
+                .map(|v| take_timings(v).unwrap_or(Value::Null))
+                .collect();
+            taken
+                .iter()
+                .any(|v| !v.is_null())
+                .then_some(Value::Array(taken))
+        }
+        _ => None,
+    }
 }
 
 fn stage_city(_args: &DemoArgs) -> anyhow::Result<StageOutput> {

@@ -5,7 +5,7 @@
 //!   (DIR: a simulated `localization` dataset, or an MCD sequence folder with `--map`).
 
 use crate::report::Svg;
-use anyhow::{bail, Context};
+use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::osm::OsmMap;
 use localize::distractors::{embed_among_distractors, DistractorOptions, DistractorSummary};
@@ -159,7 +159,7 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
 
 fn options(cost: CostKind, grid_m: f64, yaw_step_deg: f64) -> anyhow::Result<LocalizeOptions> {
     if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
-        bail!("--yaw-step-deg {yaw_step_deg}: expected a step in (0, 90] degrees");
+        super::usage!("--yaw-step-deg {yaw_step_deg}: expected a step in (0, 90] degrees");
     }
     let mut o = LocalizeOptions {
         rank_by: cost,
@@ -194,7 +194,9 @@ fn candidate_json(map: &OsmMap, rank: usize, c: &localize::pipeline::Candidate) 
 
 fn run_one(args: RunArgs) -> anyhow::Result<()> {
     let (Some(map_path), Some(scan_path)) = (&args.map, &args.scan) else {
-        bail!("urbansem localize needs --map MAP and --scan SCAN (or the `eval` subcommand)");
+        super::usage!(
+            "urbansem localize needs --map MAP and --scan SCAN (or the `eval` subcommand)"
+        );
     };
     let t = Instant::now();
     let map = OsmMap::load(map_path)
@@ -214,7 +216,8 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         .with_context(|| format!("localizing {}", scan_path.display()))?;
     if let Some(svg_path) = &args.svg {
         let svg = figure(&localizer, &result, None, 100.0);
-        std::fs::write(svg_path, svg).with_context(|| format!("writing {}", svg_path.display()))?;
+        geodata::fsio::write_atomic(svg_path, svg)
+            .with_context(|| format!("writing {}", svg_path.display()))?;
     }
     let top: Vec<Value> = result
         .candidates
@@ -410,7 +413,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let mcd = is_mcd(&args.dataset);
     let (map_path, sim) = if mcd {
         let Some(m) = args.map.clone() else {
-            bail!(
+            super::usage!(
                 "{} is an MCD sequence; give the map with --map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)",
                 args.dataset.display()
             );
@@ -505,7 +508,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         let hashing_s = t.elapsed().as_secs_f64();
         if let Some(dir) = &args.figures {
             let path = dir.join(format!("{}.svg", scan.name.trim_end_matches(".ply")));
-            std::fs::write(&path, figure(&localizer, &result, Some(scan.truth), 90.0))
+            geodata::fsio::write_atomic(&path, figure(&localizer, &result, Some(scan.truth), 90.0))
                 .with_context(|| format!("writing {}", path.display()))?;
         }
         let rec = ScanRecord {
@@ -708,7 +711,7 @@ fn summarize(
     if let Some(dir) = &args.figures {
         let path = dir.join("curves.svg");
         let names: Vec<&str> = method_rows.iter().map(|(n, _)| *n).collect();
-        std::fs::write(&path, curves_svg(&table, &names, n))
+        geodata::fsio::write_atomic(&path, curves_svg(&table, &names, n))
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if args.json {

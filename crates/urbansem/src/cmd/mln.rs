@@ -7,7 +7,6 @@ use mln::infer::{map_inference, InferOptions, Method, Representation};
 use mln::parse::{parse_query_predicates, read_evidence, read_program, read_query};
 use pbo::quadratize::Quadratizer;
 use serde_json::json;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -210,7 +209,7 @@ fn read_evidence_and_query(
     let query = match (args.queries.as_deref(), args.query_file.as_deref()) {
         (Some(list), _) => parse_query_predicates(list, program)?,
         (None, Some(f)) => read_query(f, program).context("reading the query file")?,
-        (None, None) => anyhow::bail!("no query: give -q Pred1,Pred2 or --query-file FILE"),
+        (None, None) => super::usage!("no query: give -q Pred1,Pred2 or --query-file FILE"),
     };
     Ok((evidence, query))
 }
@@ -354,7 +353,7 @@ pub(crate) fn write_generated(
             )
             .with_context(|| format!("in {}", dir.display()))?;
             let path = out.join("training.db");
-            std::fs::write(&path, &k.training)
+            geodata::fsio::write_atomic(&path, &k.training)
                 .with_context(|| format!("writing {}", path.display()))?;
             k.files
         }
@@ -374,7 +373,8 @@ pub(crate) fn write_generated(
         ("query.db", &g.query),
     ] {
         let path = out.join(name);
-        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+        geodata::fsio::write_atomic(&path, text)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }
@@ -398,7 +398,8 @@ pub(crate) fn learn_program(
         .context("setting up the training problem")?;
     let learnt = mln::learn::learn_weights(&program, &training, options);
     let text = mln::learn::with_weights(&source, &program, &learnt.weights);
-    std::fs::write(output, text).with_context(|| format!("writing {}", output.display()))?;
+    geodata::fsio::write_atomic(output, text)
+        .with_context(|| format!("writing {}", output.display()))?;
     Ok((training, learnt))
 }
 
@@ -456,11 +457,10 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let (program, problem, query, parse_s, ground_s) = load_and_ground(&args.problem)?;
     if let Some(path) = &args.export_wcnf {
-        let file = std::fs::File::create(path)
+        let mut w = geodata::fsio::AtomicFile::create(path)
             .with_context(|| format!("creating the WCNF file {}", path.display()))?;
-        let mut w = std::io::BufWriter::new(file);
         let summary = mln::wcnf::write_wcnf(&problem, args.wcnf_scale, &mut w)
-            .and_then(|s| w.flush().map(|()| s))
+            .and_then(|s| w.commit().map(|()| s))
             .with_context(|| format!("writing {}", path.display()))?;
         eprintln!(
             "wrote {}: {} variables ({} auxiliary), {} hard and {} soft clauses; cost = optimum / {} {:+}",
@@ -506,11 +506,13 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
             })
             .collect();
         lines.sort();
-        let mut f = std::fs::File::create(path)
-            .with_context(|| format!("creating the result file {}", path.display()))?;
+        let mut text = String::new();
         for l in lines {
-            writeln!(f, "{l}").with_context(|| format!("writing {}", path.display()))?;
+            text.push_str(&l);
+            text.push('\n');
         }
+        geodata::fsio::write_atomic(path, text)
+            .with_context(|| format!("writing the result file {}", path.display()))?;
     }
     let higher = problem.higher_order_factors();
     if args.json {

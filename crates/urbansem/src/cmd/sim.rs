@@ -112,7 +112,8 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
             };
             let (xml, stats) =
                 generate_city_with_stats(&options, seed).context("generating the city")?;
-            std::fs::write(&out, xml).with_context(|| format!("writing {}", out.display()))?;
+            geodata::fsio::write_atomic(&out, xml)
+                .with_context(|| format!("writing {}", out.display()))?;
             println!(
                 "{}: {} nodes, {} highway ways ({} segments), {} building ways + {} courtyard multipolygons",
                 out.display(),
@@ -244,10 +245,13 @@ fn load_or_default(map: Option<&Path>, out: &Path) -> anyhow::Result<(OsmMap, St
             let xml = generate_city(&CityOptions::default(), 1)
                 .context("generating the embedded default city")?;
             let path = out.join("city.osm");
-            std::fs::write(&path, &xml).with_context(|| format!("writing {}", path.display()))?;
+            geodata::fsio::write_atomic(&path, &xml)
+                .with_context(|| format!("writing {}", path.display()))?;
+            // Recorded relative to the dataset folder: the dataset can move, and the same
+            // command writes the same dataset.json wherever OUT is.
             Ok((
                 OsmMap::from_xml_str(&xml).context("parsing the embedded default city")?,
-                path.display().to_string(),
+                "city.osm".to_owned(),
             ))
         }
     }

@@ -1,6 +1,6 @@
 //! `urbansem map …` and `urbansem relations …`: the semantic R-tree map and spatial relations.
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use clap::Subcommand;
 use geodata::classes::Class;
 use serde_json::{json, Value};
@@ -150,7 +150,7 @@ fn parse_floats<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]>
         .collect::<Result<_, _>>()
         .with_context(|| format!("{what} {s:?}: expected {N} comma-separated numbers"))?;
     if v.len() != N || v.iter().any(|x| !x.is_finite()) {
-        bail!("{what} {s:?}: expected {N} comma-separated finite numbers");
+        super::usage!("{what} {s:?}: expected {N} comma-separated finite numbers");
     }
     let mut out = [0.0; N];
     out.copy_from_slice(&v);
@@ -264,7 +264,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
                     m.cells_of_class(class)
                 }
                 (None, None, None, Some(o)) => m.cells_of_object(o),
-                _ => bail!("give exactly one of --box, --near, --class, --object"),
+                _ => super::usage!("give exactly one of --box, --near, --class, --object"),
             };
             let seconds = t.elapsed().as_secs_f64();
             let rows: Vec<Value> = cells
@@ -340,7 +340,7 @@ fn eval_labels(
     )?;
     let eval_s = t.elapsed().as_secs_f64();
     if let Some(p) = model_out {
-        std::fs::write(p, serde_json::to_string_pretty(&ev.model)?)
+        geodata::fsio::write_atomic(p, serde_json::to_string_pretty(&ev.model)?)
             .with_context(|| format!("writing {}", p.display()))?;
     }
     let score_json = |s: &LabelScore| {
@@ -480,7 +480,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             let t = Instant::now();
             let model =
                 train(&ds.train, &train_options(seed)).context("training the relation model")?;
-            std::fs::write(&out, serde_json::to_string_pretty(&model)?)
+            geodata::fsio::write_atomic(&out, serde_json::to_string_pretty(&model)?)
                 .with_context(|| format!("writing {}", out.display()))?;
             println!(
                 "{}: trained on {} scenes ({:.1} s loading, {:.1} s training); MLN weights {:?}",
@@ -876,7 +876,7 @@ fn rss_bytes() -> u64 {
 
 fn write_f64s(path: &Path, values: impl Iterator<Item = f64>) -> anyhow::Result<()> {
     let bytes: Vec<u8> = values.flat_map(f64::to_le_bytes).collect();
-    std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
+    geodata::fsio::write_atomic(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
 /// `urbansem bench srtree`: inserts all real scans, registered into one cloud, scan by scan
@@ -1008,7 +1008,7 @@ pub fn bench_srtree(args: &SrtreeBenchArgs) -> anyhow::Result<()> {
         let meta = json!({"resolution_m": args.resolution, "points": points, "scans": scans_json,
             "max_ray_m": MapOptions::default().max_ray_m});
         let p = dir.join("meta.json");
-        std::fs::write(&p, serde_json::to_string_pretty(&meta)?)
+        geodata::fsio::write_atomic(&p, serde_json::to_string_pretty(&meta)?)
             .with_context(|| format!("writing {}", p.display()))?;
     }
     let out = json!({

@@ -216,7 +216,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("evaluating {}", dataset.display()))?;
             report.seconds.insert("load".into(), load_s);
             if let Some(p) = segments_out {
-                std::fs::write(&p, serde_json::to_vec_pretty(&report.geometries)?)
+                geodata::fsio::write_atomic(&p, serde_json::to_vec_pretty(&report.geometries)?)
                     .with_context(|| format!("writing {}", p.display()))?;
             }
             if json {
@@ -237,7 +237,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             let ds = StreetsDataset::load(&dataset)
                 .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
             let model = train_model(&ds, target.into(), &training)?;
-            std::fs::write(&out, serde_json::to_vec(&model)?)
+            geodata::fsio::write_atomic(&out, serde_json::to_vec(&model)?)
                 .with_context(|| format!("writing {}", out.display()))?;
             println!(
                 "{}: {} support vectors, held-out confusion {:?}",
@@ -253,10 +253,10 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             model,
             out,
         } => {
-            let text = std::fs::read_to_string(&model)
+            let bytes = std::fs::read(&model)
                 .with_context(|| format!("reading the model {}", model.display()))?;
-            let model: StreetModel = serde_json::from_str(&text)
-                .with_context(|| format!("parsing the model {}", model.display()))?;
+            // Checked as it is read: dimensions, finite values, bin sizes (issue 16).
+            let model = StreetModel::from_json(&bytes, &model)?;
             let osm = OsmMap::load(&map).with_context(|| format!("loading {}", map.display()))?;
             let pc = read_cloud(&cloud).with_context(|| format!("reading {}", cloud.display()))?;
             let est = model.estimate(
@@ -267,7 +267,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             )?;
             let fc = streets::geojson::feature_collection(&osm, &est.segments);
             streets::geojson::validate(&fc).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
-            std::fs::write(&out, serde_json::to_vec_pretty(&fc)?)
+            geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&fc)?)
                 .with_context(|| format!("writing {}", out.display()))?;
             println!(
                 "{}: {} segments estimated ({} exact inference), {} shorter than a bin, {} without observed bins",
@@ -565,7 +565,8 @@ fn bench_svm(
                 s += "\n";
             }
             let p = dir.join(name);
-            std::fs::write(&p, s).with_context(|| format!("writing {}", p.display()))?;
+            geodata::fsio::write_atomic(&p, s)
+                .with_context(|| format!("writing {}", p.display()))?;
         }
     }
     let options = SvmOptions {
@@ -618,7 +619,8 @@ pub(crate) fn demo_stage(
     let map_path = dir.join("city.osm");
     let xml = geodata::city::generate_city(&geodata::city::CityOptions::default(), 1)
         .context("writing the embedded city as OSM XML")?;
-    std::fs::write(&map_path, xml).with_context(|| format!("writing {}", map_path.display()))?;
+    geodata::fsio::write_atomic(&map_path, xml)
+        .with_context(|| format!("writing {}", map_path.display()))?;
     let defaults = StreetsOptions::default();
     let options = StreetsOptions {
         route_m: 700.0,
@@ -631,15 +633,9 @@ pub(crate) fn demo_stage(
         ..defaults
     };
     let t = Instant::now();
-    write_streets(
-        &map,
-        &map_path.display().to_string(),
-        &dir,
-        &options,
-        args.seed,
-        &|_, _| {},
-    )
-    .context("simulating the streets dataset")?;
+    // The map is recorded relative to the dataset folder (see `sim dataset`).
+    write_streets(&map, "city.osm", &dir, &options, args.seed, &|_, _| {})
+        .context("simulating the streets dataset")?;
     let sim_s = t.elapsed().as_secs_f64();
     let ds = StreetsDataset::load(&dir).with_context(|| format!("loading {}", dir.display()))?;
     let mut eval_options = EvalOptions {
