@@ -180,13 +180,7 @@ fn write_text(path: &Path, text: &str) -> Result<(), String> {
 /// A 4-connected denoising grid written as one objective line (≈ 95 bytes per pixel).
 fn gen_opb(bytes: u64, path: &Path) -> Result<(), String> {
     let side = ((bytes as f64 / 95.0).sqrt().round() as usize).max(2);
-    let inst = pbo::instances::denoising_grid(side, side, 1);
-    let problem = pbo::opb::OpbProblem {
-        poly: inst.to_polynomial(),
-        names: (1..=inst.num_vars).map(|k| format!("x{k}")).collect(),
-        sense: pbo::opb::Sense::Minimize,
-        declared: Some(inst.num_vars),
-    };
+    let problem = pbo::instances::denoising_grid(side, side, 1).to_opb();
     write_text(path, &pbo::opb::write_opb(&problem))
 }
 

@@ -132,6 +132,17 @@ impl QuadraticInstance {
         f
     }
 
+    /// The function as an `.opb` objective over `x1 … xN` (literal form, see
+    /// [`QuadraticInstance::to_polynomial`]).
+    pub fn to_opb(&self) -> crate::opb::OpbProblem {
+        crate::opb::OpbProblem {
+            poly: self.to_polynomial(),
+            names: (1..=self.num_vars).map(|k| format!("x{k}")).collect(),
+            sense: crate::opb::Sense::Minimize,
+            declared: Some(self.num_vars),
+        }
+    }
+
     /// Energy of `x`, in `i64`.
     pub fn energy(&self, x: &[bool]) -> i64 {
         let mut e = 0i64;

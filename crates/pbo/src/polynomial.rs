@@ -177,12 +177,27 @@ impl TermIndex {
 /// Sorts literals, drops repeats (l·l = l); returns `None` if x·x̄ makes the product zero.
 fn normalize(literals: &[Literal]) -> Option<Vec<Literal>> {
     let mut lits = literals.to_vec();
-    lits.sort_unstable();
-    lits.dedup();
-    if lits.windows(2).any(|w| w[0].var() == w[1].var()) {
-        return None;
-    }
+    let n = normalize_in_place(&mut lits)?;
+    lits.truncate(n);
     Some(lits)
+}
+
+/// [`normalize`] in place: sorts `lits`, moves the distinct literals to the front and
+/// returns their number, or `None` if x·x̄ makes the product zero.
+fn normalize_in_place(lits: &mut [Literal]) -> Option<usize> {
+    lits.sort_unstable();
+    let mut n = 0;
+    for i in 0..lits.len() {
+        if n > 0 && lits[n - 1] == lits[i] {
+            continue;
+        }
+        if n > 0 && lits[n - 1].var() == lits[i].var() {
+            return None;
+        }
+        lits[n] = lits[i];
+        n += 1;
+    }
+    Some(n)
 }
 
 impl Polynomial {
@@ -231,19 +246,9 @@ impl Polynomial {
             let mut buf = [Literal(0); 4];
             let lits = &mut buf[..literals.len()];
             lits.copy_from_slice(literals);
-            lits.sort_unstable();
-            let mut n = 0;
-            for i in 0..lits.len() {
-                if n > 0 && lits[n - 1] == lits[i] {
-                    continue;
-                }
-                if n > 0 && lits[n - 1].var() == lits[i].var() {
-                    return; // x · x̄ = 0
-                }
-                lits[n] = lits[i];
-                n += 1;
+            if let Some(n) = normalize_in_place(lits) {
+                self.add_sorted_slice(coeff, &buf[..n]);
             }
-            self.add_sorted_slice(coeff, &buf[..n]);
             return;
         }
         let Some(lits) = normalize(literals) else {
@@ -279,23 +284,7 @@ impl Polynomial {
 
     /// Adds a term whose literals are already sorted and on distinct variables.
     fn add_normalized(&mut self, coeff: f64, lits: Vec<Literal>) {
-        if lits.is_empty() {
-            self.constant += coeff;
-            return;
-        }
-        if let Some(last) = lits.last() {
-            self.num_vars = self.num_vars.max(last.var() as usize + 1);
-        }
-        let key: Box<[Literal]> = lits.into_boxed_slice();
-        if let Some(pos) = self.index.get(&key) {
-            self.terms[pos].coeff += coeff;
-        } else {
-            self.index.insert(&key, self.terms.len());
-            self.terms.push(Term {
-                literals: key,
-                coeff,
-            });
-        }
+        self.add_sorted_slice(coeff, &lits);
     }
 
     /// The non-zero terms as (sorted literals, coefficient), in insertion order.

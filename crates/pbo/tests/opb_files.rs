@@ -2,7 +2,7 @@
 //! and a header that made the reader allocate one name per declared variable).
 
 use pbo::instances::denoising_grid;
-use pbo::opb::{parse_opb, write_opb, OpbError, OpbProblem, Sense};
+use pbo::opb::{parse_opb, write_opb, OpbError};
 use pbo::qssr::{solve, QssrOptions};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -14,13 +14,7 @@ use rand_chacha::ChaCha8Rng;
 #[test]
 fn issue16_grid_objective_on_one_line_reads_and_solves() {
     let inst = denoising_grid(512, 512, 7);
-    let names = (1..=inst.num_vars).map(|k| format!("x{k}")).collect();
-    let problem = OpbProblem {
-        poly: inst.to_polynomial(),
-        names,
-        sense: Sense::Minimize,
-        declared: Some(inst.num_vars),
-    };
+    let problem = inst.to_opb();
     let text = write_opb(&problem);
     let objective_lines = text.lines().filter(|l| !l.starts_with('*')).count();
     assert_eq!(objective_lines, 1, "the objective must be one line");

@@ -121,13 +121,7 @@ fn grid_end_to_end(args: &ParsersBenchArgs) -> anyhow::Result<Value> {
     std::fs::create_dir_all(&args.dir)
         .with_context(|| format!("creating {}", args.dir.display()))?;
     let opb_path = args.dir.join(format!("grid{side}.opb"));
-    let problem = pbo::opb::OpbProblem {
-        poly: inst.to_polynomial(),
-        names: (1..=inst.num_vars).map(|k| format!("x{k}")).collect(),
-        sense: pbo::opb::Sense::Minimize,
-        declared: Some(inst.num_vars),
-    };
-    geodata::fsio::write_atomic(&opb_path, pbo::opb::write_opb(&problem))
+    geodata::fsio::write_atomic(&opb_path, pbo::opb::write_opb(&inst.to_opb()))
         .with_context(|| format!("writing {}", opb_path.display()))?;
     let bytes = std::fs::metadata(&opb_path)?.len();
     let exe = std::env::current_exe().context("locating the urbansem binary")?;
