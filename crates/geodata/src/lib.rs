@@ -11,6 +11,7 @@
 //! - [`cloud`]: the column-wise [`cloud::PointCloud`] and its PLY/PCD/LAS/LAZ/KITTI IO.
 //! - [`mercator`]: scaled-Mercator georeferencing used by the KITTI and MCD datasets.
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
+//! - [`sensors`]: named LiDAR models (beam elevations, azimuth step, range, mount height).
 //! - [`fsio`]: atomic output files (written beside the target, renamed into place).
 //! - [`sim`]: the urban scan simulator (scene from a map, ray-cast scanner, datasets with truth).
 
@@ -22,4 +23,5 @@ pub mod fsio;
 pub mod mercator;
 pub mod osm;
 pub mod projection;
+pub mod sensors;
 pub mod sim;

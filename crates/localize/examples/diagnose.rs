@@ -26,7 +26,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let only: Vec<usize> = args.map(|a| a.parse()).collect::<Result<_, _>>()?;
     let ds = SimDataset::open(&dir)?;
     let map = OsmMap::load(&ds.map_path)?;
-    let mut options = LocalizeOptions::default();
+    // The environment variables below set the extraction options themselves.
+    let mut options = LocalizeOptions {
+        sensor: localize::sensor::SensorChoice::Manual,
+        ..LocalizeOptions::default()
+    };
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     if let Some(v) = env("FEASIBLE") {
         options.search.feasible_only = v != 0.0;

@@ -5,6 +5,8 @@
 //!
 //! Stages, one module each, in data-flow order:
 //!
+//! - [`sensor`]: the LiDAR's mount height, vertical field of view and beams (named profile or
+//!   detected from the scan) and the extraction options that follow.
 //! - [`surfaces`]: voxel downsampling, normals per occupied cell, cells with a horizontal
 //!   normal (vertical surfaces) projected to the ground plane (§5.3.2).
 //! - [`segments`]: one 2-D histogram per normal-yaw bin, the progressive probabilistic Hough
@@ -22,18 +24,21 @@
 //! - [`refine`]: continuous 2-D alignment of the best candidates.
 //! - [`hashing`]: the geometric-hashing baseline of Cham et al. (2010).
 //! - [`distractors`]: a map embedded among distractor buildings of another real map.
-//! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables.
+//! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables;
+//!   [`extract_eval`]: extraction precision/recall on labelled real scans.
 
 pub mod candidates;
 pub mod chamfer;
 pub mod distractors;
 pub mod eval;
+pub mod extract_eval;
 pub mod feasible;
 pub mod hashing;
 pub mod pipeline;
 pub mod rank;
 pub mod refine;
 pub mod segments;
+pub mod sensor;
 pub mod surfaces;
 pub mod visibility;
 

@@ -20,6 +20,7 @@ use crate::feasible::FeasibleMask;
 use crate::rank::{confidence, costs, rank_order, CostKind, CostOptions, Costs};
 use crate::refine::{refine_pose, RefineOptions};
 use crate::segments::{extract_segments, SegmentOptions};
+use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::visibility::{visible_segments, EdgeGrid, VisibilityOptions};
 use crate::{Pose2, Result, Segment};
@@ -32,9 +33,14 @@ use std::time::Instant;
 /// Every option of the chain.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LocalizeOptions {
-    /// Surface extraction.
+    /// How each scan's extraction options are chosen (sensor detected, named, or manual).
+    pub sensor: SensorChoice,
+    /// User values over the sensor's extraction options.
+    pub overrides: ExtractOverrides,
+    /// Surface extraction under [`SensorChoice::Manual`].
     pub surfaces: SurfaceOptions,
-    /// Segment extraction.
+    /// Segment extraction under [`SensorChoice::Manual`] (its seed and Hough settings are
+    /// used under every choice).
     pub segments: SegmentOptions,
     /// Distance-transform tensor.
     pub chamfer: ChamferOptions,
@@ -67,6 +73,8 @@ pub struct LocalizeOptions {
 impl Default for LocalizeOptions {
     fn default() -> Self {
         LocalizeOptions {
+            sensor: SensorChoice::Auto,
+            overrides: ExtractOverrides::default(),
             surfaces: SurfaceOptions::default(),
             segments: SegmentOptions::default(),
             chamfer: ChamferOptions::default(),
@@ -165,6 +173,11 @@ pub struct Localization {
     pub rank_by: CostKind,
     /// Confidence of the best candidate.
     pub confidence: f64,
+    /// The sensor the scan was processed as (`None` for segments given directly or manual
+    /// options).
+    pub sensor: Option<SensorReport>,
+    /// Wall clearance the surface extraction used, metres (0 for segments given directly).
+    pub clearance_m: f64,
     /// Vertical-surface cells found.
     pub vertical_cells: usize,
     /// Poses within the factor of the minimum before suppression.
@@ -240,12 +253,22 @@ impl<'m> Localizer<'m> {
     /// Localizes a gravity-levelled scan given as points in the sensor frame.
     pub fn localize_points(&self, points: &[[f64; 3]]) -> Result<Localization> {
         let t0 = Instant::now();
-        let cells = vertical_cells(points, &self.options.surfaces)?;
+        crate::surfaces::check_points(points)?;
+        let (sensor, surfaces, mut segment_options) = options_for_scan(
+            self.options.sensor,
+            &self.options.overrides,
+            (&self.options.surfaces, &self.options.segments),
+            points,
+        );
+        segment_options.seed = self.options.segments.seed;
+        let cells = vertical_cells(points, &surfaces)?;
         let surfaces_s = t0.elapsed().as_secs_f64();
         let t = Instant::now();
-        let segments = extract_segments(&cells, &self.options.segments);
+        let segments = extract_segments(&cells, &segment_options);
         let segments_s = t.elapsed().as_secs_f64();
         let mut out = self.localize_segments(&segments);
+        out.sensor = sensor;
+        out.clearance_m = surfaces.clearance_m;
         out.vertical_cells = cells.len();
         out.seconds.surfaces = surfaces_s;
         out.seconds.segments = segments_s;
@@ -255,7 +278,7 @@ impl<'m> Localizer<'m> {
                 "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
                 points.len(),
                 cells.len(),
-                self.options.segments.final_min_length_m
+                segment_options.final_min_length_m
             ));
         }
         Ok(out)
@@ -269,6 +292,8 @@ impl<'m> Localizer<'m> {
             candidates: Vec::new(),
             rank_by: self.options.rank_by,
             confidence: 0.0,
+            sensor: None,
+            clearance_m: 0.0,
             vertical_cells: 0,
             raw_poses: 0,
             after_suppression: 0,

@@ -39,6 +39,10 @@ pub struct SurfaceOptions {
     pub max_flatness: f64,
     /// Fewest columns in a neighbourhood for a normal.
     pub min_columns: usize,
+    /// Largest share of a column's points with another return more than 1 m behind them in
+    /// the same direction (a 0.5° × 0.8° bin): a wall hides what is behind it, a hedge or a
+    /// tree crown lets beams through (1: no test).
+    pub max_see_through: f64,
 }
 
 impl Default for SurfaceOptions {
@@ -54,6 +58,7 @@ impl Default for SurfaceOptions {
             column_radius_m: 1.2,
             max_flatness: 0.3,
             min_columns: 3,
+            max_see_through: 1.0,
         }
     }
 }
@@ -75,6 +80,29 @@ struct Column {
     n: f64,
     sx: f64,
     sy: f64,
+    /// Points with another return behind them.
+    behind: f64,
+}
+
+/// Azimuth bin of the see-through test, degrees.
+const SEE_AZ_DEG: f64 = 0.5;
+/// Elevation bin of the see-through test, degrees.
+const SEE_EL_DEG: f64 = 0.8;
+/// A return this much farther in the same bin is behind, metres.
+const SEE_GAP_M: f64 = 1.0;
+
+/// The (azimuth, elevation) bin of a point for the see-through test, and its range.
+fn direction_bin(p: &[f64; 3]) -> ([i32; 2], f64) {
+    let r = p[0].hypot(p[1]);
+    let az = p[1].atan2(p[0]).to_degrees();
+    let el = p[2].atan2(r).to_degrees();
+    (
+        [
+            (az / SEE_AZ_DEG).floor() as i32,
+            (el / SEE_EL_DEG).floor() as i32,
+        ],
+        r,
+    )
 }
 
 /// Checks that every point is finite.
@@ -137,6 +165,16 @@ pub fn vertical_cells(points: &[[f64; 3]], options: &SurfaceOptions) -> Result<V
         g
     };
     let ground: FxHashMap<[i32; 2], f64> = lowest.keys().map(|&k| (k, ground_at(k))).collect();
+    // Farthest return per direction bin, for the see-through test.
+    let see_through = options.max_see_through < 1.0;
+    let mut farthest: FxHashMap<[i32; 2], f64> = FxHashMap::default();
+    if see_through {
+        for p in points.iter().filter(|p| kept(p)) {
+            let (bin, r) = direction_bin(p);
+            let f = farthest.entry(bin).or_insert(0.0);
+            *f = f.max(r);
+        }
+    }
     // Columns and voxels of the points above the clearance.
     let mut columns: FxHashMap<[i32; 2], Column> = FxHashMap::default();
     let mut voxels: FxHashMap<[i32; 3], Column> = FxHashMap::default();
@@ -150,6 +188,12 @@ pub fn vertical_cells(points: &[[f64; 3]], options: &SurfaceOptions) -> Result<V
         c.n += 1.0;
         c.sx += p[0];
         c.sy += p[1];
+        if see_through {
+            let (bin, r) = direction_bin(p);
+            if farthest.get(&bin).is_some_and(|&f| f > r + SEE_GAP_M) {
+                c.behind += 1.0;
+            }
+        }
         let v = voxels
             .entry([key[0], key[1], (p[2] * inv).floor() as i32])
             .or_default();
@@ -162,6 +206,9 @@ pub fn vertical_cells(points: &[[f64; 3]], options: &SurfaceOptions) -> Result<V
     let r2 = options.column_radius_m * options.column_radius_m;
     let mut normals: FxHashMap<[i32; 2], f64> = FxHashMap::default();
     for (key, own) in &columns {
+        if own.behind > options.max_see_through * own.n {
+            continue;
+        }
         let centre = [own.sx / own.n, own.sy / own.n];
         let (mut n, mut s) = (0.0, [0.0; 2]);
         let mut ss = [0.0; 3];

@@ -866,7 +866,8 @@ fn parse_atom_lines<T>(
         .enumerate()
         .map(|(i, p)| (p.name.clone(), i))
         .collect();
-    let mut out = Vec::new();
+    // One entry per line at most: sized once, so a large file's output is not copied on growth.
+    let mut out = Vec::with_capacity(text.bytes().filter(|&b| b == b'\n').count() + 1);
     for (i, raw) in text.lines().enumerate() {
         let line = strip_comment(raw);
         if line.trim().is_empty() {

@@ -42,7 +42,7 @@ enum Command {
     /// Street geometry: offset and width per OSM street segment.
     Streets(cmd::streets::StreetsArgs),
     /// Global localization of a 3-D scan on OSM building outlines.
-    Localize(cmd::localize::LocalizeArgs),
+    Localize(Box<cmd::localize::LocalizeArgs>),
     /// Semantic R-tree maps: build from a labelled cloud, query.
     #[command(subcommand)]
     Map(cmd::srtree::MapCommand),
@@ -69,6 +69,11 @@ fn install_panic_hook() {
             .map(|s| (*s).to_owned())
             .or_else(|| info.payload().downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "(no message)".to_owned());
+        // `urbansem … | head`: the reader closed the pipe and wants no more output. Unix
+        // tools stop quietly here (Rust ignores SIGPIPE, so `println!` panics instead).
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(0);
+        }
         let location = info
             .location()
             .map(|l| format!("{}:{}", l.file(), l.line()))
@@ -95,7 +100,7 @@ fn main() -> ExitCode {
         Command::Cloud(c) => cmd::cloud::run(c),
         Command::Sim(c) => cmd::sim::run(c),
         Command::Streets(a) => cmd::streets::run(a),
-        Command::Localize(a) => cmd::localize::run(a),
+        Command::Localize(a) => cmd::localize::run(*a),
         Command::Map(c) => cmd::srtree::run_map(c),
         Command::Relations(c) => cmd::srtree::run_relations(c),
         Command::Bench(c) => cmd::bench::run(c),

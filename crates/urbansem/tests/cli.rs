@@ -334,3 +334,31 @@ fn issue16_killed_writer_leaves_the_old_file_intact() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `urbansem … | head`: output into a closed pipe ends the command quietly, not with the
+/// internal-error message of the panic hook.
+#[test]
+fn closed_stdout_pipe_is_not_an_internal_error() {
+    // 20 000 variables: the JSON answer (≈ 330 kB) overflows any pipe buffer, so the write
+    // into the closed pipe fails whenever the reader was closed.
+    let terms: Vec<String> = (1..=20_000).map(|i| format!("+1 x{i}")).collect();
+    let opb = temp_file(
+        "pipe.opb",
+        &format!(
+            "* #variable= 20000 #constraint= 0\nmin: {} ;\n",
+            terms.join(" ")
+        ),
+    );
+    let mut child = urbansem()
+        .args(["pbo", "solve", "--json"])
+        .arg(&opb)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("internal error"), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+}

@@ -43,6 +43,7 @@ use super::{mix64, purpose, stream_rng, SimError};
 use crate::classes::Class;
 use crate::cloud::{write_cloud, PointCloud};
 use crate::osm::OsmMap;
+use crate::sensors::SensorKind;
 use rand::Rng;
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -66,6 +67,23 @@ pub struct LocalizationOptions {
     pub min_map_building_view: f64,
     /// Range of that view test, metres.
     pub view_range_m: f64,
+    /// The sensor model the scanner imitates: terrestrial scans are taken on sidewalks,
+    /// car-mounted ones on the road, heading along it, every `spacing_m` along a drive.
+    pub sensor_kind: SensorKind,
+    /// Distance between car-mounted scans along the drive, metres.
+    pub spacing_m: f64,
+}
+
+impl LocalizationOptions {
+    /// The options of a sensor model: its beams, azimuth step, range and mount height.
+    pub fn for_sensor(kind: SensorKind) -> LocalizationOptions {
+        LocalizationOptions {
+            sensor: SensorOptions::of_kind(kind),
+            sensor_height_m: kind.mount_height_m(),
+            sensor_kind: kind,
+            ..LocalizationOptions::default()
+        }
+    }
 }
 
 impl Default for LocalizationOptions {
@@ -80,6 +98,8 @@ impl Default for LocalizationOptions {
             sensor_height_m: 1.8,
             min_map_building_view: 0.1,
             view_range_m: 60.0,
+            sensor_kind: SensorKind::Terrestrial,
+            spacing_m: 10.0,
         }
     }
 }
@@ -111,6 +131,9 @@ fn localization_poses(
     seed: u64,
 ) -> Result<Vec<Pose>, SimError> {
     let h = options.sensor_height_m;
+    if options.sensor_kind.on_car() {
+        return car_poses(scene, options, seed);
+    }
     if options.min_map_building_view <= 0.0 {
         return scene.sample_poses_with_height(options.scans, h, seed);
     }
@@ -140,6 +163,69 @@ fn localization_poses(
         found: out.len(),
         tries: tried,
     })
+}
+
+/// Car poses every `spacing_m` along a seeded drive (on the true centre line, heading along
+/// it), those with enough of the horizon on map buildings, at most `scans`.
+fn car_poses(
+    scene: &Scene,
+    options: &LocalizationOptions,
+    seed: u64,
+) -> Result<Vec<Pose>, SimError> {
+    if !(options.spacing_m.is_finite() && options.spacing_m >= 0.5) {
+        return Err(SimError::InvalidOption {
+            name: "spacing_m",
+            value: options.spacing_m,
+            expected: "a spacing ≥ 0.5 m",
+        });
+    }
+    // Drive eight times the needed length: poses without a view of map buildings are skipped.
+    let route_m = 8.0 * options.spacing_m * options.scans.max(1) as f64;
+    let route = drive_route(scene, route_m, seed)?;
+    let poses: Vec<Pose> = route_poses(scene, &route, options.spacing_m, options.sensor_height_m)
+        .into_iter()
+        .filter(|p| {
+            options.min_map_building_view <= 0.0
+                || map_building_view(scene, p, options.view_range_m)
+                    >= options.min_map_building_view
+        })
+        .take(options.scans)
+        .collect();
+    if poses.len() < options.scans {
+        return Err(SimError::NoCarPoses {
+            wanted: options.scans,
+            found: poses.len(),
+            route_m,
+        });
+    }
+    Ok(poses)
+}
+
+/// Poses every `spacing_m` along the true centre lines of a route, `height_m` above the street.
+fn route_poses(scene: &Scene, route: &[(usize, bool)], spacing_m: f64, height_m: f64) -> Vec<Pose> {
+    let mut poses = Vec::new();
+    let mut carry = 0.0;
+    for &(s, forward) in route {
+        let seg = &scene.segments[s];
+        let [a, b] = super::truth::offset_centre_line(seg, &scene.truth[s]);
+        let (p0, p1) = if forward { (a, b) } else { (b, a) };
+        let yaw = (p1[1] - p0[1]).atan2(p1[0] - p0[0]);
+        let mut t = carry;
+        while t <= seg.length_m {
+            let f = t / seg.length_m;
+            let p = [p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1])];
+            if scene.clear_of_shapes(p, 1.0) && !scene.inside_building(p) {
+                let z = scene.ground_at(p).z + height_m;
+                poses.push(Pose {
+                    position: [p[0], p[1], z],
+                    yaw_rad: yaw,
+                });
+            }
+            t += spacing_m;
+        }
+        carry = t - seg.length_m;
+    }
+    poses
 }
 
 /// The true pose of one localization scan as written to `truth.json`: in the map's frame
@@ -267,6 +353,7 @@ pub fn write_localization(
             "scans": summary.scans,
             "frame_origin": {"lat": lat0, "lon": lon0},
             "sensor": options.sensor,
+            "sensor_profile": options.sensor_kind.name(),
             "sensor_height_m": options.sensor_height_m,
             "min_map_building_view": options.min_map_building_view,
             "view_range_m": options.view_range_m,
@@ -420,31 +507,9 @@ pub fn write_streets(
     let scene = Scene::build(map, &options.scene, seed)?;
     let route = drive_route(&scene, options.route_m, seed)?;
     // Scan poses every spacing_m along the true centre lines of the route.
-    let mut poses = Vec::new();
-    let mut carry = 0.0;
-    for &(s, forward) in &route {
-        let seg = &scene.segments[s];
-        let [a, b] = super::truth::offset_centre_line(seg, &scene.truth[s]);
-        let (p0, p1) = if forward { (a, b) } else { (b, a) };
-        let yaw = (p1[1] - p0[1]).atan2(p1[0] - p0[0]);
-        let mut t = carry;
-        while t <= seg.length_m {
-            let f = t / seg.length_m;
-            let p = [p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1])];
-            if scene.clear_of_shapes(p, 1.0) && !scene.inside_building(p) {
-                let z = scene.ground_at(p).z + options.sensor_height_m;
-                poses.push(Pose {
-                    position: [p[0], p[1], z],
-                    yaw_rad: yaw,
-                });
-            }
-            t += options.spacing_m;
-        }
-        carry = t - seg.length_m;
-        if options.max_scans > 0 && poses.len() >= options.max_scans {
-            poses.truncate(options.max_scans);
-            break;
-        }
+    let mut poses = route_poses(&scene, &route, options.spacing_m, options.sensor_height_m);
+    if options.max_scans > 0 {
+        poses.truncate(options.max_scans);
     }
     let started = std::time::Instant::now();
     let mut summary = DatasetSummary::default();
@@ -931,6 +996,44 @@ mod tests {
         }
         let again = localization_poses(&scene, &options, 4).unwrap();
         assert_eq!(poses, again);
+    }
+
+    #[test]
+    fn car_sensor_scans_from_the_road_along_it_and_names_its_sensor() {
+        let map = map();
+        let options = LocalizationOptions {
+            scans: 4,
+            min_map_building_view: 0.05,
+            ..LocalizationOptions::for_sensor(SensorKind::Hdl64)
+        };
+        let scene = Scene::build(&map, &options.scene, 3).unwrap();
+        let poses = localization_poses(&scene, &options, 3).unwrap();
+        assert_eq!(poses.len(), 4);
+        for p in &poses {
+            let ground = scene.ground_at([p.position[0], p.position[1]]);
+            assert_eq!(ground.class, Class::Street, "{p:?}");
+            assert!((p.position[2] - ground.z - 1.73).abs() < 1e-9, "{p:?}");
+        }
+        let dir = std::env::temp_dir().join(format!("urbansem-car-{}", std::process::id()));
+        write_localization(&map, "m.osm", &dir, &options, 3, &|_, _| {}).unwrap();
+        let meta: Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("dataset.json")).unwrap())
+                .unwrap();
+        assert_eq!(meta["sensor_profile"], "hdl64");
+        assert_eq!(
+            meta["sensor"]["elevations_deg"].as_array().unwrap().len(),
+            64
+        );
+        let cloud = crate::cloud::read_cloud(dir.join("scan_000.ply")).unwrap();
+        // Beams reach +2° at most (plus range noise).
+        let top = cloud
+            .positions
+            .iter()
+            .filter(|q| q[0].hypot(q[1]) > 10.0)
+            .map(|q| q[2].atan2(q[0].hypot(q[1])).to_degrees())
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!(top < 2.2, "{top}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

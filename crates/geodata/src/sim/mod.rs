@@ -73,6 +73,16 @@ pub enum SimError {
         /// Attempts made.
         tries: usize,
     },
+    /// A drive did not pass enough places for car-mounted scans.
+    #[error("could not place {wanted} car-mounted scans with buildings in view along a {route_m:.0} m drive (found {found}); the map may have few drivable streets among buildings")]
+    NoCarPoses {
+        /// Scans asked for.
+        wanted: usize,
+        /// Scans found.
+        found: usize,
+        /// Length of the drive, metres.
+        route_m: f64,
+    },
     /// A route for the streets dataset could not be found.
     #[error("no drivable street in the map to drive a route along")]
     NoRoute,

@@ -38,6 +38,10 @@ pub struct SensorOptions {
     pub range_noise_m: f64,
     /// Probability that a ray with a hit returns nothing.
     pub dropout: f64,
+    /// Beam elevations, degrees, when the fan is not uniform (empty: `v_min_deg` to
+    /// `v_max_deg` in `v_step_deg` steps).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub elevations_deg: Vec<f64>,
 }
 
 impl Default for SensorOptions {
@@ -51,6 +55,7 @@ impl Default for SensorOptions {
             range_max_m: 80.0,
             range_noise_m: 0.02,
             dropout: 0.02,
+            elevations_deg: Vec::new(),
         }
     }
 }
@@ -63,7 +68,38 @@ impl SensorOptions {
 
     /// Number of elevation rows.
     pub fn rows(&self) -> usize {
+        if !self.elevations_deg.is_empty() {
+            return self.elevations_deg.len();
+        }
         (((self.v_max_deg - self.v_min_deg) / self.v_step_deg).floor() as usize) + 1
+    }
+
+    /// Elevation of every row, degrees, lowest first.
+    pub fn row_elevations_deg(&self) -> Vec<f64> {
+        if !self.elevations_deg.is_empty() {
+            return self.elevations_deg.clone();
+        }
+        (0..self.rows())
+            .map(|r| self.v_min_deg + r as f64 * self.v_step_deg)
+            .collect()
+    }
+
+    /// The scanner of a named model (its beams, azimuth step and range; noise and dropout
+    /// as the default).
+    pub fn of_kind(kind: crate::sensors::SensorKind) -> SensorOptions {
+        let elevations = kind.elevations_deg();
+        SensorOptions {
+            h_step_deg: kind.azimuth_step_deg(),
+            v_min_deg: elevations[0],
+            v_max_deg: elevations[elevations.len() - 1],
+            range_max_m: kind.range_max_m(),
+            elevations_deg: if kind == crate::sensors::SensorKind::Terrestrial {
+                Vec::new()
+            } else {
+                elevations
+            },
+            ..SensorOptions::default()
+        }
     }
 
     /// Rays per scan.
@@ -99,6 +135,17 @@ impl SensorOptions {
                 "v_min_deg",
                 self.v_min_deg,
                 "-90 ≤ v_min_deg ≤ v_max_deg ≤ 90",
+            );
+        }
+        if self
+            .elevations_deg
+            .iter()
+            .any(|e| !(e.is_finite() && (-90.0..=90.0).contains(e)))
+        {
+            return bad(
+                "elevations_deg",
+                f64::NAN,
+                "finite beam elevations in [-90, 90] degrees",
             );
         }
         if !(self.range_min_m >= 0.0
@@ -192,13 +239,12 @@ pub fn scan_with(
     let rows = options.rows();
     let o = pose.position;
     let (sin_yaw, cos_yaw) = pose.yaw_rad.sin_cos();
-    let elevations: Vec<(f64, f64)> = (0..rows)
-        .map(|r| {
-            (options.v_min_deg + r as f64 * options.v_step_deg)
-                .to_radians()
-                .sin_cos()
-        })
+    let elevations: Vec<(f64, f64)> = options
+        .row_elevations_deg()
+        .into_iter()
+        .map(|e| e.to_radians().sin_cos())
         .collect();
+    debug_assert_eq!(elevations.len(), rows);
     let per_column: Vec<Vec<PointRecord>> = (0..columns)
         .into_par_iter()
         .map(|c| {

@@ -94,9 +94,9 @@ pub enum Problem {
     NegFs,
     /// Image denoising with triple smoothing rules.
     Id,
-    /// IE: Tuffy's program with its evidence rebuilt from mfoilp's facts (<data>/ie).
+    /// IE: Tuffy's program with its evidence rebuilt from mfoilp's facts (`<data>/ie`).
     Ie,
-    /// KB3: third-order webKB from <data>/kb/mlcnn (weights 0; also writes training.db).
+    /// KB3: third-order webKB from `<data>/kb/mlcnn` (weights 0; also writes training.db).
     Kb3,
 }
 

@@ -75,9 +75,14 @@ pub enum SimCommand {
         /// Streets: length of the route, metres.
         #[arg(long, default_value_t = 2500.0)]
         route_m: f64,
-        /// Streets: distance between scans along the route, metres.
-        #[arg(long, default_value_t = 20.0)]
-        spacing_m: f64,
+        /// Distance between scans along the route, metres (streets: 20; localization with a
+        /// car-mounted sensor: 10).
+        #[arg(long)]
+        spacing_m: Option<f64>,
+        /// Localization: the sensor model simulated (beams, azimuth step, range, mount);
+        /// car-mounted models scan from the road along a drive, `terrestrial` from sidewalks.
+        #[arg(long, default_value = "terrestrial", value_parser = ["terrestrial", "hdl64", "vlp16", "os1-64", "os1-128"])]
+        sensor: String,
         /// Relations: rate at which the annotator flips a relation label.
         #[arg(long, default_value_t = 0.0)]
         annotator_noise: f64,
@@ -138,9 +143,18 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
             range_m,
             route_m,
             spacing_m,
+            sensor,
             annotator_noise,
             train,
         } => {
+            let Some(sensor_kind) = geodata::sensors::SensorKind::from_name(&sensor) else {
+                super::usage!("--sensor {sensor}: unknown sensor model");
+            };
+            if sensor_kind.on_car() && kind != DatasetKind::Localization {
+                super::usage!(
+                    "--sensor {sensor}: car-mounted sensors are simulated for localization datasets only"
+                );
+            }
             std::fs::create_dir_all(&out)
                 .with_context(|| format!("creating the output folder {}", out.display()))?;
             let (map, map_path) = load_or_default(map.as_deref(), &out)?;
@@ -176,11 +190,12 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
             let started = Instant::now();
             let summary: DatasetSummary = match kind {
                 DatasetKind::Localization => {
-                    let defaults = LocalizationOptions::default();
+                    let defaults = LocalizationOptions::for_sensor(sensor_kind);
                     let options = LocalizationOptions {
                         scans: scans.unwrap_or(defaults.scans),
                         scene: scene_with(true),
-                        sensor: tune(defaults.sensor),
+                        sensor: tune(defaults.sensor.clone()),
+                        spacing_m: spacing_m.unwrap_or(defaults.spacing_m),
                         ..defaults
                     };
                     write_localization(&map, &map_path, &out, &options, seed, &progress)
@@ -189,7 +204,7 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
                     let defaults = StreetsOptions::default();
                     let options = StreetsOptions {
                         route_m,
-                        spacing_m,
+                        spacing_m: spacing_m.unwrap_or(defaults.spacing_m),
                         max_scans: scans.unwrap_or(0),
                         scene: scene_with(false),
                         sensor: tune(defaults.sensor.clone()),
