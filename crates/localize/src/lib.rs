@@ -24,6 +24,8 @@
 //! - [`refine`]: continuous 2-D alignment of the best candidates.
 //! - [`hashing`]: the geometric-hashing baseline of Cham et al. (2010).
 //! - [`distractors`]: a map embedded among distractor buildings of another real map.
+//! - [`track`]: a window of scans tied by odometry, searched as one (localization along a
+//!   track), odometry files and simulated drift.
 //! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables;
 //!   [`extract_eval`]: extraction precision/recall on labelled real scans.
 
@@ -40,6 +42,7 @@ pub mod refine;
 pub mod segments;
 pub mod sensor;
 pub mod surfaces;
+pub mod track;
 pub mod visibility;
 
 use serde::Serialize;
@@ -111,6 +114,26 @@ impl Pose2 {
     /// Absolute heading difference in [0, π], radians.
     pub fn yaw_error_to(&self, other: &Pose2) -> f64 {
         angle_diff(self.yaw_rad, other.yaw_rad)
+    }
+
+    /// This pose followed by `other` (other given in this pose's frame).
+    pub fn compose(&self, other: &Pose2) -> Pose2 {
+        let [x, y] = self.apply([other.x, other.y]);
+        Pose2 {
+            x,
+            y,
+            yaw_rad: self.yaw_rad + other.yaw_rad,
+        }
+    }
+
+    /// The inverse transform: `p.inverse().compose(&p)` is the identity.
+    pub fn inverse(&self) -> Pose2 {
+        let (s, c) = self.yaw_rad.sin_cos();
+        Pose2 {
+            x: -(c * self.x + s * self.y),
+            y: -(-s * self.x + c * self.y),
+            yaw_rad: -self.yaw_rad,
+        }
     }
 }
 
@@ -195,6 +218,16 @@ pub enum LocalizeError {
         /// File.
         path: PathBuf,
         /// What is wrong.
+        message: String,
+    },
+    /// An odometry file has a malformed line, or does not match the scans.
+    #[error("{path}:{line}: {message}")]
+    Odometry {
+        /// File.
+        path: PathBuf,
+        /// 1-based line (the last line for a count mismatch).
+        line: usize,
+        /// What is wrong and what was expected.
         message: String,
     },
     /// Reading a point cloud failed.

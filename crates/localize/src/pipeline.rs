@@ -162,6 +162,25 @@ pub struct StageSeconds {
     pub total: f64,
 }
 
+/// The wall segments of one scan and how they were extracted.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScanSegments {
+    /// Segments in the sensor frame.
+    pub segments: Vec<Segment>,
+    /// The sensor the scan was processed as (`None` under manual options).
+    pub sensor: Option<SensorReport>,
+    /// Wall clearance used, metres.
+    pub clearance_m: f64,
+    /// Vertical-surface cells found.
+    pub vertical_cells: usize,
+    /// Shortest segment kept, metres.
+    pub min_length_m: f64,
+    /// Seconds of the surface extraction.
+    pub surfaces_s: f64,
+    /// Seconds of the segment extraction.
+    pub segments_s: f64,
+}
+
 /// The result of one scan.
 #[derive(Debug, Clone, Serialize)]
 pub struct Localization {
@@ -250,8 +269,9 @@ impl<'m> Localizer<'m> {
         })
     }
 
-    /// Localizes a gravity-levelled scan given as points in the sensor frame.
-    pub fn localize_points(&self, points: &[[f64; 3]]) -> Result<Localization> {
+    /// The wall segments of a gravity-levelled scan (sensor frame), with the sensor it was
+    /// processed as.
+    pub fn scan_segments(&self, points: &[[f64; 3]]) -> Result<ScanSegments> {
         let t0 = Instant::now();
         crate::surfaces::check_points(points)?;
         let (sensor, surfaces, mut segment_options) = options_for_scan(
@@ -265,20 +285,34 @@ impl<'m> Localizer<'m> {
         let surfaces_s = t0.elapsed().as_secs_f64();
         let t = Instant::now();
         let segments = extract_segments(&cells, &segment_options);
-        let segments_s = t.elapsed().as_secs_f64();
-        let mut out = self.localize_segments(&segments);
-        out.sensor = sensor;
-        out.clearance_m = surfaces.clearance_m;
-        out.vertical_cells = cells.len();
-        out.seconds.surfaces = surfaces_s;
-        out.seconds.segments = segments_s;
+        Ok(ScanSegments {
+            segments,
+            sensor,
+            clearance_m: surfaces.clearance_m,
+            vertical_cells: cells.len(),
+            min_length_m: segment_options.final_min_length_m,
+            surfaces_s,
+            segments_s: t.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Localizes a gravity-levelled scan given as points in the sensor frame.
+    pub fn localize_points(&self, points: &[[f64; 3]]) -> Result<Localization> {
+        let t0 = Instant::now();
+        let extracted = self.scan_segments(points)?;
+        let mut out = self.localize_segments(&extracted.segments);
+        out.sensor = extracted.sensor;
+        out.clearance_m = extracted.clearance_m;
+        out.vertical_cells = extracted.vertical_cells;
+        out.seconds.surfaces = extracted.surfaces_s;
+        out.seconds.segments = extracted.segments_s;
         out.seconds.total = t0.elapsed().as_secs_f64();
-        if segments.is_empty() {
+        if extracted.segments.is_empty() {
             out.message = Some(format!(
                 "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
                 points.len(),
-                cells.len(),
-                segment_options.final_min_length_m
+                extracted.vertical_cells,
+                extracted.min_length_m
             ));
         }
         Ok(out)
@@ -286,6 +320,16 @@ impl<'m> Localizer<'m> {
 
     /// Localizes scan segments given in the sensor frame.
     pub fn localize_segments(&self, segments: &[Segment]) -> Localization {
+        self.localize_segments_seen_from(segments, &[[0.0, 0.0]])
+    }
+
+    /// Localizes segments gathered from several sensor positions (`views`, in the segments'
+    /// frame): the visibility-aware costs use the map edges visible from any of them.
+    pub fn localize_segments_seen_from(
+        &self,
+        segments: &[Segment],
+        views: &[[f64; 2]],
+    ) -> Localization {
         let t0 = Instant::now();
         let mut out = Localization {
             segments: segments.to_vec(),
@@ -359,7 +403,7 @@ impl<'m> Localizer<'m> {
             .par_iter()
             .map(|c| Candidate {
                 pose: c.pose,
-                costs: self.costs_at(segments, c.pose, c.dcm),
+                costs: self.costs_seen_from(segments, c.pose, c.dcm, views),
                 refined: false,
                 confidence: 0.0,
             })
@@ -369,15 +413,10 @@ impl<'m> Localizer<'m> {
         self.sort(&mut cands);
         let top = o.refine_top.min(cands.len());
         cands[..top].par_iter_mut().for_each(|c| {
-            let visible = visible_segments(
-                &self.edges,
-                &self.edge_grid,
-                [c.pose.x, c.pose.y],
-                &o.visibility,
-            );
+            let visible = self.visible_from_views(&c.pose, views);
             let pose = refine_pose(segments, &visible, c.pose, &o.refine);
             c.pose = pose;
-            c.costs = self.costs_at(segments, pose, c.costs.dcm);
+            c.costs = self.costs_seen_from(segments, pose, c.costs.dcm, views);
             c.refined = true;
         });
         self.sort(&mut cands);
@@ -418,14 +457,34 @@ impl<'m> Localizer<'m> {
 
     /// Forward, reverse and symmetric costs of the scan segments at a pose.
     pub fn costs_at(&self, segments: &[Segment], pose: Pose2, dcm: f64) -> Costs {
-        let visible = visible_segments(
-            &self.edges,
-            &self.edge_grid,
-            [pose.x, pose.y],
-            &self.options.visibility,
-        );
+        self.costs_seen_from(segments, pose, dcm, &[[0.0, 0.0]])
+    }
+
+    /// Costs of segments gathered from several sensor positions (`views`, segment frame).
+    pub fn costs_seen_from(
+        &self,
+        segments: &[Segment],
+        pose: Pose2,
+        dcm: f64,
+        views: &[[f64; 2]],
+    ) -> Costs {
+        let visible = self.visible_from_views(&pose, views);
         let moved: Vec<Segment> = segments.iter().map(|s| s.transformed(&pose)).collect();
         costs(&moved, &visible, dcm, &self.options.cost)
+    }
+
+    /// The map edges visible from any of `views` (segment frame) placed at `pose`.
+    fn visible_from_views(&self, pose: &Pose2, views: &[[f64; 2]]) -> Vec<Segment> {
+        let mut out = Vec::new();
+        for v in views {
+            out.extend(visible_segments(
+                &self.edges,
+                &self.edge_grid,
+                pose.apply(*v),
+                &self.options.visibility,
+            ));
+        }
+        out
     }
 
     /// The map edges visible from a position.

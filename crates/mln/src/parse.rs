@@ -411,7 +411,12 @@ struct Cursor<'a> {
     path: &'a str,
     line: usize,
     line_len: usize,
+    /// Nesting depth of the formula being parsed (parentheses, negations, quantifiers).
+    depth: usize,
 }
+
+/// Deepest formula nesting parsed; deeper input is an error, not a stack overflow.
+const MAX_NESTING: usize = 200;
 
 impl<'a> Cursor<'a> {
     fn peek(&self) -> Option<&'a Tok> {
@@ -494,6 +499,7 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
             path,
             line: line_no,
             line_len: line.chars().count(),
+            depth: 0,
         };
         // Type domain: name = { … }
         if let (Some(Tok::Ident(name)), Some(Tok::Eq), Some(Tok::LBrace)) =
@@ -588,6 +594,7 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
             path,
             line: line_no,
             line_len: cur.line_len,
+            depth: 0,
         };
         if hard {
             if matches!(weight, Weight::Soft(w) if w != 0.0) {
@@ -638,7 +645,8 @@ fn parse_domain(cur: &mut Cursor<'_>) -> Result<Vec<String>, ParseError> {
                         cur.error("`...` needs integers on both sides: { 1, ..., 10 }".into())
                     );
                 };
-                if to - from > 10_000_000 {
+                // i128: `-9e18, ..., 9e18` must be refused, not overflow.
+                if i128::from(to) - i128::from(from) > 10_000_000 {
                     return Err(cur.error(format!("range {from}..{to} is too large")));
                 }
                 out.extend((from + 1..=to).map(|k| k.to_string()));
@@ -678,13 +686,25 @@ fn parse_implies(
     p: &Program,
     idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
-    let left = parse_or(cur, p, idx)?;
-    if cur.peek() == Some(&Tok::Implies) {
+    // `a => b => c` is `a => (b => c)`: read the chain in a loop (a long chain must not
+    // recurse once per arrow), then fold from the right.
+    let mut operands = vec![parse_or(cur, p, idx)?];
+    while cur.peek() == Some(&Tok::Implies) {
+        if operands.len() > MAX_NESTING {
+            return Err(cur.error(format!(
+                "formula nested deeper than {MAX_NESTING} levels (a chain of `=>`)"
+            )));
+        }
         cur.pos += 1;
-        let right = parse_implies(cur, p, idx)?;
-        return Ok(Formula::Implies(Box::new(left), Box::new(right)));
+        operands.push(parse_or(cur, p, idx)?);
     }
-    Ok(left)
+    let Some(mut f) = operands.pop() else {
+        return Err(cur.error("expected a formula".into()));
+    };
+    while let Some(left) = operands.pop() {
+        f = Formula::Implies(Box::new(left), Box::new(f));
+    }
+    Ok(f)
 }
 
 fn is_or(t: Option<&Tok>) -> bool {
@@ -718,6 +738,22 @@ fn parse_and(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formu
 }
 
 fn parse_unary(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+    if cur.depth >= MAX_NESTING {
+        return Err(cur.error(format!(
+            "formula nested deeper than {MAX_NESTING} levels (parentheses, `!`, quantifiers)"
+        )));
+    }
+    cur.depth += 1;
+    let out = parse_unary_inner(cur, p, idx);
+    cur.depth -= 1;
+    out
+}
+
+fn parse_unary_inner(
+    cur: &mut Cursor<'_>,
+    p: &Program,
+    idx: &PredIndex,
+) -> Result<Formula, ParseError> {
     match cur.peek() {
         Some(Tok::Not) => {
             cur.pos += 1;
@@ -880,6 +916,7 @@ fn parse_atom_lines<T>(
             path,
             line: i + 1,
             line_len: line.chars().count(),
+            depth: 0,
         };
         out.push(per_line(&mut cur, &idx)?);
     }
@@ -989,6 +1026,35 @@ pub fn parse_query_predicates(list: &str, program: &Program) -> Result<Vec<Atom>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn issue16_deep_nesting_is_an_error_not_a_stack_overflow() {
+        // Found by replaying the fuzz corpus on a 2 MB test-thread stack.
+        let p = parse_program("P(a)\n", "p.mln").unwrap();
+        let deep = format!("{}P(A){}\n", "(".repeat(100_000), ")".repeat(100_000));
+        let err = parse_evidence(&deep, "deep.db", &p)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("nested deeper"), "{err}");
+        let nots = format!("1 {}P(x)\n", "!".repeat(100_000));
+        let err = parse_program(&format!("P(a)\n{nots}"), "n.mln")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("nested deeper"), "{err}");
+        let chain = format!("1 P(x){}\n", " => P(x)".repeat(100_000));
+        let err = parse_program(&format!("P(a)\nP(a)\n{chain}"), "c.mln").unwrap_err();
+        assert!(err.to_string().contains("nested deeper"), "{err}");
+        let ok = format!("1 P(x){}\n", " => P(x)".repeat(150));
+        assert!(parse_program(&format!("P(a)\n{ok}"), "ok.mln").is_ok());
+    }
+
+    #[test]
+    fn issue16_domain_range_spanning_all_of_i64_is_refused() {
+        // Found by fuzzing: `to - from` overflowed i64.
+        let text = "n = { -9000000000000000000, ..., 9000000000000000000 }\nP(n)\n";
+        let err = parse_program(text, "range.mln").unwrap_err().to_string();
+        assert!(err.contains("too large"), "{err}");
+    }
 
     const SMOKERS: &str = "// Evidence\n*Friends(person, person)\nSmokes(person)\nCancer(person)\n\n0.5  !Smokes(a1) v Cancer(a1)\n0.4  !Friends(a1,a2) v !Smokes(a1) v Smokes(a2)\n";
 

@@ -5,6 +5,8 @@
 //!   (DIR: a simulated `localization` dataset, or an MCD sequence folder with `--map`).
 //! - `urbansem localize extract-eval --dataset DIR [--stride N] [--json]` (DIR: a labelled
 //!   KITTI-360 or MCD sequence): wall-extraction precision, recall, segments per scan.
+//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--json]`:
+//!   every scan of a folder with the window of K scans ending at it, tied by odometry.
 //!
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
 //! knobs of [`ExtractArgs`] (issue 15).
@@ -45,6 +47,45 @@ pub enum LocalizeCommand {
     /// Wall-segment extraction quality on labelled real scans (KITTI-360, MCD): precision,
     /// recall, segments per scan.
     ExtractEval(ExtractEvalArgs),
+    /// Localize every scan of a track: a window of scans tied by odometry, searched as one.
+    Track(TrackArgs),
+}
+
+/// Arguments of `urbansem localize track`.
+#[derive(Args)]
+pub struct TrackArgs {
+    /// OSM map (.osm or .osm.pbf).
+    #[arg(long)]
+    pub map: PathBuf,
+    /// Folder of gravity-levelled scans (any supported cloud format), taken in
+    /// lexicographic file-name order.
+    #[arg(long)]
+    pub scans: PathBuf,
+    /// One line per scan, `x_m y_m yaw_rad` (optionally `scan x_m y_m yaw_rad`), in any
+    /// local odometry frame; `#` starts a comment.
+    #[arg(long)]
+    pub odometry: PathBuf,
+    /// Scans per window (the scan and the K−1 before it).
+    #[arg(long, default_value_t = 5)]
+    pub window: usize,
+    /// Candidates printed per scan.
+    #[arg(long, default_value_t = 5)]
+    pub top: usize,
+    /// Cost that ranks the candidates.
+    #[arg(long, value_enum, default_value = "reverse")]
+    pub cost: CostArg,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Grid of the distance-transform tensor, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub grid_m: f64,
+    /// Yaw step of the search, degrees.
+    #[arg(long, default_value_t = 0.5)]
+    pub yaw_step_deg: f64,
+    /// Sensor profile and extraction knobs.
+    #[command(flatten)]
+    pub extract: ExtractArgs,
 }
 
 /// Sensor names accepted by `--sensor`.
@@ -309,6 +350,16 @@ pub struct EvalArgs {
     /// Width of the distractor ring around the map's building bounding box, metres.
     #[arg(long, default_value_t = 400.0)]
     pub distractor_ring_m: f64,
+    /// Track mode: localize each scan with the window of K scans ending at it, tied by
+    /// odometry made from the true poses with drift (scans in file-name order).
+    #[arg(long)]
+    pub track: Option<usize>,
+    /// Track mode: odometry scale error (0.02: 2 % of the distance travelled).
+    #[arg(long, default_value_t = 0.02)]
+    pub odometry_drift: f64,
+    /// Track mode: odometry heading drift, degrees per 50 m travelled.
+    #[arg(long, default_value_t = 1.0)]
+    pub odometry_yaw_drift_deg: f64,
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
@@ -319,6 +370,7 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     match args.command {
         Some(LocalizeCommand::Eval(e)) => eval(e),
         Some(LocalizeCommand::ExtractEval(e)) => extract_eval(e),
+        Some(LocalizeCommand::Track(t)) => track(t),
         None => run_one(args.run),
     }
 }
@@ -503,6 +555,118 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         s.refine,
         s.total
     );
+    Ok(())
+}
+
+fn track(args: TrackArgs) -> anyhow::Result<()> {
+    if args.window == 0 {
+        super::usage!("--window 0: expected at least 1 scan per window");
+    }
+    let map = OsmMap::load(&args.map)
+        .with_context(|| format!("loading the map {}", args.map.display()))?;
+    let localizer = Localizer::new(
+        &map,
+        options(
+            args.cost.kind(),
+            args.grid_m,
+            args.yaw_step_deg,
+            &args.extract,
+        )?,
+    )
+    .with_context(|| format!("preparing the map {}", args.map.display()))?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&args.scans)
+        .with_context(|| format!("listing {}", args.scans.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| geodata::cloud::Format::from_path(p).is_ok())
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        anyhow::bail!(
+            "{}: no scan files (PLY, PCD, LAS/LAZ, KITTI .bin)",
+            args.scans.display()
+        );
+    }
+    let names: Vec<String> = files
+        .iter()
+        .map(|p| {
+            p.file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        })
+        .collect();
+    let odometry = localize::track::read_odometry(&args.odometry, &names)?;
+    let t = Instant::now();
+    let mut extracted = Vec::with_capacity(files.len());
+    for f in &files {
+        let cloud = geodata::cloud::read_cloud(f)
+            .with_context(|| format!("reading the scan {}", f.display()))?;
+        extracted.push(
+            localizer
+                .scan_segments(&cloud.positions)
+                .with_context(|| format!("extracting walls from {}", f.display()))?,
+        );
+    }
+    let segments: Vec<Vec<Segment>> = extracted.iter().map(|e| e.segments.clone()).collect();
+    let results = localizer.localize_track(&segments, &odometry, args.window)?;
+    let seconds = t.elapsed().as_secs_f64();
+    let rows: Vec<Value> = names
+        .iter()
+        .zip(&results)
+        .zip(&extracted)
+        .map(|((name, r), e)| {
+            let best = r.candidates.first().map(|c| candidate_json(&map, 0, c));
+            let f = |k: &str| best.as_ref().and_then(|b| b.get(k).cloned()).unwrap_or(Value::Null);
+            json!({
+                "scan": name,
+                "lat": f("lat"),
+                "lon": f("lon"),
+                "yaw": f("yaw"),
+                "x": f("x"),
+                "y": f("y"),
+                "confidence": r.confidence,
+                "candidates": r.candidates.iter().take(args.top).enumerate().map(|(i, c)| candidate_json(&map, i, c)).collect::<Vec<_>>(),
+                "segments": e.segments.len(),
+                "window_segments": r.segments.len(),
+                "sensor": e.sensor,
+                "message": r.message,
+            })
+        })
+        .collect();
+    if args.json {
+        let v = json!({
+            "map": args.map.display().to_string(),
+            "scans_dir": args.scans.display().to_string(),
+            "odometry": args.odometry.display().to_string(),
+            "window": args.window,
+            "cost": results.first().map_or("reverse", |r| r.rank_by.name()),
+            "scans": rows,
+            "seconds": {"total": seconds, "per_scan": seconds / files.len() as f64},
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "{}: {} scans, window {}, {:.2} s per scan",
+        args.scans.display(),
+        files.len(),
+        args.window,
+        seconds / files.len() as f64
+    );
+    println!(
+        "{:>24} {:>5} {:>11} {:>11} {:>8} {:>6}",
+        "scan", "segs", "lat", "lon", "yaw°", "conf"
+    );
+    for row in &rows {
+        let g = |k: &str| row.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+        println!(
+            "{:>24} {:>5} {:>11.6} {:>11.6} {:>8.2} {:>6.3}",
+            row["scan"].as_str().unwrap_or(""),
+            row["segments"].as_u64().unwrap_or(0),
+            g("lat"),
+            g("lon"),
+            g("yaw").to_degrees(),
+            g("confidence")
+        );
+    }
     Ok(())
 }
 
@@ -744,6 +908,52 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if let Some(dir) = &args.figures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    let load = |i: usize| -> anyhow::Result<EvalScan> {
+        Ok(match &sim {
+            Some(d) => d
+                .load(i)
+                .with_context(|| format!("loading scan {i} of {}", args.dataset.display()))?,
+            None => scans
+                .get(i)
+                .cloned()
+                .with_context(|| format!("MCD scan {i} missing"))?,
+        })
+    };
+    // Track mode: every scan's walls first, then each window searched as one.
+    let track_results: Option<Vec<Localization>> = match args.track {
+        Some(0) => super::usage!("--track 0: expected a window of at least 1 scan"),
+        Some(k) => {
+            let mut truths = Vec::with_capacity(count);
+            let mut extracted = Vec::with_capacity(count);
+            for i in 0..count {
+                let scan = load(i)?;
+                truths.push(scan.truth);
+                extracted.push(
+                    localizer
+                        .scan_segments(&scan.points)
+                        .with_context(|| format!("extracting walls from {}", scan.name))?,
+                );
+            }
+            let odometry = localize::track::drifted_odometry(
+                &truths,
+                args.odometry_drift,
+                args.odometry_yaw_drift_deg.to_radians() / 50.0,
+            );
+            let segments: Vec<Vec<Segment>> =
+                extracted.iter().map(|e| e.segments.clone()).collect();
+            let mut results = localizer.localize_track(&segments, &odometry, k)?;
+            for (r, e) in results.iter_mut().zip(&extracted) {
+                r.sensor = e.sensor;
+                r.clearance_m = e.clearance_m;
+                r.vertical_cells = e.vertical_cells;
+                r.seconds.surfaces = e.surfaces_s;
+                r.seconds.segments = e.segments_s;
+                r.seconds.total += e.surfaces_s + e.segments_s;
+            }
+            Some(results)
+        }
+        None => None,
+    };
     let mut records: Vec<ScanRecord> = Vec::new();
     for i in 0..count {
         let scan = match &sim {
@@ -755,9 +965,12 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
                 .cloned()
                 .with_context(|| format!("MCD scan {i} missing"))?,
         };
-        let result = localizer
-            .localize_points(&scan.points)
-            .with_context(|| format!("localizing {}", scan.name))?;
+        let result = match &track_results {
+            Some(results) => results[i].clone(),
+            None => localizer
+                .localize_points(&scan.points)
+                .with_context(|| format!("localizing {}", scan.name))?,
+        };
         let costs: Vec<Costs> = result.candidates.iter().map(|c| c.costs).collect();
         let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
         let ranked = CostKind::ALL.map(|k| {
@@ -943,6 +1156,28 @@ fn summarize(
                 .any(|p| strict.accepts(p, &r.truth))
         })
         .count();
+    // Track mode: the scans after the first window.
+    let track_summary = args.track.map(|k| {
+        let after: Vec<&ScanRecord> = records.iter().skip(k.saturating_sub(1)).collect();
+        let top1 = after
+            .iter()
+            .filter(|r| {
+                r.ranked[2]
+                    .first()
+                    .is_some_and(|p| strict.accepts(p, &r.truth))
+            })
+            .count();
+        let top10 = after
+            .iter()
+            .filter(|r| {
+                r.ranked[2]
+                    .iter()
+                    .take(10)
+                    .any(|p| strict.accepts(p, &r.truth))
+            })
+            .count();
+        (k, after.len(), top1, top10)
+    });
     let mut sensors: Vec<(&str, usize)> = Vec::new();
     for r in records.iter() {
         let name = r.result.sensor.map_or("manual", |s| s.profile);
@@ -1049,6 +1284,14 @@ fn summarize(
             "accurate_in_candidate_set": in_set,
             "top1_within_2m_3deg": {"dcm": strict_top1[0], "forward": strict_top1[1], "reverse": strict_top1[2], "symmetric": strict_top1[3]},
             "top10_within_2m_3deg_reverse": strict_top10,
+            "track": track_summary.map(|(k, n, t1, t10)| json!({
+                "window": k,
+                "odometry_drift": args.odometry_drift,
+                "odometry_yaw_drift_deg_per_50m": args.odometry_yaw_drift_deg,
+                "scans_after_first_window": n,
+                "top1_within_2m_3deg": t1,
+                "top10_within_2m_3deg": t10,
+            })),
             "sensors": sensors.iter().map(|(p, n)| (p.to_string(), json!(n))).collect::<serde_json::Map<String, Value>>(),
             "median_error_accurate_top1_reverse_m": median_err,
             "map_seconds": {
@@ -1125,6 +1368,13 @@ fn summarize(
     );
     let sensor_counts: Vec<String> = sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
     println!("sensor profiles: {}", sensor_counts.join(", "));
+    if let Some((k, after, t1, t10)) = track_summary {
+        println!(
+            "track mode (window {k}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 (reverse) within 2 m and 3° for {t1}/{after} scans, top 10 for {t10}/{after}",
+            100.0 * args.odometry_drift,
+            args.odometry_yaw_drift_deg
+        );
+    }
     println!(
         "map: load {load_map_s:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, feasible-pose mask {:.3} s ({} of {} cells), hashing index {hashing_index_s:.3} s ({threads} threads)",
         localizer.seconds.edges,
