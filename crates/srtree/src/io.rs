@@ -33,7 +33,9 @@
 use crate::dirichlet::{Dirichlet, DirichletModel};
 use crate::error::{io_err, Result, SrtreeError};
 use crate::graph::RelationGraph;
-use crate::map::{histogram_ref_valid, Cell, ColourSum, Histogram, MapOptions, SrMap, KEY_LIMIT};
+use crate::map::{
+    histogram_ref_valid, morton, Cell, ColourSum, Histogram, MapOptions, SrMap, KEY_LIMIT,
+};
 use geodata::classes::Class;
 use rustc_hash::FxHashSet;
 use std::path::Path;
@@ -303,7 +305,11 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
     let _ = at;
     let mut cells = Vec::with_capacity(n as usize);
     let mut refs_at = Vec::with_capacity(n as usize);
-    let mut seen = FxHashSet::default();
+    // Keys in strictly increasing Morton order (as the writer stores a packed map) are
+    // distinct; only other orders need the hash set, whose random access at tens of
+    // millions of cells would dominate the read.
+    let mut prev_code = None;
+    let mut increasing = true;
     for _ in 0..n {
         let at = r.pos;
         let key = [r.i32("cell key")?, r.i32("cell key")?, r.i32("cell key")?];
@@ -335,9 +341,9 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
                 ),
             ));
         }
-        if !seen.insert(key) {
-            return Err(r.malformed(at, format!("cell key {key:?} appears twice")));
-        }
+        let code = morton(key);
+        increasing &= prev_code.is_none_or(|p| p < code);
+        prev_code = Some(code);
         refs_at.push(at + 24);
         cells.push(Cell {
             key,
@@ -349,7 +355,14 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
             label,
         });
     }
-    drop(seen);
+    if !increasing {
+        let mut seen = FxHashSet::with_capacity_and_hasher(cells.len(), Default::default());
+        for (c, &at) in cells.iter().zip(&refs_at) {
+            if !seen.insert(c.key) {
+                return Err(r.malformed(at - 24, format!("cell key {:?} appears twice", c.key)));
+            }
+        }
+    }
     let m = r.u64("full histogram count")?;
     r.check_fits(m, HISTOGRAM_BYTES, "full histograms")?;
     let mut table: Vec<Histogram> = Vec::with_capacity(m as usize);
@@ -577,6 +590,34 @@ mod tests {
             matches!(err, SrtreeError::Malformed { offset: 53, .. }),
             "{err}"
         );
+        // A key stored twice (the later copy named), whether or not the order is Morton's.
+        for (from, to) in [(0usize, 2usize), (2, 1)] {
+            let mut twice = bytes.clone();
+            let (a, b) = (53 + 32 * from, 53 + 32 * to);
+            let k: Vec<u8> = twice[a..a + 12].to_vec();
+            twice[b..b + 12].copy_from_slice(&k);
+            let err = decode_map(&resum(twice), p).unwrap_err();
+            let later = a.max(b);
+            assert!(
+                matches!(&err, SrtreeError::Malformed { offset, message, .. }
+                    if *offset == later && message.contains("appears twice")),
+                "{from}->{to}: {err}"
+            );
+        }
+        // Cells out of Morton order (another writer's) are read and re-sorted.
+        let mut swapped = bytes.clone();
+        let (c0, c1): (Vec<u8>, Vec<u8>) = (bytes[53..85].to_vec(), bytes[85..117].to_vec());
+        swapped[53..85].copy_from_slice(&c1);
+        swapped[85..117].copy_from_slice(&c0);
+        let a = decode_map(&bytes, p).unwrap();
+        let b = decode_map(&resum(swapped), p).unwrap();
+        assert_eq!(a.len(), b.len());
+        let keys = |m: &SrMap| {
+            let mut k: Vec<[i32; 3]> = m.cells().iter().map(|c| c.key).collect();
+            k.sort_unstable();
+            k
+        };
+        assert_eq!(keys(&a), keys(&b));
         // A version 1 file is refused with the version named.
         let mut old = bytes.clone();
         old[8..12].copy_from_slice(&1u32.to_le_bytes());

@@ -116,6 +116,16 @@ pub enum CloudError {
         /// The feature.
         what: String,
     },
+    /// Compressed data that its decoder cannot decode.
+    #[error("{path}: {at}: corrupt compressed data: {message}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// Where (point index when known, else byte 0).
+        at: Location,
+        /// What failed.
+        message: String,
+    },
     /// The `las` crate reported an error.
     #[error("{path}: {at}: LAS/LAZ: {source}")]
     Las {

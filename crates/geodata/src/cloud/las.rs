@@ -176,6 +176,7 @@ const LAZ_MIN_CHUNK_BYTES: u64 = 4;
 
 /// What [`check_layout`] learnt: the point count and record length the crate will use.
 struct Layout {
+    data_start: u64,
     points: u64,
     record_bytes: u64,
 }
@@ -273,9 +274,84 @@ fn check_layout(path: &Path, r: &mut (impl Read + Seek), file_len: u64) -> Resul
     }
     r.seek(SeekFrom::Start(0)).map_err(io_err(path))?;
     Ok(Layout {
+        data_start,
         points,
         record_bytes,
     })
+}
+
+/// Checks, chunk by chunk, that the layers of a layered LAZ file (point formats 6–10) fit in
+/// the file: the `laz` crate allocates each layer's announced size before reading it, so a
+/// corrupt size would otherwise allocate up to 4 GiB per layer (`fuzz/artifacts/las/oom-*`).
+/// Mirrors the crate's walk: a chunk is the raw first point, its point count, one `u32` size
+/// per layer, then the layers; the next chunk follows. Reads O(file size) bytes.
+fn check_laz_layers(
+    path: &Path,
+    vlr: &laz::LazVlr,
+    data_start: u64,
+    file_len: u64,
+    points: u64,
+) -> Result<()> {
+    use laz::LazItemType as T;
+    if !vlr.items().iter().any(|i| i.version() >= 3) {
+        return Ok(()); // point-wise compression reads its stream directly
+    }
+    let layers: u64 = vlr
+        .items()
+        .iter()
+        .map(|i| match i.item_type() {
+            T::Point14 => 9,
+            T::RGBNIR14 => 2,
+            T::Byte14(n) | T::Byte(n) => u64::from(n),
+            _ => 1,
+        })
+        .sum();
+    let record = vlr.items_size();
+    let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io_err(path))?);
+    // Variable-size chunks take their point counts from the chunk table when it reads.
+    let table = if vlr.uses_variable_size_chunks() {
+        r.seek(SeekFrom::Start(data_start)).map_err(io_err(path))?;
+        laz::laszip::ChunkTable::read_from(&mut r, vlr).ok()
+    } else {
+        None
+    };
+    let head = record + 4 + 4 * layers;
+    let mut sizes = Vec::new();
+    let (mut pos, mut left, mut chunk) = (data_start + 8, points, 0usize);
+    while left > 0 && pos.saturating_add(head) <= file_len {
+        r.seek(SeekFrom::Start(pos + record))
+            .map_err(io_err(path))?;
+        sizes.resize(4 + 4 * layers as usize, 0u8);
+        r.read_exact(&mut sizes).map_err(io_err(path))?;
+        let own_count = u64::from(u32::from_le_bytes([sizes[0], sizes[1], sizes[2], sizes[3]]));
+        let total: u64 = sizes[4..]
+            .chunks_exact(4)
+            .map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+            .sum();
+        let body = pos + head;
+        if total > file_len - body {
+            return Err(CloudError::Header {
+                path: path_buf(path),
+                at: Location::Byte(pos + record + 4),
+                message: format!(
+                    "LAZ chunk {chunk} announces layers of {total} bytes, but only {} bytes follow in the file",
+                    file_len - body
+                ),
+            });
+        }
+        pos = body + total;
+        let in_chunk = match &table {
+            Some(t) => t.as_ref().get(chunk).map_or(own_count, |e| e.point_count),
+            None if vlr.uses_variable_size_chunks() => own_count,
+            None => u64::from(vlr.chunk_size()),
+        };
+        if in_chunk == 0 {
+            break; // the crate then reads every remaining point from this chunk
+        }
+        left = left.saturating_sub(in_chunk);
+        chunk += 1;
+    }
+    Ok(())
 }
 
 /// Reads a LAS or LAZ file.
@@ -283,9 +359,24 @@ pub fn read_las(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
     let mut file = std::fs::File::open(path).map_err(io_err(path))?;
     let file_len = file.metadata().map_err(io_err(path))?.len();
     let layout = check_layout(path, &mut file, file_len)?;
-    let mut reader = Reader::new(std::io::BufReader::with_capacity(1 << 16, file))
-        .map_err(las_err(path, Location::Byte(0)))?;
+    let mut reader = super::guard::catch_silently(|| {
+        Reader::new(std::io::BufReader::with_capacity(1 << 16, file))
+    })
+    .ok_or_else(|| CloudError::Corrupt {
+        path: path_buf(path),
+        at: Location::Byte(0),
+        message: "the LAZ chunk table reader failed".into(),
+    })?
+    .map_err(las_err(path, Location::Byte(0)))?;
     let header = reader.header();
+    if let Some(v) = header
+        .all_vlrs()
+        .find(|v| v.user_id == laz::LazVlr::USER_ID && v.record_id == laz::LazVlr::RECORD_ID)
+    {
+        if let Ok(vlr) = laz::LazVlr::from_buffer(&v.data) {
+            check_laz_layers(path, &vlr, layout.data_start, file_len, layout.points)?;
+        }
+    }
     let ours = header
         .all_vlrs()
         .find(|v| v.user_id == VLR_USER && v.record_id == VLR_RECORD)
@@ -342,7 +433,15 @@ pub fn read_las(path: &Path, options: &ReadOptions) -> Result<(PointCloud, ReadR
         options,
     );
     for i in 0..n {
-        let point = match reader.read_point() {
+        // The laz decoder panics on some corrupt data (see `guard`): a format error here.
+        let read = super::guard::catch_silently(|| reader.read_point()).ok_or_else(|| {
+            CloudError::Corrupt {
+                path: path_buf(path),
+                at: Location::Point(i),
+                message: "the LAZ decoder failed".into(),
+            }
+        })?;
+        let point = match read {
             Ok(Some(p)) => p,
             Ok(None) => {
                 return Err(CloudError::Truncated {
@@ -634,6 +733,31 @@ mod tests {
                 ..
             }) => assert_eq!(at, table as u64 + 4),
             other => panic!("{other:?}"),
+        }
+        // A layer size of 0xF000_0000 in the first chunk (the laz crate would allocate it):
+        // the chunk is the raw first point, the point count, then 9 point layers and one
+        // layer per extra byte (4 here, the f32 intensity).
+        let record = u64::from(u16::from_le_bytes(bytes[105..107].try_into().unwrap())) as usize;
+        let sizes = start + 8 + record + 4;
+        assert_eq!(
+            u32::from_le_bytes(bytes[sizes - 4..sizes].try_into().unwrap()),
+            100
+        );
+        for layer in [0, 3, 8, 9, 12] {
+            let mut b = bytes.clone();
+            let at = sizes + 4 * layer;
+            b[at..at + 4].copy_from_slice(&0xF000_0000u32.to_le_bytes());
+            match read(&p, &b) {
+                Err(CloudError::Header {
+                    at: Location::Byte(at),
+                    message,
+                    ..
+                }) => {
+                    assert_eq!(at as usize, sizes, "layer {layer}");
+                    assert!(message.contains("LAZ chunk 0"), "{message}");
+                }
+                other => panic!("layer {layer}: {other:?}"),
+            }
         }
         // Truncated anywhere: an error, never a panic.
         for cut in [0, 100, start, start + 8, start + 40, bytes.len() - 1] {

@@ -38,6 +38,7 @@
 //! ```
 
 pub mod error;
+mod guard;
 pub mod kitti;
 pub mod las;
 pub mod lzf;
