@@ -84,7 +84,7 @@ pub fn bounding_box(segments: &[Segment]) -> Option<([f64; 2], [f64; 2])> {
 }
 
 /// The directional distance-transform tensor (u8, units of τ/255).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DtTensor {
     /// Lower-left corner of cell (0, 0), metres in the map frame.
     pub origin: [f64; 2],
@@ -422,7 +422,7 @@ fn step_offset(m: i64, slope: f64) -> i64 {
 }
 
 /// Multi-resolution lower bounds of a [`DtTensor`] (see the module doc).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct BoundPyramid {
     /// Levels h = 2 ..= top: with k = [`stride_shift`]`(h)` and u = 2^(h−k), the minimum over
     /// the (2^k + 1)·u cells (per axis) starting at each multiple of u.
@@ -508,7 +508,7 @@ pub fn stride_shift(h: u32) -> u32 {
 
 const STRIDE_SHIFT: u32 = 1;
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 struct BoundLevel {
     /// Stored position of block 0 (blocks from −offset are stored).
     offset: i64,
@@ -640,6 +640,108 @@ impl BoundLevel {
         }
         let start = (y as usize * self.w + x as usize) * self.channels;
         self.data.get(start..start + self.channels)
+    }
+}
+
+/// Index file codec of the prepared map (see [`crate::index`]).
+impl DtTensor {
+    pub(crate) fn encode<'a>(&'a self, e: &mut crate::index::Enc<'a>) {
+        e.f64(self.origin[0]);
+        e.f64(self.origin[1]);
+        e.f64(self.grid_m);
+        e.u64(self.width as u64);
+        e.u64(self.height as u64);
+        e.u64(self.channels as u64);
+        e.f64(self.units_per_m);
+        e.f64(self.lambda_m_per_rad);
+        e.bytes(&self.data);
+    }
+
+    pub(crate) fn decode<R: std::io::Read>(d: &mut crate::index::Dec<'_, R>) -> Result<DtTensor> {
+        let origin: [f64; 2] = d.f64s("tensor origin")?;
+        let grid_m = d.f64("tensor grid")?;
+        let (width, height, channels) = (
+            d.usize("tensor width")?,
+            d.usize("tensor height")?,
+            d.usize("tensor channels")?,
+        );
+        let units_per_m = d.f64("tensor units")?;
+        let lambda_m_per_rad = d.f64("tensor lambda")?;
+        let cells = width
+            .checked_mul(height)
+            .and_then(|c| c.checked_mul(channels))
+            .ok_or_else(|| d.bad(format!("tensor {width} × {height} × {channels} overflows")))?;
+        if grid_m <= 0.0 || units_per_m <= 0.0 || channels == 0 {
+            return Err(d.bad(format!(
+                "tensor grid {grid_m} m, {units_per_m} units/m, {channels} channels"
+            )));
+        }
+        let data = d.bytes(cells, "tensor data")?;
+        Ok(DtTensor {
+            origin,
+            grid_m,
+            width,
+            height,
+            channels,
+            units_per_m,
+            lambda_m_per_rad,
+            data,
+        })
+    }
+}
+
+impl BoundLevel {
+    fn encode<'a>(&'a self, e: &mut crate::index::Enc<'a>) {
+        e.i64(self.offset);
+        e.u64(self.w as u64);
+        e.u64(self.h as u64);
+        e.u64(self.channels as u64);
+        e.bytes(&self.data);
+    }
+
+    fn decode<R: std::io::Read>(d: &mut crate::index::Dec<'_, R>) -> Result<BoundLevel> {
+        let offset = d.i64("pyramid offset")?;
+        let (w, h, channels) = (
+            d.usize("pyramid width")?,
+            d.usize("pyramid height")?,
+            d.usize("pyramid channels")?,
+        );
+        if offset.unsigned_abs() > 1 << 32 {
+            return Err(d.bad(format!("pyramid offset {offset}")));
+        }
+        let n = w
+            .checked_mul(h)
+            .and_then(|c| c.checked_mul(channels))
+            .ok_or_else(|| d.bad(format!("pyramid level {w} × {h} × {channels} overflows")))?;
+        let data = d.bytes(n, "pyramid data")?;
+        Ok(BoundLevel {
+            offset,
+            w,
+            h,
+            channels,
+            data,
+        })
+    }
+}
+
+impl BoundPyramid {
+    pub(crate) fn encode<'a>(&'a self, e: &mut crate::index::Enc<'a>) {
+        e.u64(self.levels.len() as u64);
+        for l in &self.levels {
+            l.encode(e);
+        }
+        self.fine.encode(e);
+    }
+
+    pub(crate) fn decode<R: std::io::Read>(
+        d: &mut crate::index::Dec<'_, R>,
+    ) -> Result<BoundPyramid> {
+        let n = d.count(32, "pyramid levels")?;
+        let levels = (0..n)
+            .map(|_| BoundLevel::decode(d))
+            .collect::<Result<Vec<_>>>()?;
+        let fine = BoundLevel::decode(d)?;
+        Ok(BoundPyramid { levels, fine })
     }
 }
 

@@ -228,6 +228,67 @@ fn inside(sorted_crossings: &[f64], x: f64) -> bool {
     right % 2 == 1
 }
 
+/// Index file codec (see [`crate::index`]).
+impl FeasibleMask {
+    pub(crate) fn encode(&self, e: &mut crate::index::Enc<'_>) {
+        for v in [
+            self.domain.i0,
+            self.domain.j0,
+            self.domain.i1,
+            self.domain.j1,
+        ] {
+            e.i64(v);
+        }
+        e.u64(self.feasible_cells);
+        e.u64(self.levels.len() as u64);
+        for l in &self.levels {
+            for v in [l.bx0, l.by0, l.w, l.h] {
+                e.i64(v);
+            }
+            e.u64(l.flags.len() as u64);
+            // One byte per flag, written as scalars (the flags are bools, not bytes).
+            for &f in &l.flags {
+                e.u8(u8::from(f));
+            }
+        }
+    }
+
+    pub(crate) fn decode<R: std::io::Read>(
+        d: &mut crate::index::Dec<'_, R>,
+    ) -> crate::Result<FeasibleMask> {
+        let domain = crate::index::decode_domain(d)?;
+        let feasible_cells = d.u64("feasible cell count")?;
+        let n = d.count(40, "feasible levels")?;
+        let mut levels = Vec::with_capacity(n);
+        for _ in 0..n {
+            let v: [i64; 4] = d.i64s("level box")?;
+            if v.iter().any(|x| x.unsigned_abs() > 1 << 40) || v[2] < 0 || v[3] < 0 {
+                return Err(d.bad(format!("feasible level box {v:?}")));
+            }
+            let cells = v[2]
+                .checked_mul(v[3])
+                .ok_or_else(|| d.bad(format!("feasible level box {v:?} overflows")))?;
+            let flags: Vec<bool> = d
+                .bytes(cells as usize, "feasible flags")?
+                .into_iter()
+                .map(|b| b != 0)
+                .collect();
+            levels.push(Level {
+                bx0: v[0],
+                by0: v[1],
+                w: v[2],
+                h: v[3],
+                flags,
+            });
+        }
+        Ok(FeasibleMask {
+            domain,
+            feasible_cells,
+            levels,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -36,6 +36,7 @@ pub mod eval;
 pub mod extract_eval;
 pub mod feasible;
 pub mod hashing;
+pub mod index;
 pub mod pipeline;
 pub mod rank;
 pub mod refine;
@@ -229,6 +230,20 @@ pub enum LocalizeError {
         line: usize,
         /// What is wrong and what was expected.
         message: String,
+    },
+    /// A map index is unreadable, corrupt or stale.
+    #[error("map index {path}: {message}")]
+    Index {
+        /// The index file.
+        path: PathBuf,
+        /// What is wrong and what to do.
+        message: String,
+    },
+    /// A prepared map (index) was built with other options than the search asks for.
+    #[error("the map index was prepared with other options ({differences}); pass the index's options or rebuild it with `urbansem localize index`")]
+    PrepMismatch {
+        /// The differing options.
+        differences: String,
     },
     /// Reading a point cloud failed.
     #[error(transparent)]

@@ -15,15 +15,16 @@ use crate::candidates::{
     build_template, filter, search, suppress, Domain, FilterCounts, SearchOptions, SearchStats,
     Template,
 };
-use crate::chamfer::{bounding_box, map_edges, BoundPyramid, ChamferOptions, DtTensor};
+use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
+use crate::index::{PrepOptions, PreparedMap};
 use crate::rank::{confidence, costs, rank_order, CostKind, CostOptions, Costs};
 use crate::refine::{refine_pose, RefineOptions};
 use crate::segments::{extract_segments, SegmentOptions};
 use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::visibility::{visible_segments, EdgeGrid, VisibilityOptions};
-use crate::{Pose2, Result, Segment};
+use crate::{LocalizeError, Pose2, Result, Segment};
 use geodata::osm::index::MapIndex;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;
@@ -92,18 +93,7 @@ impl Default for LocalizeOptions {
     }
 }
 
-/// Seconds spent in the map preparation.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct MapSeconds {
-    /// Outline edges and the visibility grid.
-    pub edges: f64,
-    /// Distance-transform tensor.
-    pub distance_transform: f64,
-    /// Lower-bound pyramid.
-    pub pyramid: f64,
-    /// Feasible-pose mask.
-    pub feasible: f64,
-}
+pub use crate::index::MapSeconds;
 
 /// A map prepared for localization.
 pub struct Localizer<'m> {
@@ -216,55 +206,39 @@ pub struct Localization {
 impl<'m> Localizer<'m> {
     /// Prepares a map: edges, tensor, pyramid, spatial index.
     pub fn new(map: &'m OsmMap, options: LocalizeOptions) -> Result<Localizer<'m>> {
+        let prepared = PreparedMap::build(map, &options.chamfer, &options.search)?;
+        Localizer::with_prepared(map, options, prepared)
+    }
+
+    /// A localizer on a map prepared before (e.g. read from an index, [`PreparedMap::read`]);
+    /// an error when the preparation options differ from `options`'.
+    pub fn with_prepared(
+        map: &'m OsmMap,
+        options: LocalizeOptions,
+        prepared: PreparedMap,
+    ) -> Result<Localizer<'m>> {
+        let wanted = PrepOptions::of(&options.chamfer, &options.search);
+        let differ = prepared.options.differences(&wanted);
+        if !differ.is_empty() {
+            return Err(LocalizeError::PrepMismatch {
+                differences: differ.join("; "),
+            });
+        }
         let t = Instant::now();
-        let edges = map_edges(map);
-        let edge_grid = EdgeGrid::new(&edges, 25.0);
+        let edge_grid = EdgeGrid::new(&prepared.edges, 25.0);
         let index = MapIndex::new(map);
-        let edges_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let dt = DtTensor::build(&edges, &options.chamfer)?;
-        let dt_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let pyramid = BoundPyramid::build(&dt, options.search.levels);
-        let pyr_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let domain = match bounding_box(&edges) {
-            Some((min, max)) => {
-                let m = options.search.pose_margin_m;
-                Domain::from_box(&dt, [min[0] - m, min[1] - m], [max[0] + m, max[1] + m])
-            }
-            None => Domain {
-                i0: 0,
-                j0: 0,
-                i1: 0,
-                j1: 0,
-            },
-        };
-        let feasible = options.search.feasible_only.then(|| {
-            FeasibleMask::build(
-                map,
-                &dt,
-                domain,
-                options.search.street_distance_m,
-                pyramid.top(),
-            )
-        });
-        let feasible_s = t.elapsed().as_secs_f64();
+        let mut seconds = prepared.seconds;
+        seconds.edges += t.elapsed().as_secs_f64();
         Ok(Localizer {
             map,
             options,
-            edges,
+            edges: prepared.edges,
             edge_grid,
-            dt,
-            pyramid,
-            domain,
-            feasible,
-            seconds: MapSeconds {
-                edges: edges_s,
-                distance_transform: dt_s,
-                pyramid: pyr_s,
-                feasible: feasible_s,
-            },
+            dt: prepared.dt,
+            pyramid: prepared.pyramid,
+            domain: prepared.domain,
+            feasible: prepared.feasible,
+            seconds,
             index,
         })
     }

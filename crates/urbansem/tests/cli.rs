@@ -362,3 +362,83 @@ fn closed_stdout_pipe_is_not_an_internal_error() {
     assert!(!stderr.contains("internal error"), "{stderr}");
     assert_eq!(out.status.code(), Some(0), "{stderr}");
 }
+
+/// Issue 15: `localize index` writes an index that `localize eval --map X.uloc` uses with the
+/// same results as the map; a corrupt index exits 1 naming the file.
+#[test]
+fn localize_index_gives_the_same_results_as_the_map() {
+    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+    let map = format!("{shared}/osm/kth_campus_stockholm.osm");
+    let dataset = format!("{shared}/lidar/mcd_kth_day_06");
+    let dir = tempfile::tempdir().unwrap();
+    let index = dir.path().join("kth.uloc");
+    let out = urbansem()
+        .args(["localize", "index", "--map", &map, "--out"])
+        .arg(&index)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["bytes"].as_u64().unwrap() > 1_000_000, "{v}");
+    let eval = |m: &std::path::Path| {
+        let out = urbansem()
+            .args([
+                "localize",
+                "eval",
+                "--dataset",
+                &dataset,
+                "--limit",
+                "2",
+                "--json",
+                "--map",
+            ])
+            .arg(m)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["per_scan"].clone()
+    };
+    let a = eval(std::path::Path::new(&map));
+    let b = eval(&index);
+    assert!(a.as_array().is_some_and(|s| s.len() == 2), "{a}");
+    let strip = |v: &serde_json::Value| {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|s| {
+                (
+                    s["scan"].clone(),
+                    s["top1"].clone(),
+                    s["top_costs"].clone(),
+                    s["confidence"].clone(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(strip(&a), strip(&b));
+    let mut bytes = std::fs::read(&index).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 1;
+    std::fs::write(&index, &bytes).unwrap();
+    let out = urbansem()
+        .args(["localize", "--scan", "x.ply", "--map"])
+        .arg(&index)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("kth.uloc") && err.contains("checksum"),
+        "{err}"
+    );
+}

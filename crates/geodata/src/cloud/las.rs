@@ -293,20 +293,23 @@ fn check_laz_layers(
     points: u64,
 ) -> Result<()> {
     use laz::LazItemType as T;
-    if !vlr.items().iter().any(|i| i.version() >= 3) {
+    if vlr.items().first().is_none_or(|i| i.version() < 3) {
         return Ok(()); // point-wise compression reads its stream directly
     }
-    let layers: u64 = vlr
+    // Per item: its layers, and the bytes of its part of the raw first point as the crate's
+    // field decoders read them (fixed per item type; a corrupt VLR may declare other sizes).
+    let (layers, record) = vlr
         .items()
         .iter()
         .map(|i| match i.item_type() {
-            T::Point14 => 9,
-            T::RGBNIR14 => 2,
-            T::Byte14(n) | T::Byte(n) => u64::from(n),
-            _ => 1,
+            T::Point14 => (9, 30),
+            T::RGB14 => (1, 6),
+            T::RGBNIR14 => (2, 8),
+            T::WavePacket14 => (1, 29),
+            T::Byte14(n) => (u64::from(n), u64::from(n)),
+            _ => (1, u64::from(i.size())),
         })
-        .sum();
-    let record = vlr.items_size();
+        .fold((0u64, 0u64), |(l, r), (a, b)| (l + a, r + b));
     let mut r = std::io::BufReader::new(std::fs::File::open(path).map_err(io_err(path))?);
     // Variable-size chunks take their point counts from the chunk table when it reads.
     let table = if vlr.uses_variable_size_chunks() {

@@ -19,6 +19,7 @@ use localize::distractors::{embed_among_distractors, DistractorOptions, Distract
 use localize::eval::{accurate_within, is_mcd, mcd_scans, Accuracy, EvalScan, SimDataset};
 use localize::extract_eval::{evaluate, labelled_scans};
 use localize::hashing::{CornerIndex, HashingOptions};
+use localize::index::{is_index, PreparedMap};
 use localize::pipeline::{Localization, LocalizeOptions, Localizer};
 use localize::rank::{rank_order, CostKind, Costs};
 use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
@@ -49,12 +50,32 @@ pub enum LocalizeCommand {
     ExtractEval(ExtractEvalArgs),
     /// Localize every scan of a track: a window of scans tied by odometry, searched as one.
     Track(TrackArgs),
+    /// Prepare a map once and save it as an index (`.uloc`) that every `localize` command
+    /// accepts as `--map`.
+    Index(IndexArgs),
+}
+
+/// Arguments of `urbansem localize index`.
+#[derive(Args)]
+pub struct IndexArgs {
+    /// OSM map (.osm or .osm.pbf).
+    #[arg(long)]
+    pub map: PathBuf,
+    /// The index file to write (`.uloc`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Grid of the distance-transform tensor, metres (searches with the index must use the same).
+    #[arg(long, default_value_t = 0.5)]
+    pub grid_m: f64,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `urbansem localize track`.
 #[derive(Args)]
 pub struct TrackArgs {
-    /// OSM map (.osm or .osm.pbf).
+    /// OSM map (.osm or .osm.pbf), or its index (.uloc, from `localize index`).
     #[arg(long)]
     pub map: PathBuf,
     /// Folder of gravity-levelled scans (any supported cloud format), taken in
@@ -264,7 +285,7 @@ impl CostArg {
 /// Arguments of one localization.
 #[derive(Args)]
 pub struct RunArgs {
-    /// OSM map (.osm or .osm.pbf).
+    /// OSM map (.osm or .osm.pbf), or its index (.uloc, from `localize index`).
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// Gravity-levelled scan in the sensor frame (PLY, PCD, LAS/LAZ, KITTI .bin).
@@ -317,7 +338,7 @@ pub struct EvalArgs {
     /// A `localization` dataset folder, or an MCD sequence folder (needs --map).
     #[arg(long)]
     pub dataset: PathBuf,
-    /// OSM map; default: the dataset's `map`.
+    /// OSM map, or its index (.uloc); default: the dataset's `map`.
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// Methods to evaluate (repeatable).
@@ -371,6 +392,7 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
         Some(LocalizeCommand::Eval(e)) => eval(e),
         Some(LocalizeCommand::ExtractEval(e)) => extract_eval(e),
         Some(LocalizeCommand::Track(t)) => track(t),
+        Some(LocalizeCommand::Index(i)) => index(i),
         None => run_one(args.run),
     }
 }
@@ -417,6 +439,101 @@ fn candidate_json(map: &OsmMap, rank: usize, c: &localize::pipeline::Candidate) 
     })
 }
 
+/// The map of `--map`: an OSM file, or an index (`.uloc`) with the map it was built from.
+fn load_map_or_index(path: &Path) -> anyhow::Result<(OsmMap, Option<PreparedMap>)> {
+    if is_index(path) {
+        let (prepared, source) = PreparedMap::read(path)?;
+        let map = source.load(path)?;
+        return Ok((map, Some(prepared)));
+    }
+    let map = OsmMap::load(path).with_context(|| format!("loading the map {}", path.display()))?;
+    Ok((map, None))
+}
+
+/// A localizer on the map, prepared now or taken from its index.
+fn prepare<'m>(
+    map: &'m OsmMap,
+    prepared: Option<PreparedMap>,
+    options: LocalizeOptions,
+    path: &Path,
+) -> anyhow::Result<Localizer<'m>> {
+    match prepared {
+        Some(p) => Localizer::with_prepared(map, options, p)
+            .with_context(|| format!("using the map index {}", path.display())),
+        None => Localizer::new(map, options)
+            .with_context(|| format!("preparing the map {}", path.display())),
+    }
+}
+
+fn index(args: IndexArgs) -> anyhow::Result<()> {
+    if is_index(&args.map) {
+        super::usage!(
+            "--map {}: expected an OSM map, not an index",
+            args.map.display()
+        );
+    }
+    if !is_index(&args.out) {
+        super::usage!(
+            "--out {}: the index file name must end in .uloc",
+            args.out.display()
+        );
+    }
+    let t = Instant::now();
+    let map = OsmMap::load(&args.map)
+        .with_context(|| format!("loading the map {}", args.map.display()))?;
+    let load_s = t.elapsed().as_secs_f64();
+    let mut o = LocalizeOptions::default();
+    o.chamfer.grid_m = args.grid_m;
+    let prepared = PreparedMap::build(&map, &o.chamfer, &o.search)
+        .with_context(|| format!("preparing the map {}", args.map.display()))?;
+    let t = Instant::now();
+    prepared.write(&args.out, &args.map)?;
+    let write_s = t.elapsed().as_secs_f64();
+    let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
+    let t = Instant::now();
+    let (check, source) = PreparedMap::read(&args.out)?;
+    let _map = source.load(&args.out)?;
+    let load_index_s = t.elapsed().as_secs_f64();
+    drop(check);
+    let dt = &prepared.dt;
+    if args.json {
+        let v = json!({
+            "index": args.out,
+            "map": args.map,
+            "bytes": bytes,
+            "edges": prepared.edges.len(),
+            "tensor": [dt.width, dt.height, dt.channels],
+            "grid_m": dt.grid_m,
+            "seconds": {
+                "load_map": load_s,
+                "prepare": prepared.seconds,
+                "write": write_s,
+                "load_index": load_index_s,
+            },
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        let s = &prepared.seconds;
+        println!(
+            "{}: {:.1} MB ({} edges, tensor {}×{}×{} at {} m); prepared in {:.2} s (tensor {:.2}, pyramid {:.2}, feasible {:.2}), written in {:.2} s; loading it back (index and map) takes {:.3} s",
+            args.out.display(),
+            bytes as f64 / 1e6,
+            prepared.edges.len(),
+            dt.width,
+            dt.height,
+            dt.channels,
+            dt.grid_m,
+            s.edges + s.distance_transform + s.pyramid + s.feasible,
+            s.distance_transform,
+            s.pyramid,
+            s.feasible,
+            write_s,
+            load_index_s
+        );
+    }
+    Ok(())
+}
+
 fn run_one(args: RunArgs) -> anyhow::Result<()> {
     let (Some(map_path), Some(scan_path)) = (&args.map, &args.scan) else {
         super::usage!(
@@ -424,19 +541,19 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         );
     };
     let t = Instant::now();
-    let map = OsmMap::load(map_path)
-        .with_context(|| format!("loading the map {}", map_path.display()))?;
+    let (map, prepared) = load_map_or_index(map_path)?;
     let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = Localizer::new(
+    let localizer = prepare(
         &map,
+        prepared,
         options(
             args.cost.kind(),
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
         )?,
-    )
-    .with_context(|| format!("preparing the map {}", map_path.display()))?;
+        map_path,
+    )?;
     let t = Instant::now();
     let cloud = geodata::cloud::read_cloud(scan_path)
         .with_context(|| format!("reading the scan {}", scan_path.display()))?;
@@ -562,18 +679,18 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     if args.window == 0 {
         super::usage!("--window 0: expected at least 1 scan per window");
     }
-    let map = OsmMap::load(&args.map)
-        .with_context(|| format!("loading the map {}", args.map.display()))?;
-    let localizer = Localizer::new(
+    let (map, prepared) = load_map_or_index(&args.map)?;
+    let localizer = prepare(
         &map,
+        prepared,
         options(
             args.cost.kind(),
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
         )?,
-    )
-    .with_context(|| format!("preparing the map {}", args.map.display()))?;
+        &args.map,
+    )?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(&args.scans)
         .with_context(|| format!("listing {}", args.scans.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -858,8 +975,13 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         )
     };
     let t = Instant::now();
-    let map = OsmMap::load(&map_path)
-        .with_context(|| format!("loading the map {}", map_path.display()))?;
+    let (map, prepared) = load_map_or_index(&map_path)?;
+    if prepared.is_some() && args.distractors.is_some() {
+        super::usage!(
+            "--distractors changes the map, so it needs the OSM map, not the index {}",
+            map_path.display()
+        );
+    }
     let (map, distractors) = match &args.distractors {
         Some(other_path) => {
             let other = OsmMap::load(other_path)
@@ -882,16 +1004,17 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         None => (map, None),
     };
     let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = Localizer::new(
+    let localizer = prepare(
         &map,
+        prepared,
         options(
             CostKind::Reverse,
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
         )?,
-    )
-    .with_context(|| format!("preparing the map {}", map_path.display()))?;
+        &map_path,
+    )?;
     let t = Instant::now();
     let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
     let hashing_index_s = t.elapsed().as_secs_f64();
