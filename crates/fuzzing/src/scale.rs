@@ -125,6 +125,10 @@ pub fn formats() -> Vec<ScaleFormat> {
 }
 
 /// Times `format`'s reader on one generated input per size (bytes), fastest of `repeat`.
+///
+/// The reads are interleaved: every round reads every size once, smallest first, so a change
+/// of the machine's speed during the run (a shared 2-core VM drifts by tens of per cent over
+/// minutes) affects all sizes alike instead of one size's growth ratio.
 pub fn measure(
     format: &ScaleFormat,
     sizes: &[u64],
@@ -133,7 +137,7 @@ pub fn measure(
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<Measurement>, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let mut out: Vec<Measurement> = Vec::new();
+    let mut files: Vec<(PathBuf, u64)> = Vec::new();
     for &size in sizes {
         let path: PathBuf = dir.join(format!("{}-{size}.{}", format.name, format.ext));
         progress(&format!(
@@ -145,28 +149,41 @@ pub fn measure(
         let bytes = std::fs::metadata(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?
             .len();
-        progress(&format!(
-            "{}: reading {:.0} MB",
-            format.name,
-            bytes as f64 / 1e6
-        ));
-        let mut best = f64::INFINITY;
-        let mut items = 0;
-        for _ in 0..repeat.max(1) {
-            let t = Instant::now();
-            items = (format.read)(&path)?;
-            best = best.min(t.elapsed().as_secs_f64());
+        files.push((path, bytes));
+    }
+    let mut best = vec![f64::INFINITY; files.len()];
+    let mut items = vec![0; files.len()];
+    let result = (|| {
+        for round in 0..repeat.max(1) {
+            progress(&format!(
+                "{}: reading every size, round {} of {}",
+                format.name,
+                round + 1,
+                repeat.max(1)
+            ));
+            for (k, (path, _)) in files.iter().enumerate() {
+                let t = Instant::now();
+                items[k] = (format.read)(path)?;
+                best[k] = best[k].min(t.elapsed().as_secs_f64());
+            }
         }
-        let _ = std::fs::remove_file(&path);
+        Ok::<(), String>(())
+    })();
+    for (path, _) in &files {
+        let _ = std::fs::remove_file(path);
+    }
+    result?;
+    let mut out: Vec<Measurement> = Vec::new();
+    for (k, &(_, bytes)) in files.iter().enumerate() {
         let growth = out
             .last()
-            .map(|prev| (best / prev.seconds) / (bytes as f64 / prev.bytes as f64));
+            .map(|prev| (best[k] / prev.seconds) / (bytes as f64 / prev.bytes as f64));
         out.push(Measurement {
             format: format.name,
             bytes,
-            items,
-            seconds: best,
-            mb_per_s: bytes as f64 / 1e6 / best.max(1e-12),
+            items: items[k],
+            seconds: best[k],
+            mb_per_s: bytes as f64 / 1e6 / best[k].max(1e-12),
             growth,
         });
     }

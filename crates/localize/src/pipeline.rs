@@ -448,7 +448,7 @@ impl<'m> Localizer<'m> {
     }
 
     /// The map edges visible from any of `views` (segment frame) placed at `pose`.
-    fn visible_from_views(&self, pose: &Pose2, views: &[[f64; 2]]) -> Vec<Segment> {
+    pub(crate) fn visible_from_views(&self, pose: &Pose2, views: &[[f64; 2]]) -> Vec<Segment> {
         let mut out = Vec::new();
         for v in views {
             out.extend(visible_segments(
@@ -461,12 +461,24 @@ impl<'m> Localizer<'m> {
         out
     }
 
+    /// Whether a pose passes the search's filter: outside every building and, on a map with
+    /// streets, within the street distance of one.
+    pub(crate) fn pose_allowed(&self, pose: &Pose2) -> bool {
+        let p = [pose.x, pose.y];
+        self.index.building_at(p).is_none()
+            && (self.map.streets.segments.is_empty()
+                || self
+                    .index
+                    .nearest_segment(p)
+                    .is_some_and(|(_, d)| d <= self.options.search.street_distance_m))
+    }
+
     /// The map edges visible from a position.
     pub fn visible_from(&self, p: [f64; 2]) -> Vec<Segment> {
         visible_segments(&self.edges, &self.edge_grid, p, &self.options.visibility)
     }
 
-    fn sort(&self, cands: &mut Vec<Candidate>) {
+    pub(crate) fn sort(&self, cands: &mut Vec<Candidate>) {
         let costs: Vec<Costs> = cands.iter().map(|c| c.costs).collect();
         let poses: Vec<Pose2> = cands.iter().map(|c| c.pose).collect();
         let order = rank_order(&costs, &poses, self.options.rank_by);

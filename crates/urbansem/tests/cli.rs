@@ -9,6 +9,17 @@ fn urbansem() -> Command {
     Command::new(env!("CARGO_BIN_EXE_urbansem"))
 }
 
+/// Runs the command, checks that it succeeded and returns its standard output.
+fn stdout_of(cmd: &mut Command) -> Vec<u8> {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
 fn temp_file(name: &str, text: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("urbansem-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -372,40 +383,30 @@ fn localize_index_gives_the_same_results_as_the_map() {
     let dataset = format!("{shared}/lidar/mcd_kth_day_06");
     let dir = tempfile::tempdir().unwrap();
     let index = dir.path().join("kth.uloc");
-    let out = urbansem()
-        .args(["localize", "index", "--map", &map, "--out"])
-        .arg(&index)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = stdout_of(
+        urbansem()
+            .args(["localize", "index", "--map", &map, "--out"])
+            .arg(&index)
+            .arg("--json"),
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     assert!(v["bytes"].as_u64().unwrap() > 1_000_000, "{v}");
     let eval = |m: &std::path::Path| {
-        let out = urbansem()
-            .args([
-                "localize",
-                "eval",
-                "--dataset",
-                &dataset,
-                "--limit",
-                "2",
-                "--json",
-                "--map",
-            ])
-            .arg(m)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let stdout = stdout_of(
+            urbansem()
+                .args([
+                    "localize",
+                    "eval",
+                    "--dataset",
+                    &dataset,
+                    "--limit",
+                    "2",
+                    "--json",
+                    "--map",
+                ])
+                .arg(m),
         );
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
         v["per_scan"].clone()
     };
     let a = eval(std::path::Path::new(&map));
@@ -441,4 +442,41 @@ fn localize_index_gives_the_same_results_as_the_map() {
         err.contains("kth.uloc") && err.contains("checksum"),
         "{err}"
     );
+}
+
+/// Issue 15: track mode recovers the truth on a simulated HDL-64 drive with drifting
+/// odometry (2 % of the distance and 1° per 50 m, the `localize eval --track` defaults).
+#[test]
+fn track_mode_recovers_a_simulated_hdl64_drive() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("drive");
+    stdout_of(
+        urbansem()
+            .args([
+                "sim",
+                "dataset",
+                "--kind",
+                "localization",
+                "--sensor",
+                "hdl64",
+                "--scans",
+                "12",
+                "--seed",
+                "2",
+                "--map-error",
+                "--out",
+            ])
+            .arg(&data),
+    );
+    let stdout = stdout_of(
+        urbansem()
+            .args(["localize", "eval", "--track", "5", "--json", "--dataset"])
+            .arg(&data),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
+    let t = &v["track"];
+    assert_eq!(t["scans_after_first_window"], 8, "{t}");
+    // Measured 8/8 (and 36/36 on 40 scans); one miss allowed.
+    assert!(t["top1_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
+    assert!(t["top10_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
 }

@@ -723,7 +723,11 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
         );
     }
     let segments: Vec<Vec<Segment>> = extracted.iter().map(|e| e.segments.clone()).collect();
-    let results = localizer.localize_track(&segments, &odometry, args.window)?;
+    let track_options = localize::track::TrackOptions {
+        window: args.window,
+        ..Default::default()
+    };
+    let results = localizer.localize_track(&segments, &odometry, &track_options)?;
     let seconds = t.elapsed().as_secs_f64();
     let rows: Vec<Value> = names
         .iter()
@@ -742,7 +746,6 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
                 "confidence": r.confidence,
                 "candidates": r.candidates.iter().take(args.top).enumerate().map(|(i, c)| candidate_json(&map, i, c)).collect::<Vec<_>>(),
                 "segments": e.segments.len(),
-                "window_segments": r.segments.len(),
                 "sensor": e.sensor,
                 "message": r.message,
             })
@@ -1064,7 +1067,11 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             );
             let segments: Vec<Vec<Segment>> =
                 extracted.iter().map(|e| e.segments.clone()).collect();
-            let mut results = localizer.localize_track(&segments, &odometry, k)?;
+            let track_options = localize::track::TrackOptions {
+                window: k,
+                ..Default::default()
+            };
+            let mut results = localizer.localize_track(&segments, &odometry, &track_options)?;
             for (r, e) in results.iter_mut().zip(&extracted) {
                 r.sensor = e.sensor;
                 r.clearance_m = e.clearance_m;
@@ -1280,25 +1287,18 @@ fn summarize(
         })
         .count();
     // Track mode: the scans after the first window.
+    // Track mode ranks by the chains of its window: judged in the localizer's own order.
     let track_summary = args.track.map(|k| {
         let after: Vec<&ScanRecord> = records.iter().skip(k.saturating_sub(1)).collect();
-        let top1 = after
-            .iter()
-            .filter(|r| {
-                r.ranked[2]
-                    .first()
-                    .is_some_and(|p| strict.accepts(p, &r.truth))
-            })
-            .count();
-        let top10 = after
-            .iter()
-            .filter(|r| {
-                r.ranked[2]
-                    .iter()
-                    .take(10)
-                    .any(|p| strict.accepts(p, &r.truth))
-            })
-            .count();
+        let within = |r: &ScanRecord, n: usize| {
+            r.result
+                .candidates
+                .iter()
+                .take(n)
+                .any(|c| strict.accepts(&c.pose, &r.truth))
+        };
+        let top1 = after.iter().filter(|r| within(r, 1)).count();
+        let top10 = after.iter().filter(|r| within(r, 10)).count();
         (k, after.len(), top1, top10)
     });
     let mut sensors: Vec<(&str, usize)> = Vec::new();
