@@ -203,6 +203,19 @@ pub struct Localization {
     pub seconds: StageSeconds,
 }
 
+impl Localization {
+    /// Records how the scan's walls were extracted (sensor, clearance, cells, stage times);
+    /// the extraction seconds are added to the total.
+    pub fn record_extraction(&mut self, extracted: &ScanSegments) {
+        self.sensor = extracted.sensor;
+        self.clearance_m = extracted.clearance_m;
+        self.vertical_cells = extracted.vertical_cells;
+        self.seconds.surfaces = extracted.surfaces_s;
+        self.seconds.segments = extracted.segments_s;
+        self.seconds.total += extracted.surfaces_s + extracted.segments_s;
+    }
+}
+
 impl<'m> Localizer<'m> {
     /// Prepares a map: edges, tensor, pyramid, spatial index.
     pub fn new(map: &'m OsmMap, options: LocalizeOptions) -> Result<Localizer<'m>> {
@@ -275,11 +288,7 @@ impl<'m> Localizer<'m> {
         let t0 = Instant::now();
         let extracted = self.scan_segments(points)?;
         let mut out = self.localize_segments(&extracted.segments);
-        out.sensor = extracted.sensor;
-        out.clearance_m = extracted.clearance_m;
-        out.vertical_cells = extracted.vertical_cells;
-        out.seconds.surfaces = extracted.surfaces_s;
-        out.seconds.segments = extracted.segments_s;
+        out.record_extraction(&extracted);
         out.seconds.total = t0.elapsed().as_secs_f64();
         if extracted.segments.is_empty() {
             out.message = Some(format!(

@@ -14,10 +14,10 @@
 //! Odometry files have one line per scan, `x_m y_m yaw_rad` (optionally preceded by the scan
 //! file name, which must then match), in any local frame; `#` starts a comment.
 
-use crate::pipeline::{Candidate, Localization, Localizer};
+use crate::pipeline::{Candidate, Localization, Localizer, ScanSegments};
 use crate::rank::confidence;
 use crate::refine::refine_pose;
-use crate::{LocalizeError, Pose2, Result, Segment};
+use crate::{LocalizeError, Pose2, Result};
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -122,15 +122,6 @@ pub fn drifted_odometry(truth: &[Pose2], scale_error: f64, yaw_rad_per_m: f64) -
     out
 }
 
-/// How [`Localizer::localize_track`] ranks a scan's states.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TrackRank {
-    /// By the window's joint cost at each state.
-    Window,
-    /// By the cheapest odometry-gated chain of states through the window (Viterbi).
-    Chain,
-}
-
 /// How the candidates of consecutive scans are tied by odometry in [`Localizer::localize_track`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackOptions {
@@ -144,8 +135,6 @@ pub struct TrackOptions {
     pub gate_m: f64,
     /// … plus this share of the step length (odometry drift, 2 % assumed, and refinement).
     pub gate_per_m: f64,
-    /// How a scan's states are ranked.
-    pub rank: TrackRank,
     /// Yaw gate: a fixed part, radians …
     pub gate_rad: f64,
     /// … plus this many radians per metre of the step (1° per 50 m assumed, with margin).
@@ -160,7 +149,6 @@ impl Default for TrackOptions {
             carried_states: 20,
             gate_m: 1.5,
             gate_per_m: 0.05,
-            rank: TrackRank::Chain,
             gate_rad: 3f64.to_radians(),
             gate_rad_per_m: 4f64.to_radians() / 50.0,
         }
@@ -176,11 +164,11 @@ impl Localizer<'_> {
     /// within the gates (the sum of the scans' costs along the chain; a Viterbi pass).
     pub fn localize_track(
         &self,
-        segments: &[Vec<Segment>],
+        scans: &[ScanSegments],
         odometry: &[Pose2],
         options: &TrackOptions,
     ) -> Result<Vec<Localization>> {
-        if segments.len() != odometry.len() {
+        if scans.len() != odometry.len() {
             return Err(LocalizeError::InvalidOption {
                 name: "odometry",
                 value: odometry.len() as f64,
@@ -188,9 +176,10 @@ impl Localizer<'_> {
             });
         }
         let o = &self.options;
-        let mut out: Vec<Localization> = Vec::with_capacity(segments.len());
-        let mut states: Vec<Vec<Candidate>> = Vec::with_capacity(segments.len());
-        for (i, segs) in segments.iter().enumerate() {
+        let mut out: Vec<Localization> = Vec::with_capacity(scans.len());
+        let mut states: Vec<Vec<Candidate>> = Vec::with_capacity(scans.len());
+        for (i, scan) in scans.iter().enumerate() {
+            let segs = &scan.segments;
             let single = self.localize_segments_seen_from(segs, &[[0.0, 0.0]]);
             let t = std::time::Instant::now();
             let mut mine: Vec<Candidate> = single
@@ -228,16 +217,12 @@ impl Localizer<'_> {
             }
             self.sort(&mut mine);
             states.push(mine);
-            let ranked = match options.rank {
-                TrackRank::Chain => self
-                    .chain_rank(&states, odometry, i, options)
-                    .into_iter()
-                    .map(|(c, _)| c)
-                    .collect(),
-                TrackRank::Window => self.window_rank(segments, &states[i], odometry, i, options),
-            };
+            let ranked = self
+                .chain_rank(&states, odometry, i, options)
+                .into_iter()
+                .map(|(c, _)| c)
+                .collect();
             let mut result = single;
-            result.segments = segs.clone();
             result.candidates = ranked;
             let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
             // Confidence from the chain costs (stored in `confidence` by chain_rank, lower is better).
@@ -255,52 +240,10 @@ impl Localizer<'_> {
             }
             result.seconds.refine += t.elapsed().as_secs_f64();
             result.seconds.total += t.elapsed().as_secs_f64();
+            result.record_extraction(scan);
             out.push(result);
         }
         Ok(out)
-    }
-
-    /// Scan i's states ranked by the cost of the whole window's walls (every scan's segments
-    /// moved into scan i's frame by the odometry) at each state, with the map edges visible
-    /// from any of the window's sensor positions; `confidence` holds that cost.
-    fn window_rank(
-        &self,
-        segments: &[Vec<Segment>],
-        states: &[Candidate],
-        odometry: &[Pose2],
-        i: usize,
-        options: &TrackOptions,
-    ) -> Vec<Candidate> {
-        let kind = self.options.rank_by;
-        let start = (i + 1).saturating_sub(options.window.max(1));
-        let to_ref = odometry[i].inverse();
-        let mut segs = Vec::new();
-        let mut views = Vec::new();
-        for j in start..=i {
-            let rel = to_ref.compose(&odometry[j]);
-            segs.extend(segments[j].iter().map(|s| s.transformed(&rel)));
-            views.push([rel.x, rel.y]);
-        }
-        let mut out: Vec<Candidate> = states
-            .par_iter()
-            .map(|c| {
-                let mut c = *c;
-                let visible = self.visible_from_views(&c.pose, &views);
-                let pose = refine_pose(&segs, &visible, c.pose, &self.options.refine);
-                let pose = if self.pose_allowed(&pose) {
-                    pose
-                } else {
-                    c.pose
-                };
-                c.confidence = self
-                    .costs_seen_from(&segs, pose, c.costs.dcm, &views)
-                    .get(kind);
-                c.pose = pose;
-                c
-            })
-            .collect();
-        out.sort_by(|a, b| a.confidence.total_cmp(&b.confidence));
-        out
     }
 
     /// Scan i's states ranked by the cheapest gated chain through its window; each returned

@@ -491,10 +491,9 @@ fn index(args: IndexArgs) -> anyhow::Result<()> {
     let write_s = t.elapsed().as_secs_f64();
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
     let t = Instant::now();
-    let (check, source) = PreparedMap::read(&args.out)?;
-    let _map = source.load(&args.out)?;
+    let (_, source) = PreparedMap::read(&args.out)?;
+    source.load(&args.out)?;
     let load_index_s = t.elapsed().as_secs_f64();
-    drop(check);
     let dt = &prepared.dt;
     if args.json {
         let v = json!({
@@ -722,12 +721,11 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("extracting walls from {}", f.display()))?,
         );
     }
-    let segments: Vec<Vec<Segment>> = extracted.iter().map(|e| e.segments.clone()).collect();
     let track_options = localize::track::TrackOptions {
         window: args.window,
         ..Default::default()
     };
-    let results = localizer.localize_track(&segments, &odometry, &track_options)?;
+    let results = localizer.localize_track(&extracted, &odometry, &track_options)?;
     let seconds = t.elapsed().as_secs_f64();
     let rows: Vec<Value> = names
         .iter()
@@ -1065,22 +1063,11 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
                 args.odometry_drift,
                 args.odometry_yaw_drift_deg.to_radians() / 50.0,
             );
-            let segments: Vec<Vec<Segment>> =
-                extracted.iter().map(|e| e.segments.clone()).collect();
             let track_options = localize::track::TrackOptions {
                 window: k,
                 ..Default::default()
             };
-            let mut results = localizer.localize_track(&segments, &odometry, &track_options)?;
-            for (r, e) in results.iter_mut().zip(&extracted) {
-                r.sensor = e.sensor;
-                r.clearance_m = e.clearance_m;
-                r.vertical_cells = e.vertical_cells;
-                r.seconds.surfaces = e.surfaces_s;
-                r.seconds.segments = e.segments_s;
-                r.seconds.total += e.surfaces_s + e.segments_s;
-            }
-            Some(results)
+            Some(localizer.localize_track(&extracted, &odometry, &track_options)?)
         }
         None => None,
     };
