@@ -21,7 +21,7 @@
 //! assert_eq!(back.poly.evaluate(&[true, true, false]), 1.0);
 //! ```
 
-use crate::polynomial::{Literal, Polynomial};
+use crate::polynomial::{Literal, Polynomial, TermBatch};
 use rustc_hash::FxHashMap;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -338,7 +338,7 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
     };
     let mut poly = Polynomial::new(names.len());
     // A term takes at least 4 bytes (`+1 x`); reserve for a typical 16.
-    poly.reserve_terms(text.len() / 16);
+    let mut batch = TermBatch::with_capacity(text.len() / 16);
     let mut it = Tokens::new(text).peekable();
     let Some(first) = it.next() else {
         return Err(OpbError::NoObjective {
@@ -454,8 +454,9 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
             });
             it.next();
         }
-        poly.add_term(sign * coeff, &lits);
+        batch.push(sign * coeff, &lits);
     }
+    poly.add_batch(batch);
     if !closed {
         return Err(OpbError::Syntax {
             path: path.to_owned(),
@@ -484,7 +485,7 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
             new_of_old[old as usize] = new as u32;
         }
         let mut sorted = Polynomial::new(numbers.len());
-        sorted.add_constant(poly.constant());
+        let mut batch = TermBatch::with_capacity(poly.num_terms());
         let mut mapped = Vec::new();
         for (term, coeff) in poly.terms() {
             mapped.clear();
@@ -492,8 +493,10 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
                 term.iter()
                     .map(|l| Literal::new(new_of_old[l.var() as usize], !l.is_negated())),
             );
-            sorted.add_term(coeff, &mapped);
+            batch.push(coeff, &mapped);
         }
+        sorted.add_batch(batch);
+        sorted.add_constant(poly.constant());
         poly = sorted;
         names = order
             .iter()

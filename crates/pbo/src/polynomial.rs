@@ -2,7 +2,9 @@
 //!
 //! A literal is a variable x = x⁽¹⁾ or its complement x̄ = x⁽⁰⁾ = 1 − x. A [`Polynomial`]
 //! keeps one term per distinct literal set (identical monomials are merged through a hash
-//! of the sorted literal set), a constant, and the number of variables. It converts to the
+//! of the sorted literal set, or, for a [`TermBatch`] of many terms at once, by a radix sort
+//! that reads memory in order: a file reader's million-term batch then costs no cache miss
+//! per term), a constant, and the number of variables. It converts to the
 //! *multinomial* form (positive literals only) and to a *posiform* (every coefficient ≥ 0
 //! except the constant, which is then a lower bound on the minimum), substitutes fixed
 //! variables, and evaluates assignments. See Boros & Hammer, "Pseudo-Boolean
@@ -123,7 +125,10 @@ pub struct Polynomial {
     num_vars: usize,
     constant: f64,
     terms: Vec<Term>,
+    /// Looks up `terms[..indexed]`; the rest (added by [`Polynomial::add_batch`]) is indexed
+    /// on the next single-term addition.
     index: TermIndex,
+    indexed: usize,
 }
 
 /// Monomial → position in `Polynomial::terms`. Monomials of one or two literals (the bulk
@@ -200,6 +205,104 @@ fn normalize_in_place(lits: &mut [Literal]) -> Option<usize> {
     Some(n)
 }
 
+/// Many terms to add at once with [`Polynomial::add_batch`] (a file reader's objective).
+#[derive(Debug, Clone, Default)]
+pub struct TermBatch {
+    constants: Vec<f64>,
+    num_vars: usize,
+    terms: Vec<Term>,
+    /// (packed literals, position in `terms`) of the monomials of one or two literals.
+    short: Vec<(u64, usize)>,
+    /// Positions in `terms` of the longer monomials.
+    long: Vec<usize>,
+}
+
+impl TermBatch {
+    /// An empty batch with room for `terms` terms.
+    pub fn with_capacity(terms: usize) -> TermBatch {
+        TermBatch {
+            terms: Vec::with_capacity(terms),
+            short: Vec::with_capacity(terms),
+            ..TermBatch::default()
+        }
+    }
+
+    /// Appends `coeff · Π literals`, read as [`Polynomial::add_term`] reads it.
+    pub fn push(&mut self, coeff: f64, literals: &[Literal]) {
+        if coeff == 0.0 {
+            return;
+        }
+        let mut buf = [Literal(0); 4];
+        let lits: std::borrow::Cow<'_, [Literal]> = if literals.len() <= 4 {
+            let lits = &mut buf[..literals.len()];
+            lits.copy_from_slice(literals);
+            match normalize_in_place(lits) {
+                Some(n) => std::borrow::Cow::Borrowed(&buf[..n]),
+                None => return,
+            }
+        } else {
+            match normalize(literals) {
+                Some(l) => std::borrow::Cow::Owned(l),
+                None => return,
+            }
+        };
+        let Some(last) = lits.last() else {
+            self.constants.push(coeff);
+            return;
+        };
+        self.num_vars = self.num_vars.max(last.var() as usize + 1);
+        let pos = self.terms.len();
+        match TermIndex::short_key(&lits) {
+            Some(key) => self.short.push((key, pos)),
+            None => self.long.push(pos),
+        }
+        self.terms.push(Term {
+            literals: lits.as_ref().into(),
+            coeff,
+        });
+    }
+
+    /// Number of terms pushed (constants and vanishing products not counted).
+    pub fn len(&self) -> usize {
+        self.terms.len()
+    }
+
+    /// Whether no term was pushed.
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
+    }
+}
+
+/// Stable LSD radix sort of (key, payload) pairs by key, one pass per byte in which the keys
+/// differ.
+fn radix_sort_by_key(mut items: Vec<(u64, usize)>) -> Vec<(u64, usize)> {
+    let mut counts = vec![[0usize; 256]; 8];
+    for &(key, _) in &items {
+        for (byte, c) in counts.iter_mut().enumerate() {
+            c[(key >> (8 * byte)) as usize & 0xff] += 1;
+        }
+    }
+    let mut scratch = vec![(0u64, 0usize); items.len()];
+    for (byte, c) in counts.iter().enumerate() {
+        if c.contains(&items.len()) {
+            continue; // every key has the same byte here
+        }
+        let mut start = [0usize; 256];
+        let mut sum = 0;
+        for (s, &n) in start.iter_mut().zip(c.iter()) {
+            *s = sum;
+            sum += n;
+        }
+        for &item in &items {
+            let b = (item.0 >> (8 * byte)) as usize & 0xff;
+            scratch[start[b]] = item;
+            start[b] += 1;
+        }
+        std::mem::swap(&mut items, &mut scratch);
+    }
+    items
+}
+
 impl Polynomial {
     /// The zero function over `num_vars` variables.
     pub fn new(num_vars: usize) -> Polynomial {
@@ -271,6 +374,7 @@ impl Polynomial {
             return;
         };
         self.num_vars = self.num_vars.max(last.var() as usize + 1);
+        self.sync_index();
         if let Some(pos) = self.index.get(lits) {
             self.terms[pos].coeff += coeff;
         } else {
@@ -279,7 +383,90 @@ impl Polynomial {
                 literals: lits.into(),
                 coeff,
             });
+            self.indexed = self.terms.len();
         }
+    }
+
+    /// Indexes the terms a batch appended without indexing them.
+    fn sync_index(&mut self) {
+        if self.indexed == self.terms.len() {
+            return;
+        }
+        self.index.reserve(self.terms.len() - self.indexed);
+        for (i, t) in self.terms.iter().enumerate().skip(self.indexed) {
+            self.index.insert(&t.literals, i);
+        }
+        self.indexed = self.terms.len();
+    }
+
+    /// Adds every term of `batch`: the same function, terms and term order as
+    /// [`Polynomial::add_term`] on each in turn.
+    ///
+    /// Into a zero polynomial, repeated monomials are merged by a stable radix sort of their
+    /// packed literals (linear time, memory read in order) instead of one hash lookup per
+    /// term, and the lookup index is built only when a single term is added later.
+    pub fn add_batch(&mut self, batch: TermBatch) {
+        let TermBatch {
+            constants,
+            num_vars,
+            mut terms,
+            short,
+            long,
+        } = batch;
+        if !self.terms.is_empty() || self.constant != 0.0 {
+            for c in constants {
+                self.constant += c;
+            }
+            for t in terms {
+                self.add_sorted_slice(t.coeff, &t.literals);
+            }
+            return;
+        }
+        for c in constants {
+            self.constant += c;
+        }
+        self.num_vars = self.num_vars.max(num_vars);
+        let mut alive = vec![true; terms.len()];
+        // Short monomials: equal keys are adjacent after the sort, in arrival order (the
+        // sort is stable), so each run adds into its first term in the order add_term would.
+        let sorted = radix_sort_by_key(short);
+        let mut i = 0;
+        while i < sorted.len() {
+            let (key, first) = sorted[i];
+            let mut j = i + 1;
+            while j < sorted.len() && sorted[j].0 == key {
+                let other = sorted[j].1;
+                terms[first].coeff += terms[other].coeff;
+                alive[other] = false;
+                j += 1;
+            }
+            i = j;
+        }
+        // Longer monomials (rare in files): hashed, first occurrence kept.
+        let mut merges = Vec::new();
+        {
+            let mut first_of: FxHashMap<&[Literal], usize> = FxHashMap::default();
+            for &pos in &long {
+                match first_of.entry(&terms[pos].literals) {
+                    std::collections::hash_map::Entry::Occupied(e) => merges.push((*e.get(), pos)),
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        e.insert(pos);
+                    }
+                }
+            }
+        }
+        for (first, other) in merges {
+            terms[first].coeff += terms[other].coeff;
+            alive[other] = false;
+        }
+        let mut k = 0;
+        terms.retain(|_| {
+            k += 1;
+            alive[k - 1]
+        });
+        self.terms = terms;
+        self.index.clear();
+        self.indexed = 0;
     }
 
     /// Adds a term whose literals are already sorted and on distinct variables.
@@ -302,6 +489,11 @@ impl Polynomial {
             Some(lits) => self
                 .index
                 .get(lits.as_slice())
+                .or_else(|| {
+                    // Terms a batch added are not indexed yet: scanned (callers that add
+                    // single terms index them first).
+                    (self.indexed..self.terms.len()).find(|&i| *self.terms[i].literals == *lits)
+                })
                 .map_or(0.0, |i| self.terms[i].coeff),
             None => 0.0,
         }
@@ -451,9 +643,7 @@ impl Polynomial {
         }
         self.terms.retain(|t| t.coeff.abs() > tolerance);
         self.index.clear();
-        for (i, t) in self.terms.iter().enumerate() {
-            self.index.insert(&t.literals, i);
-        }
+        self.indexed = 0;
     }
 
     /// The exact minimum and a minimiser by enumerating all 2ⁿ assignments (n ≤ 25).
@@ -570,6 +760,65 @@ mod tests {
                 },
             )
         })
+    }
+
+    /// Terms as (literals, coefficient bits) in order, and the constant's bits.
+    fn exact(f: &Polynomial) -> (Vec<(Vec<Literal>, u64)>, u64, usize) {
+        (
+            f.terms().map(|(l, a)| (l.to_vec(), a.to_bits())).collect(),
+            f.constant().to_bits(),
+            f.num_vars(),
+        )
+    }
+
+    #[test]
+    fn radix_sort_is_stable_and_sorted() {
+        let mut items = Vec::new();
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        for i in 0..5000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            // Few distinct keys spread over all bytes, so runs of equal keys are long.
+            items.push(((x % 37).wrapping_mul(0x0101_0101_0101_0101), i));
+        }
+        let mut expected = items.clone();
+        expected.sort_by_key(|&(k, _)| k); // stable
+        assert_eq!(radix_sort_by_key(items), expected);
+        assert!(radix_sort_by_key(Vec::new()).is_empty());
+    }
+
+    proptest! {
+        #[test]
+        fn batch_equals_term_by_term(
+            start in proptest::collection::vec((proptest::collection::vec((0u32..6, any::<bool>()), 0..=3), -3i32..=3), 0..3),
+            terms in proptest::collection::vec((proptest::collection::vec((0u32..6, any::<bool>()), 0..=6), -10i32..=10), 0..40),
+            later in proptest::collection::vec((0u32..6, any::<bool>()), 0..=3),
+        ) {
+            let lits = |v: &[(u32, bool)]| v.iter().map(|&(v, s)| Literal::new(v, s)).collect::<Vec<_>>();
+            // Non-integral coefficients, so the order of the additions shows in the bits.
+            let coeff = |a: i32| f64::from(a) / 3.0;
+            let mut one = Polynomial::new(2);
+            let mut batched = Polynomial::new(2);
+            for (l, a) in &start {
+                one.add_term(coeff(*a), &lits(l));
+                batched.add_term(coeff(*a), &lits(l));
+            }
+            let mut batch = TermBatch::with_capacity(terms.len());
+            for (l, a) in &terms {
+                one.add_term(coeff(*a), &lits(l));
+                batch.push(coeff(*a), &lits(l));
+            }
+            batched.add_batch(batch);
+            prop_assert_eq!(exact(&one), exact(&batched));
+            for (l, _) in &terms {
+                prop_assert_eq!(one.coefficient(&lits(l)).to_bits(), batched.coefficient(&lits(l)).to_bits());
+            }
+            // A single term after a batch finds the batch's monomials.
+            one.add_term(1.5, &lits(&later));
+            batched.add_term(1.5, &lits(&later));
+            prop_assert_eq!(exact(&one), exact(&batched));
+        }
     }
 
     proptest! {
