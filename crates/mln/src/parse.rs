@@ -302,14 +302,15 @@ fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseErro
             out.push((Tok::Ident(chars[start..i].iter().collect()), col));
             continue;
         }
-        let two: String = chars[i..(i + 3).min(chars.len())].iter().collect();
-        let (tok, len) = if two.starts_with("<=>") {
+        // Operators are compared in place (no allocation per token).
+        let ahead = &chars[i..];
+        let (tok, len) = if ahead.starts_with(&['<', '=', '>']) {
             (Tok::Iff, 3)
-        } else if two.starts_with("...") {
+        } else if ahead.starts_with(&['.', '.', '.']) {
             (Tok::Ellipsis, 3)
-        } else if two.starts_with("=>") {
+        } else if ahead.starts_with(&['=', '>']) {
             (Tok::Implies, 2)
-        } else if two.starts_with("!=") {
+        } else if ahead.starts_with(&['!', '=']) {
             (Tok::Neq, 2)
         } else {
             match c {

@@ -48,7 +48,7 @@ type Stage = fn(&DemoArgs) -> anyhow::Result<StageOutput>;
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output folder {}", args.out.display()))?;
-    let stages: [(&str, Stage); 8] = [
+    let stages: [(&str, Stage); 9] = [
         ("geodata: embedded default city", stage_city),
         ("geodata: simulated scans", crate::cmd::sim::demo_stage),
         ("pbo: binary image denoising (QPBO)", stage_denoise),
@@ -64,6 +64,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         (
             "localize: one scan on the map",
             crate::cmd::localize::demo_stage,
+        ),
+        (
+            "localize: a car-LiDAR drive along its track",
+            crate::cmd::localize::demo_track_stage,
         ),
         (
             "srtree: semantic map and spatial relations",
