@@ -184,6 +184,11 @@ impl Accuracy {
         max_m: 4.0,
         max_rad: 0.2,
     };
+    /// The car-mounted targets' thresholds (issue 15): 2 m, 3°.
+    pub const STRICT: Accuracy = Accuracy {
+        max_m: 2.0,
+        max_rad: 3.0 * (std::f64::consts::PI / 180.0),
+    };
     /// The thesis' thresholds for the hashing baseline: 5 m, π/6.
     pub const HASHING: Accuracy = Accuracy {
         max_m: 5.0,

@@ -96,6 +96,11 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
     Ok(poses)
 }
 
+/// The odometry drift the track targets assume: 2 % of the distance travelled.
+pub const ODOMETRY_SCALE_DRIFT: f64 = 0.02;
+/// The odometry heading drift the track targets assume, degrees per 50 m travelled.
+pub const ODOMETRY_YAW_DRIFT_DEG_PER_50M: f64 = 1.0;
+
 /// Odometry from true poses with drift: every step's translation scaled by `1 + scale_error`
 /// and its heading turned by `yaw_rad_per_m` per metre travelled (a systematic drift, the
 /// worst case of a random one), starting at the origin.

@@ -485,6 +485,7 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
             new_of_old[old as usize] = new as u32;
         }
         let mut sorted = Polynomial::new(numbers.len());
+        sorted.add_constant(poly.constant());
         let mut batch = TermBatch::with_capacity(poly.num_terms());
         let mut mapped = Vec::new();
         for (term, coeff) in poly.terms() {
@@ -496,7 +497,6 @@ pub fn parse_opb(text: &str, path: &str) -> Result<OpbProblem, OpbError> {
             batch.push(coeff, &mapped);
         }
         sorted.add_batch(batch);
-        sorted.add_constant(poly.constant());
         poly = sorted;
         names = order
             .iter()

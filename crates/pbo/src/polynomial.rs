@@ -413,17 +413,15 @@ impl Polynomial {
             short,
             long,
         } = batch;
-        if !self.terms.is_empty() || self.constant != 0.0 {
-            for c in constants {
-                self.constant += c;
-            }
+        // The constant is summed in arrival order, as add_term sums it.
+        for c in constants {
+            self.constant += c;
+        }
+        if !self.terms.is_empty() {
             for t in terms {
                 self.add_sorted_slice(t.coeff, &t.literals);
             }
             return;
-        }
-        for c in constants {
-            self.constant += c;
         }
         self.num_vars = self.num_vars.max(num_vars);
         let mut alive = vec![true; terms.len()];

@@ -376,10 +376,10 @@ pub struct EvalArgs {
     #[arg(long)]
     pub track: Option<usize>,
     /// Track mode: odometry scale error (0.02: 2 % of the distance travelled).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = localize::track::ODOMETRY_SCALE_DRIFT)]
     pub odometry_drift: f64,
     /// Track mode: odometry heading drift, degrees per 50 m travelled.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = localize::track::ODOMETRY_YAW_DRIFT_DEG_PER_50M)]
     pub odometry_yaw_drift_deg: f64,
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
@@ -1247,10 +1247,7 @@ fn summarize(
             )
         })
         .count();
-    let strict = Accuracy {
-        max_m: 2.0,
-        max_rad: 3f64.to_radians(),
-    };
+    let strict = Accuracy::STRICT;
     let strict_top1: Vec<usize> = (0..4)
         .map(|k| {
             records
@@ -1750,10 +1747,7 @@ pub(crate) fn demo_track_stage(
 
     const SCANS: usize = 12;
     const WINDOW: usize = 5;
-    let strict = Accuracy {
-        max_m: 2.0,
-        max_rad: 3f64.to_radians(),
-    };
+    let strict = Accuracy::STRICT;
     let map = geodata::city::default_city_map().context("generating the embedded default city")?;
     // The scans are written as a dataset (as `sim dataset --sensor hdl64` writes them), read
     // back, and removed: the demo's folder keeps only the figure and the summary.
@@ -1789,7 +1783,11 @@ pub(crate) fn demo_track_stage(
         );
     }
     std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
-    let odometry = localize::track::drifted_odometry(&truths, 0.02, 1f64.to_radians() / 50.0);
+    let odometry = localize::track::drifted_odometry(
+        &truths,
+        localize::track::ODOMETRY_SCALE_DRIFT,
+        localize::track::ODOMETRY_YAW_DRIFT_DEG_PER_50M.to_radians() / 50.0,
+    );
     let results = localizer.localize_track(
         &extracted,
         &odometry,
