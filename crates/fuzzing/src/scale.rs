@@ -124,11 +124,14 @@ pub fn formats() -> Vec<ScaleFormat> {
     ]
 }
 
-/// Times `format`'s reader on one generated input per size (bytes), fastest of `repeat`.
+/// Times `format`'s reader on one generated input per size (bytes), fastest of `repeat`
+/// rounds.
 ///
-/// The reads are interleaved: every round reads every size once, smallest first, so a change
-/// of the machine's speed during the run (a shared 2-core VM drifts by tens of per cent over
-/// minutes) affects all sizes alike instead of one size's growth ratio.
+/// The reads are interleaved: every round reads every size, smallest first, so a change of
+/// the machine's speed during the run (a shared 2-core VM drifts by tens of per cent over
+/// minutes) affects all sizes alike instead of one size's growth ratio. Within a round a
+/// smaller input is read more often ([`reads_per_round`]): a 60 ms read is far noisier than
+/// a 6 s one, and its minimum over three reads alone moved a growth ratio by ±0.3.
 pub fn measure(
     format: &ScaleFormat,
     sizes: &[u64],
@@ -151,6 +154,7 @@ pub fn measure(
             .len();
         files.push((path, bytes));
     }
+    let largest = files.iter().map(|f| f.1).max().unwrap_or(1);
     let mut best = vec![f64::INFINITY; files.len()];
     let mut items = vec![0; files.len()];
     let result = (|| {
@@ -161,10 +165,12 @@ pub fn measure(
                 round + 1,
                 repeat.max(1)
             ));
-            for (k, (path, _)) in files.iter().enumerate() {
-                let t = Instant::now();
-                items[k] = (format.read)(path)?;
-                best[k] = best[k].min(t.elapsed().as_secs_f64());
+            for (k, (path, bytes)) in files.iter().enumerate() {
+                for _ in 0..reads_per_round(*bytes, largest) {
+                    let t = Instant::now();
+                    items[k] = (format.read)(path)?;
+                    best[k] = best[k].min(t.elapsed().as_secs_f64());
+                }
             }
         }
         Ok::<(), String>(())
@@ -188,6 +194,12 @@ pub fn measure(
         });
     }
     Ok(out)
+}
+
+/// Reads of an input of `bytes` per round: √(largest / bytes), at least 1 — a size 8× and
+/// 64× below the largest is read 3× and 8× per round, for a quarter more time in all.
+pub fn reads_per_round(bytes: u64, largest: u64) -> usize {
+    ((largest as f64 / bytes.max(1) as f64).sqrt().round() as usize).max(1)
 }
 
 fn write_text(path: &Path, text: &str) -> Result<(), String> {
@@ -344,4 +356,18 @@ fn gen_srt(bytes: u64, path: &Path) -> Result<(), String> {
 fn read_srt(path: &Path) -> Result<u64, String> {
     let map = srtree::io::read_map(path).map_err(|e| e.to_string())?;
     Ok(map.len() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::reads_per_round;
+
+    #[test]
+    fn smaller_inputs_are_read_more_often() {
+        assert_eq!(reads_per_round(128, 128), 1);
+        assert_eq!(reads_per_round(16, 128), 3);
+        assert_eq!(reads_per_round(2, 128), 8);
+        assert_eq!(reads_per_round(0, 0), 1);
+        assert_eq!(reads_per_round(200, 100), 1);
+    }
 }

@@ -84,6 +84,8 @@ pub fn streets_truth(map: &geodata::osm::OsmMap) -> Vec<streets::dataset::Segmen
             offset_m: 0.0,
             width_m: 7.0,
             sidewalk_m: 2.0,
+            outer_offset_m: None,
+            outer_observed: true,
             drivable: geodata::sim::truth::is_drivable(&s.highway),
             observed: true,
             points: 0,

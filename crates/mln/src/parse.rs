@@ -200,10 +200,10 @@ fn read(path: &Path) -> Result<String, ParseError> {
 
 /// Lexical tokens.
 #[derive(Debug, Clone, PartialEq)]
-enum Tok {
-    Ident(String),
-    Quoted(String),
-    Number(String),
+enum Tok<'s> {
+    Ident(&'s str),
+    Quoted(&'s str),
+    Number(&'s str),
     LParen,
     RParen,
     LBrace,
@@ -222,7 +222,7 @@ enum Tok {
     At,
 }
 
-impl Tok {
+impl Tok<'_> {
     fn describe(&self) -> String {
         match self {
             Tok::Ident(s) => format!("`{s}`"),
@@ -249,12 +249,33 @@ impl Tok {
 }
 
 /// A token and its 1-based column.
-type Spanned = (Tok, usize);
+type Spanned<'s> = (Tok<'s>, usize);
 
-/// Splits one line (comment already removed) into tokens.
-fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseError> {
-    let chars: Vec<char> = line.chars().collect();
-    let mut out = Vec::new();
+/// The lexer's reusable buffer: one line's characters with their byte offsets (kept across
+/// lines so that a long file allocates it once).
+#[derive(Default)]
+struct LexBuf {
+    chars: Vec<(usize, char)>,
+}
+
+/// Splits one line (comment already removed) into tokens borrowing from the line; `out` is
+/// cleared first.
+fn lex<'s>(
+    line: &'s str,
+    path: &str,
+    line_no: usize,
+    buf: &mut LexBuf,
+    out: &mut Vec<Spanned<'s>>,
+) -> Result<(), ParseError> {
+    out.clear();
+    let chars = &mut buf.chars;
+    chars.clear();
+    chars.extend(line.char_indices());
+    let chars = &*chars;
+    let text = |from: usize, to: usize| -> &'s str {
+        let end = chars.get(to).map_or(line.len(), |c| c.0);
+        &line[chars[from].0..end]
+    };
     let mut i = 0;
     let err = |col: usize, message: String| ParseError::Syntax {
         path: path.to_owned(),
@@ -263,9 +284,9 @@ fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseErro
         message,
     };
     while i < chars.len() {
-        let c = chars[i];
+        let c = chars[i].1;
         let col = i + 1;
-        let next = chars.get(i + 1).copied();
+        let next = chars.get(i + 1).map(|c| c.1);
         if c.is_whitespace() {
             i += 1;
             continue;
@@ -276,41 +297,41 @@ fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseErro
             let start = i;
             i += 1;
             while i < chars.len()
-                && (chars[i].is_ascii_alphanumeric()
-                    || chars[i] == '.' && chars.get(i + 1).is_some_and(|d| d.is_ascii_digit())
-                    || chars[i] == '_'
-                    || (matches!(chars[i], '-' | '+') && matches!(chars[i - 1], 'e' | 'E')))
+                && (chars[i].1.is_ascii_alphanumeric()
+                    || chars[i].1 == '.' && chars.get(i + 1).is_some_and(|d| d.1.is_ascii_digit())
+                    || chars[i].1 == '_'
+                    || (matches!(chars[i].1, '-' | '+') && matches!(chars[i - 1].1, 'e' | 'E')))
             {
                 i += 1;
             }
-            let text: String = chars[start..i].iter().collect();
+            let word = text(start, i);
             // A token like `500abc` is a constant name, not a number.
-            if text.parse::<f64>().is_ok() {
-                out.push((Tok::Number(text), col));
+            if word.parse::<f64>().is_ok() {
+                out.push((Tok::Number(word), col));
             } else {
-                out.push((Tok::Ident(text), col));
+                out.push((Tok::Ident(word), col));
             }
             continue;
         }
         if c.is_alphanumeric() || c == '_' {
             let start = i;
             while i < chars.len()
-                && (chars[i].is_alphanumeric() || matches!(chars[i], '_' | '-' | '\''))
+                && (chars[i].1.is_alphanumeric() || matches!(chars[i].1, '_' | '-' | '\''))
             {
                 i += 1;
             }
-            out.push((Tok::Ident(chars[start..i].iter().collect()), col));
+            out.push((Tok::Ident(text(start, i)), col));
             continue;
         }
         // Operators are compared in place (no allocation per token).
-        let ahead = &chars[i..];
-        let (tok, len) = if ahead.starts_with(&['<', '=', '>']) {
+        let ahead = &line[chars[i].0..];
+        let (tok, len) = if ahead.starts_with("<=>") {
             (Tok::Iff, 3)
-        } else if ahead.starts_with(&['.', '.', '.']) {
+        } else if ahead.starts_with("...") {
             (Tok::Ellipsis, 3)
-        } else if ahead.starts_with(&['=', '>']) {
+        } else if ahead.starts_with("=>") {
             (Tok::Implies, 2)
-        } else if ahead.starts_with(&['!', '=']) {
+        } else if ahead.starts_with("!=") {
             (Tok::Neq, 2)
         } else {
             match c {
@@ -329,7 +350,7 @@ fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseErro
                 '"' => {
                     let start = i + 1;
                     let mut j = start;
-                    while j < chars.len() && chars[j] != '"' {
+                    while j < chars.len() && chars[j].1 != '"' {
                         j += 1;
                     }
                     if j >= chars.len() {
@@ -338,7 +359,7 @@ fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseErro
                             "unterminated quoted constant: expected a closing `\"`".into(),
                         ));
                     }
-                    out.push((Tok::Quoted(chars[start..j].iter().collect()), col));
+                    out.push((Tok::Quoted(text(start, j)), col));
                     i = j + 1;
                     continue;
                 }
@@ -348,7 +369,7 @@ fn lex(line: &str, path: &str, line_no: usize) -> Result<Vec<Spanned>, ParseErro
         out.push((tok, col));
         i += len;
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Blanks `/* … */` block comments (outside quotes and `//` comments), keeping newlines so
@@ -406,8 +427,8 @@ fn strip_comment(line: &str) -> &str {
 }
 
 /// A cursor over one line's tokens.
-struct Cursor<'a> {
-    toks: &'a [Spanned],
+struct Cursor<'a, 's> {
+    toks: &'a [Spanned<'s>],
     pos: usize,
     path: &'a str,
     line: usize,
@@ -419,11 +440,11 @@ struct Cursor<'a> {
 /// Deepest formula nesting parsed; deeper input is an error, not a stack overflow.
 const MAX_NESTING: usize = 200;
 
-impl<'a> Cursor<'a> {
-    fn peek(&self) -> Option<&'a Tok> {
+impl<'a, 's> Cursor<'a, 's> {
+    fn peek(&self) -> Option<&'a Tok<'s>> {
         self.toks.get(self.pos).map(|(t, _)| t)
     }
-    fn peek_at(&self, k: usize) -> Option<&'a Tok> {
+    fn peek_at(&self, k: usize) -> Option<&'a Tok<'s>> {
         self.toks.get(self.pos + k).map(|(t, _)| t)
     }
     fn col(&self) -> usize {
@@ -431,7 +452,7 @@ impl<'a> Cursor<'a> {
             .get(self.pos)
             .map_or(self.line_len + 1, |(_, c)| *c)
     }
-    fn bump(&mut self) -> Option<&'a Tok> {
+    fn bump(&mut self) -> Option<&'a Tok<'s>> {
         let t = self.peek();
         self.pos += 1;
         t
@@ -448,7 +469,7 @@ impl<'a> Cursor<'a> {
         self.peek()
             .map_or("the end of the line".to_owned(), Tok::describe)
     }
-    fn expect(&mut self, want: &Tok, what: &str) -> Result<(), ParseError> {
+    fn expect(&mut self, want: &Tok<'_>, what: &str) -> Result<(), ParseError> {
         if self.peek() == Some(want) {
             self.pos += 1;
             Ok(())
@@ -460,7 +481,7 @@ impl<'a> Cursor<'a> {
 
 /// After a list item: `,` continues the list (true), `closer` ends it (false), anything else
 /// is an error naming both.
-fn list_continues(cur: &mut Cursor<'_>, closer: &Tok) -> Result<bool, ParseError> {
+fn list_continues(cur: &mut Cursor<'_, '_>, closer: &Tok<'_>) -> Result<bool, ParseError> {
     match cur.bump() {
         Some(Tok::Comma) => Ok(true),
         Some(t) if t == closer => Ok(false),
@@ -486,14 +507,20 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
         path: path.to_owned(),
         ..Program::default()
     };
-    let mut pred_index: FxHashMap<String, usize> = FxHashMap::default();
+    let mut pred_index: PredIndex<'_> = FxHashMap::default();
+    // Every declaration and formula is one line: sized once, so a large program's lists are
+    // not copied on growth (unused capacity is never touched, and is released at the end).
+    let lines = text.bytes().filter(|&b| b == b'\n').count() + 1;
+    program.predicates.reserve(lines);
+    program.formulas.reserve(lines);
+    let (mut buf, mut toks) = (LexBuf::default(), Vec::new());
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
         let line = strip_comment(raw);
         if line.trim().is_empty() {
             continue;
         }
-        let toks = lex(line, path, line_no)?;
+        lex(line, path, line_no, &mut buf, &mut toks)?;
         let mut cur = Cursor {
             toks: &toks,
             pos: 0,
@@ -509,7 +536,7 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
             cur.pos += 3;
             let constants = parse_domain(&mut cur)?;
             program.types.push(TypeDecl {
-                name: name.clone(),
+                name: (*name).to_owned(),
                 constants,
                 line: line_no,
             });
@@ -521,12 +548,12 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
         if let (Some(Tok::Ident(name)), Some(Tok::LParen)) =
             (cur.peek_at(decl_at), cur.peek_at(decl_at + 1))
         {
-            if !pred_index.contains_key(name) {
+            if !pred_index.contains_key(*name) {
                 cur.pos += decl_at + 2;
                 let mut arg_types = Vec::new();
                 loop {
                     match cur.bump() {
-                        Some(Tok::Ident(t)) => arg_types.push(t.clone()),
+                        Some(Tok::Ident(t)) => arg_types.push((*t).to_owned()),
                         _ => {
                             cur.pos -= 1;
                             return Err(cur.error(format!(
@@ -545,9 +572,9 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
                         cur.found()
                     )));
                 }
-                pred_index.insert(name.clone(), program.predicates.len());
+                pred_index.insert(name, program.predicates.len());
                 program.predicates.push(Predicate {
-                    name: name.clone(),
+                    name: (*name).to_owned(),
                     arg_types,
                     closed_world: star,
                     line: line_no,
@@ -619,15 +646,17 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
             line: line_no,
         });
     }
+    program.predicates.shrink_to_fit();
+    program.formulas.shrink_to_fit();
     Ok(program)
 }
 
-fn parse_domain(cur: &mut Cursor<'_>) -> Result<Vec<String>, ParseError> {
+fn parse_domain(cur: &mut Cursor<'_, '_>) -> Result<Vec<String>, ParseError> {
     let mut out = Vec::new();
     loop {
         match cur.bump() {
             Some(Tok::Ident(c)) | Some(Tok::Quoted(c)) | Some(Tok::Number(c)) => {
-                out.push(c.clone())
+                out.push((*c).to_owned())
             }
             Some(Tok::Ellipsis) => {
                 // `1, ..., 10`: expand the integer range from the previous constant.
@@ -670,9 +699,14 @@ fn parse_domain(cur: &mut Cursor<'_>) -> Result<Vec<String>, ParseError> {
     Ok(out)
 }
 
-type PredIndex = FxHashMap<String, usize>;
+/// Predicate names (borrowed from the program text or the parsed program) → index.
+type PredIndex<'n> = FxHashMap<&'n str, usize>;
 
-fn parse_iff(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+fn parse_iff(
+    cur: &mut Cursor<'_, '_>,
+    p: &Program,
+    idx: &PredIndex<'_>,
+) -> Result<Formula, ParseError> {
     let mut left = parse_implies(cur, p, idx)?;
     while cur.peek() == Some(&Tok::Iff) {
         cur.pos += 1;
@@ -683,9 +717,9 @@ fn parse_iff(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formu
 }
 
 fn parse_implies(
-    cur: &mut Cursor<'_>,
+    cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex,
+    idx: &PredIndex<'_>,
 ) -> Result<Formula, ParseError> {
     // `a => b => c` is `a => (b => c)`: read the chain in a loop (a long chain must not
     // recurse once per arrow), then fold from the right.
@@ -708,11 +742,15 @@ fn parse_implies(
     Ok(f)
 }
 
-fn is_or(t: Option<&Tok>) -> bool {
-    matches!(t, Some(Tok::Ident(s)) if s == "v")
+fn is_or(t: Option<&Tok<'_>>) -> bool {
+    matches!(t, Some(Tok::Ident(s)) if *s == "v")
 }
 
-fn parse_or(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+fn parse_or(
+    cur: &mut Cursor<'_, '_>,
+    p: &Program,
+    idx: &PredIndex<'_>,
+) -> Result<Formula, ParseError> {
     let mut parts = vec![parse_and(cur, p, idx)?];
     while is_or(cur.peek()) {
         cur.pos += 1;
@@ -725,7 +763,11 @@ fn parse_or(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formul
     })
 }
 
-fn parse_and(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+fn parse_and(
+    cur: &mut Cursor<'_, '_>,
+    p: &Program,
+    idx: &PredIndex<'_>,
+) -> Result<Formula, ParseError> {
     let mut parts = vec![parse_unary(cur, p, idx)?];
     while cur.peek() == Some(&Tok::And) {
         cur.pos += 1;
@@ -738,7 +780,11 @@ fn parse_and(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formu
     })
 }
 
-fn parse_unary(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
+fn parse_unary(
+    cur: &mut Cursor<'_, '_>,
+    p: &Program,
+    idx: &PredIndex<'_>,
+) -> Result<Formula, ParseError> {
     if cur.depth >= MAX_NESTING {
         return Err(cur.error(format!(
             "formula nested deeper than {MAX_NESTING} levels (parentheses, `!`, quantifiers)"
@@ -751,9 +797,9 @@ fn parse_unary(cur: &mut Cursor<'_>, p: &Program, idx: &PredIndex) -> Result<For
 }
 
 fn parse_unary_inner(
-    cur: &mut Cursor<'_>,
+    cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex,
+    idx: &PredIndex<'_>,
 ) -> Result<Formula, ParseError> {
     match cur.peek() {
         Some(Tok::Not) => {
@@ -771,7 +817,7 @@ fn parse_unary_inner(
             let mut vars = Vec::new();
             loop {
                 match cur.bump() {
-                    Some(Tok::Ident(v)) if is_variable(v) => vars.push(v.clone()),
+                    Some(Tok::Ident(v)) if is_variable(v) => vars.push((*v).to_owned()),
                     _ => {
                         cur.pos -= 1;
                         return Err(cur.error(format!(
@@ -797,11 +843,11 @@ fn parse_unary_inner(
     }
 }
 
-fn parse_term(cur: &mut Cursor<'_>) -> Result<Term, ParseError> {
+fn parse_term(cur: &mut Cursor<'_, '_>) -> Result<Term, ParseError> {
     match cur.bump() {
-        Some(Tok::Ident(s)) if is_variable(s) => Ok(Term::Var(s.clone())),
+        Some(Tok::Ident(s)) if is_variable(s) => Ok(Term::Var((*s).to_owned())),
         Some(Tok::Ident(s)) | Some(Tok::Number(s)) | Some(Tok::Quoted(s)) => {
-            Ok(Term::Const(s.clone()))
+            Ok(Term::Const((*s).to_owned()))
         }
         _ => {
             cur.pos -= 1;
@@ -814,9 +860,9 @@ fn parse_term(cur: &mut Cursor<'_>) -> Result<Term, ParseError> {
 }
 
 fn parse_primary(
-    cur: &mut Cursor<'_>,
+    cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex,
+    idx: &PredIndex<'_>,
 ) -> Result<Formula, ParseError> {
     match (cur.peek(), cur.peek_at(1)) {
         (Some(Tok::LParen), _) => {
@@ -827,7 +873,7 @@ fn parse_primary(
         }
         (Some(Tok::Ident(name)), Some(Tok::LParen)) => {
             let col = cur.col();
-            let Some(&pred) = idx.get(name) else {
+            let Some(&pred) = idx.get(*name) else {
                 return Err(cur.error(format!(
                     "undeclared predicate {name}: declare it first, e.g. {name}(type1, type2)"
                 )));
@@ -869,7 +915,7 @@ fn parse_primary(
             let eq = Formula::Equal(a, b);
             Ok(if neq { Formula::Not(Box::new(eq)) } else { eq })
         }
-        (Some(Tok::Ident(name)), _) => match idx.get(name) {
+        (Some(Tok::Ident(name)), _) => match idx.get(*name) {
             Some(&pred) if p.predicates[pred].arg_types.is_empty() => {
                 cur.pos += 1;
                 Ok(Formula::Atom(Atom {
@@ -895,17 +941,18 @@ fn parse_atom_lines<T>(
     path: &str,
     program: &Program,
     fast: impl Fn(&str, usize, &PredIndex) -> Option<T>,
-    mut per_line: impl FnMut(&mut Cursor<'_>, &PredIndex) -> Result<T, ParseError>,
+    mut per_line: impl FnMut(&mut Cursor<'_, '_>, &PredIndex) -> Result<T, ParseError>,
 ) -> Result<Vec<T>, ParseError> {
     let text = &*blank_block_comments(text);
     let idx: PredIndex = program
         .predicates
         .iter()
         .enumerate()
-        .map(|(i, p)| (p.name.clone(), i))
+        .map(|(i, p)| (p.name.as_str(), i))
         .collect();
     // One entry per line at most: sized once, so a large file's output is not copied on growth.
     let mut out = Vec::with_capacity(text.bytes().filter(|&b| b == b'\n').count() + 1);
+    let (mut buf, mut toks) = (LexBuf::default(), Vec::new());
     for (i, raw) in text.lines().enumerate() {
         let line = strip_comment(raw);
         if line.trim().is_empty() {
@@ -915,7 +962,7 @@ fn parse_atom_lines<T>(
             out.push(t);
             continue;
         }
-        let toks = lex(line, path, i + 1)?;
+        lex(line, path, i + 1, &mut buf, &mut toks)?;
         let mut cur = Cursor {
             toks: &toks,
             pos: 0,
@@ -931,9 +978,9 @@ fn parse_atom_lines<T>(
 
 /// Parses one atom that must fill the rest of the line; returns it with its column.
 fn parse_whole_line_atom(
-    cur: &mut Cursor<'_>,
+    cur: &mut Cursor<'_, '_>,
     program: &Program,
-    idx: &PredIndex,
+    idx: &PredIndex<'_>,
     what: &str,
 ) -> Result<(Atom, usize), ParseError> {
     let col = cur.col();
@@ -958,7 +1005,7 @@ fn parse_whole_line_atom(
 fn fast_evidence_line(
     line: &str,
     line_no: usize,
-    idx: &PredIndex,
+    idx: &PredIndex<'_>,
     program: &Program,
 ) -> Option<EvidenceAtom> {
     let b = line.trim().as_bytes();

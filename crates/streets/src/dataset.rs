@@ -23,6 +23,13 @@ pub struct SegmentTruth {
     /// Sidewalk width on each side, metres (0 when the dataset has none).
     #[serde(default)]
     pub sidewalk_m: f64,
+    /// Offset of the driving area with sidewalk, when it differs from `offset_m` (real data:
+    /// sidewalks of unequal width); `None`: the same as `offset_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outer_offset_m: Option<f64>,
+    /// Whether the driving area with sidewalk has a truth (real data: its edges were seen).
+    #[serde(default = "yes")]
+    pub outer_observed: bool,
     /// Whether the segment is a street for cars (footways are not).
     #[serde(default = "yes")]
     pub drivable: bool,

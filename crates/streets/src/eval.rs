@@ -78,6 +78,9 @@ pub struct Scores {
     pub f1: f64,
     /// Length-weighted RMSE of the widths, metres (`None` for the raw classifier).
     pub rmse_w: Option<f64>,
+    /// Length-weighted RMSE of the offsets (strip centre from the OSM centre line), metres
+    /// (`None` for the raw classifier).
+    pub rmse_d: Option<f64>,
 }
 
 /// Table 4.1 rows of one target.
@@ -164,6 +167,7 @@ struct Counts {
     fp: u64,
     fn_: u64,
     w_err2: f64,
+    d_err2: f64,
     w_len: f64,
     with_width: bool,
 }
@@ -183,6 +187,9 @@ impl Counts {
             rmse_w: self
                 .with_width
                 .then(|| (self.w_err2 / self.w_len.max(1e-12)).sqrt()),
+            rmse_d: self
+                .with_width
+                .then(|| (self.d_err2 / self.w_len.max(1e-12)).sqrt()),
         }
     }
 
@@ -201,7 +208,19 @@ fn true_geometry(ds: &StreetsDataset, s: usize, target: Target) -> (f64, f64) {
     let t = &ds.segments[s];
     match target {
         Target::DrivingArea => (t.offset_m, t.width_m),
-        Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
+        Target::WithSidewalk => (
+            t.outer_offset_m.unwrap_or(t.offset_m),
+            t.width_m + 2.0 * t.sidewalk_m,
+        ),
+    }
+}
+
+/// Whether a segment has a true geometry for a target (real data may see the driving area's
+/// edges but not the sidewalk's).
+fn has_truth(ds: &StreetsDataset, s: usize, target: Target) -> bool {
+    match target {
+        Target::DrivingArea => true,
+        Target::WithSidewalk => ds.segments[s].outer_observed,
     }
 }
 
@@ -278,7 +297,9 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 if fold_of(k) == fold {
                     continue;
                 }
-                train_geom.push(true_geometry(ds, eval_ids[k], target));
+                if has_truth(ds, eval_ids[k], target) {
+                    train_geom.push(true_geometry(ds, eval_ids[k], target));
+                }
                 for (j, c) in classes[k].iter().enumerate() {
                     if let Some(c) = c {
                         x.extend_from_slice(
@@ -373,7 +394,13 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     truth: &truth_cols,
                     weights: &eval_ids
                         .iter()
-                        .map(|&s| segs[s].length_m)
+                        .map(|&s| {
+                            if has_truth(ds, s, target) {
+                                segs[s].length_m
+                            } else {
+                                0.0
+                            }
+                        })
                         .collect::<Vec<_>>(),
                     edges: &edges,
                     lambda,
@@ -477,11 +504,12 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     };
                     c.add_bin(pred, truth);
                 }
-                if let Some(st) = states {
-                    let (_, w) = grid.geometry(st[k].0, st[k].1);
-                    let (_, w_true) = true_geometry(ds, eval_ids[k], target);
+                if let Some(st) = states.filter(|_| has_truth(ds, eval_ids[k], target)) {
+                    let (d, w) = grid.geometry(st[k].0, st[k].1);
+                    let (d_true, w_true) = true_geometry(ds, eval_ids[k], target);
                     let l = segs[eval_ids[k]].length_m;
                     c.w_err2 += l * (w - w_true).powi(2);
+                    c.d_err2 += l * (d - d_true).powi(2);
                     c.w_len += l;
                 }
             }
@@ -511,6 +539,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
         geometries.insert(
             target.key(),
             (0..eval_ids.len())
+                .filter(|&k| has_truth(ds, eval_ids[k], target))
                 .map(|k| SegmentGeometry {
                     segment: eval_ids[k],
                     estimate: grid.geometry(full_states[k].0, full_states[k].1),

@@ -12,6 +12,7 @@
 //!   priors and the intersegment potentials.
 //! - [`inference`]: exact max-product on trees, loopy max-product, and parallel MCMC.
 //! - [`dataset`]: the simulator's `streets` dataset format.
+//! - [`real`]: real labelled sequences (KITTI-360, MCD) as datasets, truth from their labels.
 //! - [`eval`]: the 5-fold round robin evaluation of Table 4.1.
 //! - [`geojson`]: WGS84 polygons per segment.
 //! - [`kitti`]: the bin classifier on real KITTI-360 scans.
@@ -27,6 +28,7 @@ pub mod inference;
 pub mod kitti;
 pub mod model;
 pub mod potentials;
+pub mod real;
 pub mod svm;
 pub mod synthetic;
 

@@ -62,6 +62,8 @@ fn truths(map: &OsmMap) -> Vec<SegmentTruth> {
                     5.4 + 0.2 * k
                 },
                 sidewalk_m: 2.0,
+                outer_offset_m: None,
+                outer_observed: true,
                 drivable: true,
                 observed: true,
                 points: 1000,

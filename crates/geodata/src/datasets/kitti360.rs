@@ -82,6 +82,11 @@ impl Kitti360Sequence {
         frames_in(&self.dir.join("velodyne_points"), "bin")
     }
 
+    /// Frame numbers that have a pose, sorted.
+    pub fn pose_frames(&self) -> impl Iterator<Item = u64> + '_ {
+        self.poses.keys().copied()
+    }
+
     /// Number of poses read.
     pub fn pose_count(&self) -> usize {
         self.poses.len()

@@ -125,6 +125,11 @@ impl McdSequence {
         frames_in(&self.dir.join("lidar_bin"), "bin")
     }
 
+    /// Frame numbers that have a pose, sorted.
+    pub fn pose_frames(&self) -> impl Iterator<Item = u64> + '_ {
+        self.poses.keys().copied()
+    }
+
     /// Number of poses in `pose_inW.csv`.
     pub fn pose_count(&self) -> usize {
         self.poses.len()

@@ -16,6 +16,7 @@ use streets::model::{
     segment_bins, BinClassifier, ClassifierOptions, GeometryOptions, Scaler, StreetModel, Target,
 };
 use streets::potentials::GeometryPrior;
+use streets::real::{load_sequence, TruthOptions};
 use streets::svm::{Svm, SvmOptions};
 
 /// Arguments of `urbansem streets`.
@@ -96,6 +97,36 @@ pub enum StreetsCommand {
         #[arg(long)]
         thesis_mask: bool,
         /// Write per-segment estimated and true geometry (JSON) here.
+        #[arg(long)]
+        segments_out: Option<PathBuf>,
+        /// Training options.
+        #[command(flatten)]
+        training: TrainingArgs,
+    },
+    /// Table 4.1 analogue on a real labelled sequence (KITTI-360 or MCD layout) and an OSM
+    /// map of its streets: scans registered by their poses, each segment's true offset and
+    /// width derived from the labelled points, 5-fold round robin over segments.
+    EvalReal {
+        /// Sequence folder (KITTI-360: velodyne_points/, gt_labels/, velodyne_poses*.txt;
+        /// MCD: lidar_bin/, gt_labels/, pose_inW.csv).
+        #[arg(long)]
+        dataset: PathBuf,
+        /// OSM map of the sequence's streets (.osm or .osm.pbf).
+        #[arg(long)]
+        map: PathBuf,
+        /// Print one JSON object (keys as `streets eval`, plus `coverage` and `truth`).
+        #[arg(long)]
+        json: bool,
+        /// MCMC chains.
+        #[arg(long, default_value_t = 50)]
+        chains: usize,
+        /// MCMC iterations per chain.
+        #[arg(long, default_value_t = 1_000_000)]
+        iterations: usize,
+        /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
+        #[arg(long, default_value_t = 45.0)]
+        max_turn_deg: f64,
+        /// Write per-segment derived truth, estimates and support (JSON) here.
         #[arg(long)]
         segments_out: Option<PathBuf>,
         /// Training options.
@@ -228,6 +259,25 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        StreetsCommand::EvalReal {
+            dataset,
+            map,
+            json,
+            chains,
+            iterations,
+            max_turn_deg,
+            segments_out,
+            training,
+        } => eval_real(
+            &dataset,
+            &map,
+            json,
+            chains,
+            iterations,
+            max_turn_deg,
+            segments_out.as_deref(),
+            &training,
+        ),
         StreetsCommand::Train {
             dataset,
             target,
@@ -363,13 +413,201 @@ fn train_model(
 }
 
 fn scores_row(name: &str, s: &Scores) -> String {
+    let m = |v: Option<f64>| v.map_or("n/a".to_string(), |r| format!("{r:.2}"));
     format!(
-        "  {name:<16} {:>6.3} {:>6.3} {:>6.3} {:>8}",
+        "  {name:<16} {:>6.3} {:>6.3} {:>6.3} {:>8} {:>8}",
         s.precision,
         s.recall,
         s.f1,
-        s.rmse_w.map_or("n/a".to_string(), |r| format!("{r:.2}"))
+        m(s.rmse_w),
+        m(s.rmse_d)
     )
+}
+
+/// `urbansem streets eval-real`.
+#[allow(clippy::too_many_arguments)]
+fn eval_real(
+    dataset: &Path,
+    map: &Path,
+    json: bool,
+    chains: usize,
+    iterations: usize,
+    max_turn_deg: f64,
+    segments_out: Option<&Path>,
+    training: &TrainingArgs,
+) -> anyhow::Result<()> {
+    let mut options = EvalOptions {
+        classifier: training.classifier(),
+        ..EvalOptions::default()
+    };
+    options.geometry.max_turn_deg = max_turn_deg;
+    options.mcmc.chains = chains;
+    options.mcmc.iterations = iterations;
+    options.mcmc.seed = training.seed;
+    let truth_options = TruthOptions::default();
+    let t = Instant::now();
+    let real = load_sequence(
+        dataset,
+        map,
+        &options.geometry.corridor,
+        &truth_options,
+        &|done, total| {
+            if done == total || done % 10 == 0 {
+                eprintln!("streets eval-real: {done}/{total} scans registered");
+            }
+        },
+    )
+    .with_context(|| {
+        format!(
+            "reading the sequence {} with the map {}",
+            dataset.display(),
+            map.display()
+        )
+    })?;
+    let load_s = t.elapsed().as_secs_f64();
+    let segs = &real.dataset.map.streets.segments;
+    let truth = &real.dataset.segments;
+    let passed = &real.passed;
+    // The derived truth is written before the evaluation, so that a sequence too poorly
+    // observed to evaluate can still be inspected.
+    let write_segments = |geometries: Option<&Vec<streets::eval::SegmentGeometry>>| {
+        let Some(p) = segments_out else {
+            return Ok(());
+        };
+        let rows: Vec<serde_json::Value> = real
+            .observations
+            .iter()
+            .filter(|o| passed.contains(&o.segment))
+            .map(|o| {
+                json!({
+                    "segment": o.segment,
+                    "length_m": segs[o.segment].length_m,
+                    "highway": segs[o.segment].highway,
+                    "observation": o,
+                    "estimate": geometries.and_then(|g| g.iter().find(|s| s.segment == o.segment)),
+                })
+            })
+            .collect();
+        geodata::fsio::write_atomic(p, serde_json::to_vec_pretty(&rows)?)
+            .with_context(|| format!("writing {}", p.display()))
+    };
+    write_segments(None)?;
+    let with_truth = passed.iter().filter(|&&s| truth[s].observed).count();
+    if with_truth < options.folds {
+        bail!(
+            "{}: the drive passes {} drivable segments of {} but only {} have a derived truth (street-labelled points on both sides of the centre line, bounded by sidewalk, terrain or buildings, in at least {} slices); the {}-fold evaluation needs {}",
+            dataset.display(),
+            passed.len(),
+            map.display(),
+            with_truth,
+            truth_options.min_slices,
+            options.folds,
+            options.folds
+        );
+    }
+    let mut report = evaluate(&real.dataset, &options)
+        .with_context(|| format!("evaluating {} on {}", dataset.display(), map.display()))?;
+    report.seconds.insert("load_and_truth".into(), load_s);
+    write_segments(report.geometries.get("driving_area"))?;
+    let estimated: std::collections::BTreeSet<usize> = report
+        .geometries
+        .get("driving_area")
+        .map(|g| g.iter().map(|s| s.segment).collect())
+        .unwrap_or_default();
+    let with_outer = passed
+        .iter()
+        .filter(|&&s| truth[s].observed && truth[s].outer_observed)
+        .count();
+    let with_estimate = passed.iter().filter(|&&s| estimated.contains(&s)).count();
+    // Segments with labelled points outside the intersection masks: a segment lying wholly
+    // within 10 m of intersections has no bins of its own, for any method.
+    let estimable = passed
+        .iter()
+        .filter(|&&s| real.observations[s].slices > 0)
+        .count();
+    let passed_m: f64 = passed.iter().map(|&s| segs[s].length_m).sum();
+    let truth_m: f64 = passed
+        .iter()
+        .filter(|&&s| truth[s].observed)
+        .map(|&s| segs[s].length_m)
+        .sum();
+    let coverage = json!({
+        "passed": passed.len(),
+        "estimable": estimable,
+        "with_truth": with_truth,
+        "with_sidewalk_truth": with_outer,
+        "with_estimate": with_estimate,
+        "estimate_share_of_truth": with_estimate as f64 / with_truth.max(1) as f64,
+        "truth_share_of_passed": with_truth as f64 / passed.len().max(1) as f64,
+        "truth_share_of_estimable": with_truth as f64 / estimable.max(1) as f64,
+        "passed_m": passed_m,
+        "with_truth_m": truth_m,
+    });
+    let widths: Vec<f64> = passed
+        .iter()
+        .filter(|&&s| truth[s].observed)
+        .map(|&s| truth[s].width_m)
+        .collect();
+    let truth_summary = json!({
+        "options": truth_options,
+        "width_m_min": widths.iter().copied().fold(f64::INFINITY, f64::min),
+        "width_m_median": median_of(&widths),
+        "width_m_max": widths.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    });
+    if json {
+        let mut v = serde_json::to_value(&report)?;
+        v["coverage"] = coverage;
+        v["truth"] = truth_summary;
+        v["dataset"] = json!({
+            "kind": real.kind,
+            "scans": real.scans,
+            "points": real.dataset.cloud.len(),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        eprintln!("{}", details_text(&report));
+    } else {
+        println!(
+            "{:?} sequence {}: {} scans, {} points registered into {}",
+            real.kind,
+            dataset.display(),
+            real.scans,
+            real.dataset.cloud.len(),
+            map.display()
+        );
+        println!(
+            "coverage: the drive passes {} drivable segments ({:.0} m), {} of them with bins outside the intersection masks; {} have a derived truth ({:.0} m; {} also with sidewalk), {} an estimate",
+            passed.len(),
+            passed_m,
+            estimable,
+            with_truth,
+            truth_m,
+            with_outer,
+            with_estimate
+        );
+        println!(
+            "true driving-area widths: median {:.1} m (min {:.1}, max {:.1})",
+            median_of(&widths),
+            widths.iter().copied().fold(f64::INFINITY, f64::min),
+            widths.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        );
+        println!("{}", table_text(&report));
+        println!("{}", details_text(&report));
+    }
+    Ok(())
+}
+
+fn median_of(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }
 
 fn table_text(r: &EvalReport) -> String {
@@ -382,8 +620,8 @@ fn table_text(r: &EvalReport) -> String {
         ("driving area only", &r.driving_area),
     ] {
         out += &format!(
-            "{name}\n  {:<16} {:>6} {:>6} {:>6} {:>8}\n",
-            "method", "P", "R", "F1", "RMSE_w"
+            "{name}\n  {:<16} {:>6} {:>6} {:>6} {:>8} {:>8}\n",
+            "method", "P", "R", "F1", "RMSE_w", "RMSE_d"
         );
         out += &(scores_row("raw", &t.raw) + "\n");
         out += &(scores_row("single segment", &t.single_segment) + "\n");
