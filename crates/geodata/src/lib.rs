@@ -9,6 +9,7 @@
 //! - [`city`]: a seeded procedural city written as OSM XML (the embedded default map).
 //! - [`classes`]: urbansem's semantic classes and the mapping from dataset ids.
 //! - [`cloud`]: the column-wise [`cloud::PointCloud`] and its PLY/PCD/LAS/LAZ/KITTI IO.
+//! - [`georef`]: the frame of a user's registered cloud (local, UTM, ENU) into the map's frame.
 //! - [`mercator`]: scaled-Mercator georeferencing used by the KITTI and MCD datasets.
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
 //! - [`sensors`]: named LiDAR models (beam elevations, azimuth step, range, mount height).
@@ -20,6 +21,7 @@ pub mod classes;
 pub mod cloud;
 pub mod datasets;
 pub mod fsio;
+pub mod georef;
 pub mod mercator;
 pub mod osm;
 pub mod projection;

@@ -207,11 +207,7 @@ fn kitti360_real_streets_hold_the_readme_numbers() {
         .iter()
         .map(|g| g.segment)
         .collect();
-    let covered = real
-        .passed
-        .iter()
-        .filter(|s| estimated.contains(s))
-        .count();
+    let covered = real.passed.iter().filter(|s| estimated.contains(s)).count();
     assert!(real.passed.len() >= 12, "{}", real.passed.len());
     assert!(covered + 1 >= 11, "{covered} of {}", real.passed.len());
 }

@@ -480,3 +480,27 @@ fn track_mode_recovers_a_simulated_hdl64_drive() {
     assert!(t["top1_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
     assert!(t["top10_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
 }
+
+#[test]
+fn streets_estimate_refuses_an_unknown_cloud_frame_as_a_usage_error() {
+    let out = urbansem()
+        .args([
+            "streets",
+            "estimate",
+            "--map",
+            "m.osm",
+            "--cloud",
+            "c.ply",
+            "--model",
+            "model.json",
+            "--out",
+            "o.geojson",
+            "--cloud-frame",
+            "utm:61N",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("utm:61N") && err.contains("1–60"), "{err}");
+}

@@ -153,9 +153,13 @@ pub enum StreetsCommand {
         /// OSM map (.osm or .osm.pbf).
         #[arg(long)]
         map: PathBuf,
-        /// Registered point cloud in the map's local frame.
+        /// Registered point cloud (in the frame --cloud-frame names).
         #[arg(long)]
         cloud: PathBuf,
+        /// The cloud's frame: local (the map's local frame), utm:ZONE[N|S] (e.g. utm:32N),
+        /// or enu:LAT,LON (east/north/up metres about a WGS84 anchor); converted exactly.
+        #[arg(long, default_value = "local")]
+        cloud_frame: geodata::georef::CloudFrame,
         /// Model from `urbansem streets train`.
         #[arg(long)]
         model: PathBuf,
@@ -300,6 +304,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         StreetsCommand::Estimate {
             map,
             cloud,
+            cloud_frame,
             model,
             out,
         } => {
@@ -308,7 +313,11 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             // Checked as it is read: dimensions, finite values, bin sizes (issue 16).
             let model = StreetModel::from_json(&bytes, &model)?;
             let osm = OsmMap::load(&map).with_context(|| format!("loading {}", map.display()))?;
-            let pc = read_cloud(&cloud).with_context(|| format!("reading {}", cloud.display()))?;
+            let mut pc =
+                read_cloud(&cloud).with_context(|| format!("reading {}", cloud.display()))?;
+            cloud_frame
+                .into_map_frame(&mut pc, &osm.frame)
+                .with_context(|| format!("moving {} into the map's frame", cloud.display()))?;
             let est = model.estimate(
                 &osm,
                 &pc,
