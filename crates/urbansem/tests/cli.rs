@@ -20,6 +20,17 @@ fn stdout_of(cmd: &mut Command) -> Vec<u8> {
     out.stdout
 }
 
+/// Runs `urbansem sim dataset --kind KIND EXTRA… --out OUT` and checks that it succeeded.
+fn sim_dataset(kind: &str, extra: &[&str], out: &std::path::Path) {
+    stdout_of(
+        urbansem()
+            .args(["sim", "dataset", "--kind", kind])
+            .args(extra)
+            .arg("--out")
+            .arg(out),
+    );
+}
+
 fn temp_file(name: &str, text: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("urbansem-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -450,23 +461,18 @@ fn localize_index_gives_the_same_results_as_the_map() {
 fn track_mode_recovers_a_simulated_hdl64_drive() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("drive");
-    stdout_of(
-        urbansem()
-            .args([
-                "sim",
-                "dataset",
-                "--kind",
-                "localization",
-                "--sensor",
-                "hdl64",
-                "--scans",
-                "12",
-                "--seed",
-                "2",
-                "--map-error",
-                "--out",
-            ])
-            .arg(&data),
+    sim_dataset(
+        "localization",
+        &[
+            "--sensor",
+            "hdl64",
+            "--scans",
+            "12",
+            "--seed",
+            "2",
+            "--map-error",
+        ],
+        &data,
     );
     let stdout = stdout_of(
         urbansem()
@@ -503,4 +509,32 @@ fn streets_estimate_refuses_an_unknown_cloud_frame_as_a_usage_error() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("utm:61N") && err.contains("1–60"), "{err}");
+}
+
+#[test]
+fn relations_eval_trains_on_one_dataset_and_tests_on_every_scene_of_another() {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    for (name, seed) in [("a", "1"), ("b", "2")] {
+        let extra = ["--scans", "8", "--train", "6", "--seed", seed];
+        sim_dataset(
+            "relations",
+            &[&extra[..], &["--annotator-noise", "0"]].concat(),
+            &dir.join(name),
+        );
+    }
+    let text = String::from_utf8(stdout_of(
+        urbansem()
+            .args(["relations", "eval", "--dataset"])
+            .arg(dir.join("b"))
+            .arg("--train-dataset")
+            .arg(dir.join("a")),
+    ))
+    .unwrap();
+    // 6 training scenes of a; all 8 scenes of b are tested.
+    assert!(
+        text.contains("6 train (of ") && text.contains(" / 8 test scenes"),
+        "{text}"
+    );
+    assert!(text.contains("Behind"), "{text}");
 }

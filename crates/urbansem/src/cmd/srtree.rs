@@ -134,6 +134,10 @@ pub enum RelationsCommand {
         /// Use this model instead of training one.
         #[arg(long)]
         model: Option<PathBuf>,
+        /// Train on this dataset's train scenes instead (e.g. another city) and test on every
+        /// scene of --dataset (none of them was seen in training).
+        #[arg(long, conflicts_with = "model")]
+        train_dataset: Option<PathBuf>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -550,17 +554,29 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
         RelationsCommand::Eval {
             dataset,
             model,
+            train_dataset,
             json,
             seed,
         } => {
             let t = Instant::now();
-            let ds = load_dataset(&dataset)?;
+            let mut ds = load_dataset(&dataset)?;
+            let train_ds = match &train_dataset {
+                Some(p) => Some(load_dataset(p)?),
+                None => None,
+            };
+            if train_ds.is_some() {
+                // Across datasets every scene of the test dataset is unseen: test on all of
+                // them (a 14-scene test split holds as few as 7 Behind pairs).
+                let train_scenes = std::mem::take(&mut ds.train);
+                ds.test.splice(0..0, train_scenes);
+            }
             let load_s = t.elapsed().as_secs_f64();
             let t = Instant::now();
             let model = match model {
                 Some(p) => read_model(&p)?,
                 None => {
-                    train(&ds.train, &train_options(seed)).context("training the relation model")?
+                    let scenes = train_ds.as_ref().map_or(&ds.train, |d| &d.train);
+                    train(scenes, &train_options(seed)).context("training the relation model")?
                 }
             };
             let train_s = t.elapsed().as_secs_f64();
@@ -572,9 +588,12 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&evaluation_json(&ev))?);
             } else {
                 println!(
-                    "{}: {} train / {} test scenes, {} test pairs ({} with an object missing from the map)",
+                    "{}: {} train{} / {} test scenes, {} test pairs ({} with an object missing from the map)",
                     dataset.display(),
-                    ds.train.len(),
+                    train_ds.as_ref().map_or(ds.train.len(), |d| d.train.len()),
+                    train_dataset
+                        .as_ref()
+                        .map_or(String::new(), |p| format!(" (of {})", p.display())),
                     ds.test.len(),
                     ev.pairs,
                     ev.missing_pairs
