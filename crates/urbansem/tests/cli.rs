@@ -537,4 +537,18 @@ fn relations_eval_trains_on_one_dataset_and_tests_on_every_scene_of_another() {
         "{text}"
     );
     assert!(text.contains("Behind"), "{text}");
+    // Training on the test dataset itself is refused as a usage error.
+    let out = urbansem()
+        .args(["relations", "eval", "--dataset"])
+        .arg(dir.join("b"))
+        .arg("--train-dataset")
+        .arg(format!(
+            "{},{}",
+            dir.join("a").display(),
+            dir.join("b").display()
+        ))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is the test dataset"));
 }

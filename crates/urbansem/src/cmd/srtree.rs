@@ -134,10 +134,10 @@ pub enum RelationsCommand {
         /// Use this model instead of training one.
         #[arg(long)]
         model: Option<PathBuf>,
-        /// Train on this dataset's train scenes instead (e.g. another city) and test on every
-        /// scene of --dataset (none of them was seen in training).
-        #[arg(long, conflicts_with = "model")]
-        train_dataset: Option<PathBuf>,
+        /// Train on these datasets' train scenes instead (other cities; comma-separated for
+        /// several) and test on every scene of --dataset (none of them was seen in training).
+        #[arg(long, value_delimiter = ',', conflicts_with = "model")]
+        train_dataset: Vec<PathBuf>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -560,11 +560,27 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
         } => {
             let t = Instant::now();
             let mut ds = load_dataset(&dataset)?;
-            let train_ds = match &train_dataset {
-                Some(p) => Some(load_dataset(p)?),
-                None => None,
+            let same = |p: &Path| {
+                p.canonicalize()
+                    .ok()
+                    .is_some_and(|c| Some(c) == dataset.canonicalize().ok())
             };
-            if train_ds.is_some() {
+            if let Some(p) = train_dataset.iter().find(|p| same(p)) {
+                crate::cmd::usage!(
+                    "--train-dataset {} is the test dataset: its scenes would be tested after training on them; leave --train-dataset out to use its own train/test split",
+                    p.display()
+                );
+            }
+            let train_scenes: Option<Vec<_>> = if train_dataset.is_empty() {
+                None
+            } else {
+                let mut all = Vec::new();
+                for p in &train_dataset {
+                    all.extend(load_dataset(p)?.train);
+                }
+                Some(all)
+            };
+            if train_scenes.is_some() {
                 // Across datasets every scene of the test dataset is unseen: test on all of
                 // them (a 14-scene test split holds as few as 7 Behind pairs).
                 let train_scenes = std::mem::take(&mut ds.train);
@@ -575,7 +591,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             let model = match model {
                 Some(p) => read_model(&p)?,
                 None => {
-                    let scenes = train_ds.as_ref().map_or(&ds.train, |d| &d.train);
+                    let scenes = train_scenes.as_ref().unwrap_or(&ds.train);
                     train(scenes, &train_options(seed)).context("training the relation model")?
                 }
             };
@@ -590,10 +606,14 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 println!(
                     "{}: {} train{} / {} test scenes, {} test pairs ({} with an object missing from the map)",
                     dataset.display(),
-                    train_ds.as_ref().map_or(ds.train.len(), |d| d.train.len()),
-                    train_dataset
-                        .as_ref()
-                        .map_or(String::new(), |p| format!(" (of {})", p.display())),
+                    train_scenes.as_ref().map_or(ds.train.len(), Vec::len),
+                    if train_dataset.is_empty() {
+                        String::new()
+                    } else {
+                        let names: Vec<String> =
+                            train_dataset.iter().map(|p| p.display().to_string()).collect();
+                        format!(" (of {})", names.join(", "))
+                    },
                     ds.test.len(),
                     ev.pairs,
                     ev.missing_pairs
