@@ -679,7 +679,9 @@ fn parse_domain(cur: &mut Cursor<'_, '_>) -> Result<Vec<String>, ParseError> {
                 if i128::from(to) - i128::from(from) > 10_000_000 {
                     return Err(cur.error(format!("range {from}..{to} is too large")));
                 }
-                out.extend((from + 1..=to).map(|k| k.to_string()));
+                // In i128 too: `from + 1` overflows at i64::MAX (`{ 9223372036854775807, ..., 3 }`
+                // wrapped to a range of 9e18 constants in a release build).
+                out.extend((i128::from(from) + 1..=i128::from(to)).map(|k| k.to_string()));
             }
             _ => {
                 cur.pos -= 1;
@@ -1192,6 +1194,26 @@ mod tests {
         let text = "n = { -9000000000000000000, ..., 9000000000000000000 }\nP(n)\n";
         let err = parse_program(text, "range.mln").unwrap_err().to_string();
         assert!(err.contains("too large"), "{err}");
+    }
+
+    #[test]
+    fn issue16_domain_range_from_i64_max_adds_nothing() {
+        // Found by fuzzing (session 11): `from + 1` overflowed at i64::MAX; a descending or
+        // empty range adds no constant, at either end of i64.
+        for (text, expected) in [
+            (
+                "n = { 9223372036854775807, ..., 3 }\nP(n)\n",
+                vec!["9223372036854775807"],
+            ),
+            (
+                "n = { 9223372036854775806, ..., 9223372036854775807 }\nP(n)\n",
+                vec!["9223372036854775806", "9223372036854775807"],
+            ),
+            ("n = { 5, ..., -9223372036854775808 }\nP(n)\n", vec!["5"]),
+        ] {
+            let p = parse_program(text, "range.mln").unwrap();
+            assert_eq!(p.types[0].constants, expected, "{text}");
+        }
     }
 
     const SMOKERS: &str = "// Evidence\n*Friends(person, person)\nSmokes(person)\nCancer(person)\n\n0.5  !Smokes(a1) v Cancer(a1)\n0.4  !Friends(a1,a2) v !Smokes(a1) v Smokes(a2)\n";
