@@ -16,15 +16,11 @@
 //! above the anchor's.
 
 use crate::cloud::PointCloud;
-use crate::projection::{LocalFrame, ProjectionError};
+use crate::projection::{LocalFrame, ProjectionError, WGS84_A, WGS84_F};
 use rayon::prelude::*;
 use std::str::FromStr;
 use thiserror::Error;
 
-/// WGS84 semi-major axis, metres.
-const WGS84_A: f64 = 6_378_137.0;
-/// WGS84 flattening.
-const WGS84_F: f64 = 1.0 / 298.257_223_563;
 /// UTM scale on the central meridian.
 const UTM_K0: f64 = 0.9996;
 /// UTM false easting, metres.

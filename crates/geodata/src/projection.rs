@@ -22,9 +22,9 @@
 use thiserror::Error;
 
 /// WGS84 semi-major axis in metres.
-const WGS84_A: f64 = 6_378_137.0;
+pub(crate) const WGS84_A: f64 = 6_378_137.0;
 /// WGS84 flattening.
-const WGS84_F: f64 = 1.0 / 298.257_223_563;
+pub(crate) const WGS84_F: f64 = 1.0 / 298.257_223_563;
 
 /// Why a local frame could not be built.
 #[derive(Debug, Error, PartialEq)]

@@ -526,7 +526,7 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
             pos: 0,
             path,
             line: line_no,
-            line_len: line.chars().count(),
+            line_len: buf.chars.len(),
             depth: 0,
         };
         // Type domain: name = { … }
@@ -970,7 +970,7 @@ fn parse_atom_lines<T>(
             pos: 0,
             path,
             line: i + 1,
-            line_len: line.chars().count(),
+            line_len: buf.chars.len(),
             depth: 0,
         };
         out.push(per_line(&mut cur, &idx)?);

@@ -158,7 +158,12 @@ fn slice_edges(columns: &[Column], bin_m: f64, options: &TruthOptions) -> Option
     ))
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// The median of the values (the mean of the middle two for an even count; NaN for none);
+/// sorts them in place.
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n % 2 == 1 {
@@ -411,6 +416,57 @@ pub fn drives_along(trajectory: &[[f64; 2]], a: [f64; 2], b: [f64; 2]) -> bool {
     2 * near > n
 }
 
+/// An opened sequence of either layout.
+enum Sequence {
+    Kitti360(Kitti360Sequence),
+    Mcd(McdSequence),
+}
+
+impl Sequence {
+    fn open(kind: SequenceKind, dir: &Path) -> geodata::datasets::Result<Sequence> {
+        Ok(match kind {
+            SequenceKind::Kitti360 => Sequence::Kitti360(Kitti360Sequence::open(dir)?),
+            SequenceKind::Mcd => Sequence::Mcd(McdSequence::open(dir)?),
+        })
+    }
+
+    fn frames(&self) -> geodata::datasets::Result<Vec<u64>> {
+        match self {
+            Sequence::Kitti360(s) => s.frames(),
+            Sequence::Mcd(s) => s.frames(),
+        }
+    }
+
+    fn pose_frames(&self) -> Vec<u64> {
+        match self {
+            Sequence::Kitti360(s) => s.pose_frames().collect(),
+            Sequence::Mcd(s) => s.pose_frames().collect(),
+        }
+    }
+
+    /// world_T_sensor (the LiDAR) of a frame.
+    fn world_from_sensor(&self, frame: u64) -> Option<nalgebra::Isometry3<f64>> {
+        match self {
+            Sequence::Kitti360(s) => s.world_from_velodyne(frame),
+            Sequence::Mcd(s) => s.world_from_lidar(frame),
+        }
+    }
+
+    fn georef(&self) -> geodata::mercator::ScaledMercator {
+        match self {
+            Sequence::Kitti360(s) => s.georef(),
+            Sequence::Mcd(s) => s.georef(),
+        }
+    }
+
+    fn load_scan(&self, frame: u64) -> geodata::datasets::Result<Scan> {
+        match self {
+            Sequence::Kitti360(s) => s.load_scan(frame),
+            Sequence::Mcd(s) => s.load_scan(frame),
+        }
+    }
+}
+
 fn dataset_error(dir: &Path, e: geodata::datasets::DatasetError) -> StreetsError {
     StreetsError::Dataset {
         path: dir.to_path_buf(),
@@ -434,54 +490,25 @@ pub fn load_sequence(
             path: map_path.display().to_string(),
         });
     }
-    type Loader = Box<dyn Fn(u64) -> geodata::datasets::Result<Scan>>;
-    type PoseOf = Box<dyn Fn(u64) -> Option<nalgebra::Isometry3<f64>>>;
-    let (frames, pose_frames, load, pose_of, georef): (Vec<u64>, Vec<u64>, Loader, PoseOf, _) =
-        match kind {
-            SequenceKind::Kitti360 => {
-                let seq = Kitti360Sequence::open(dir).map_err(|e| dataset_error(dir, e))?;
-                let frames = seq.frames().map_err(|e| dataset_error(dir, e))?;
-                let georef = seq.georef();
-                let poses = seq.clone();
-                let pose_frames = seq.pose_frames().collect();
-                (
-                    frames,
-                    pose_frames,
-                    Box::new(move |f| seq.load_scan(f)),
-                    Box::new(move |f| poses.world_from_velodyne(f)),
-                    georef,
-                )
-            }
-            SequenceKind::Mcd => {
-                let seq = McdSequence::open(dir).map_err(|e| dataset_error(dir, e))?;
-                let frames = seq.frames().map_err(|e| dataset_error(dir, e))?;
-                let georef = seq.georef();
-                let poses = seq.clone();
-                let pose_frames = seq.pose_frames().collect();
-                (
-                    frames,
-                    pose_frames,
-                    Box::new(move |f| seq.load_scan(f)),
-                    Box::new(move |f| poses.world_from_lidar(f)),
-                    georef,
-                )
-            }
-        };
+    let seq = Sequence::open(kind, dir).map_err(|e| dataset_error(dir, e))?;
+    let frames = seq.frames().map_err(|e| dataset_error(dir, e))?;
     let mut parts: Vec<PointCloud> = Vec::with_capacity(frames.len());
     // The drive: every pose between the first and the last scan (the pose files of both
     // layouts hold the frames between the labelled scans too).
     let span = frames[0]..=frames[frames.len() - 1];
-    let trajectory: Vec<[f64; 2]> = pose_frames
-        .iter()
+    let georef = seq.georef();
+    let trajectory: Vec<[f64; 2]> = seq
+        .pose_frames()
+        .into_iter()
         .filter(|f| span.contains(f))
-        .filter_map(|&f| pose_of(f))
+        .filter_map(|f| seq.world_from_sensor(f))
         .map(|w| {
             let l = geodata::datasets::local_from_world_pose(&georef, &w, &map.frame);
             [l.translation.vector.x, l.translation.vector.y]
         })
         .collect();
     for (i, &f) in frames.iter().enumerate() {
-        let scan = load(f).map_err(|e| dataset_error(dir, e))?;
+        let scan = seq.load_scan(f).map_err(|e| dataset_error(dir, e))?;
         if scan.cloud.label.is_none() {
             return Err(StreetsError::NoLabels {
                 path: format!("{} (frame {f}: no gt_labels file)", scan.path.display()),

@@ -73,6 +73,37 @@ impl TrainingArgs {
     }
 }
 
+/// Options shared by `streets eval` and `streets eval-real`.
+#[derive(Args, Clone)]
+pub struct EvalArgs {
+    /// MCMC chains.
+    #[arg(long, default_value_t = 50)]
+    chains: usize,
+    /// MCMC iterations per chain.
+    #[arg(long, default_value_t = 1_000_000)]
+    iterations: usize,
+    /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
+    #[arg(long, default_value_t = 45.0)]
+    max_turn_deg: f64,
+    /// Training options.
+    #[command(flatten)]
+    pub training: TrainingArgs,
+}
+
+impl EvalArgs {
+    fn options(&self) -> EvalOptions {
+        let mut options = EvalOptions {
+            classifier: self.training.classifier(),
+            ..EvalOptions::default()
+        };
+        options.geometry.max_turn_deg = self.max_turn_deg;
+        options.mcmc.chains = self.chains;
+        options.mcmc.iterations = self.iterations;
+        options.mcmc.seed = self.training.seed;
+        options
+    }
+}
+
 /// Subcommands of `urbansem streets`.
 #[derive(Subcommand)]
 pub enum StreetsCommand {
@@ -84,24 +115,15 @@ pub enum StreetsCommand {
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
-        /// MCMC chains.
-        #[arg(long, default_value_t = 50)]
-        chains: usize,
-        /// MCMC iterations per chain.
-        #[arg(long, default_value_t = 1_000_000)]
-        iterations: usize,
-        /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
-        #[arg(long, default_value_t = 45.0)]
-        max_turn_deg: f64,
         /// Mask only near intersections, as the thesis (not bins nearer to another street).
         #[arg(long)]
         thesis_mask: bool,
         /// Write per-segment estimated and true geometry (JSON) here.
         #[arg(long)]
         segments_out: Option<PathBuf>,
-        /// Training options.
+        /// Evaluation options.
         #[command(flatten)]
-        training: TrainingArgs,
+        eval: EvalArgs,
     },
     /// Table 4.1 analogue on a real labelled sequence (KITTI-360 or MCD layout) and an OSM
     /// map of its streets: scans registered by their poses, each segment's true offset and
@@ -117,21 +139,12 @@ pub enum StreetsCommand {
         /// Print one JSON object (keys as `streets eval`, plus `coverage` and `truth`).
         #[arg(long)]
         json: bool,
-        /// MCMC chains.
-        #[arg(long, default_value_t = 50)]
-        chains: usize,
-        /// MCMC iterations per chain.
-        #[arg(long, default_value_t = 1_000_000)]
-        iterations: usize,
-        /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
-        #[arg(long, default_value_t = 45.0)]
-        max_turn_deg: f64,
         /// Write per-segment derived truth, estimates and support (JSON) here.
         #[arg(long)]
         segments_out: Option<PathBuf>,
-        /// Training options.
+        /// Evaluation options.
         #[command(flatten)]
-        training: TrainingArgs,
+        eval: EvalArgs,
     },
     /// Train a model (classifier, confusion matrix, prior) on a whole `streets` dataset.
     Train {
@@ -227,26 +240,16 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         StreetsCommand::Eval {
             dataset,
             json,
-            chains,
-            iterations,
-            max_turn_deg,
             thesis_mask,
             segments_out,
-            training,
+            eval,
         } => {
             let t = Instant::now();
             let ds = StreetsDataset::load(&dataset)
                 .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
             let load_s = t.elapsed().as_secs_f64();
-            let mut options = EvalOptions {
-                classifier: training.classifier(),
-                ..EvalOptions::default()
-            };
-            options.geometry.max_turn_deg = max_turn_deg;
+            let mut options = eval.options();
             options.geometry.corridor.mask_nearer_segments = !thesis_mask;
-            options.mcmc.chains = chains;
-            options.mcmc.iterations = iterations;
-            options.mcmc.seed = training.seed;
             let mut report = evaluate(&ds, &options)
                 .with_context(|| format!("evaluating {}", dataset.display()))?;
             report.seconds.insert("load".into(), load_s);
@@ -267,21 +270,9 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             dataset,
             map,
             json,
-            chains,
-            iterations,
-            max_turn_deg,
             segments_out,
-            training,
-        } => eval_real(
-            &dataset,
-            &map,
-            json,
-            chains,
-            iterations,
-            max_turn_deg,
-            segments_out.as_deref(),
-            &training,
-        ),
+            eval,
+        } => eval_real(&dataset, &map, json, segments_out.as_deref(), &eval),
         StreetsCommand::Train {
             dataset,
             target,
@@ -434,25 +425,14 @@ fn scores_row(name: &str, s: &Scores) -> String {
 }
 
 /// `urbansem streets eval-real`.
-#[allow(clippy::too_many_arguments)]
 fn eval_real(
     dataset: &Path,
     map: &Path,
     json: bool,
-    chains: usize,
-    iterations: usize,
-    max_turn_deg: f64,
     segments_out: Option<&Path>,
-    training: &TrainingArgs,
+    eval: &EvalArgs,
 ) -> anyhow::Result<()> {
-    let mut options = EvalOptions {
-        classifier: training.classifier(),
-        ..EvalOptions::default()
-    };
-    options.geometry.max_turn_deg = max_turn_deg;
-    options.mcmc.chains = chains;
-    options.mcmc.iterations = iterations;
-    options.mcmc.seed = training.seed;
+    let options = eval.options();
     let truth_options = TruthOptions::default();
     let t = Instant::now();
     let real = load_sequence(
@@ -552,16 +532,19 @@ fn eval_real(
         "passed_m": passed_m,
         "with_truth_m": truth_m,
     });
-    let widths: Vec<f64> = passed
+    let mut widths: Vec<f64> = passed
         .iter()
         .filter(|&&s| truth[s].observed)
         .map(|&s| truth[s].width_m)
         .collect();
+    let width_min = widths.iter().copied().fold(f64::INFINITY, f64::min);
+    let width_max = widths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let width_median = streets::real::median(&mut widths);
     let truth_summary = json!({
         "options": truth_options,
-        "width_m_min": widths.iter().copied().fold(f64::INFINITY, f64::min),
-        "width_m_median": median_of(&widths),
-        "width_m_max": widths.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        "width_m_min": width_min,
+        "width_m_median": width_median,
+        "width_m_max": width_max,
     });
     if json {
         let mut v = serde_json::to_value(&report)?;
@@ -595,28 +578,12 @@ fn eval_real(
         );
         println!(
             "true driving-area widths: median {:.1} m (min {:.1}, max {:.1})",
-            median_of(&widths),
-            widths.iter().copied().fold(f64::INFINITY, f64::min),
-            widths.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            width_median, width_min, width_max
         );
         println!("{}", table_text(&report));
         println!("{}", details_text(&report));
     }
     Ok(())
-}
-
-fn median_of(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 fn table_text(r: &EvalReport) -> String {
