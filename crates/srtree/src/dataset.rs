@@ -5,14 +5,17 @@
 //! and `scene_XXX.json` (`viewpoint` `{x, y, z, yaw}`, `objects` `[{id, class, ground, …}]`,
 //! `pairs` `[{a, b, truth: {On, LeftOf, Behind}, annotated: {…}}]`). Each scene's scan is
 //! inserted into an [`SrMap`] and its objects extracted from the map, so the relations are
-//! estimated from the map and never from the simulator's true boxes.
+//! estimated from the map and never from the simulator's true boxes. Where `dataset.json`
+//! names a `map_buildings` file (the robot map's building outlines near the scenes), the
+//! buildings are completed from the outlines they stand in ([`MapOutlines`]).
 
-use crate::amodal::AnnotatedBox;
+use crate::amodal::{AnnotatedBox, MapOutlines};
 use crate::error::{io_err, Result, SrtreeError};
 use crate::features::ViewObject;
 use crate::graph::{Relation, Viewpoint};
 use crate::map::{MapOptions, SrMap};
 use crate::objects::{extract_objects, ObjectOptions};
+use geodata::sim::dataset::MapBuildings;
 use rayon::prelude::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -151,12 +154,40 @@ fn annotated_box(o: &Value, path: &Path) -> Result<Option<AnnotatedBox>> {
     }))
 }
 
-/// Loads one scene: reads its scan into a map and its labels.
+/// Reads a dataset's map building outlines ([`geodata::sim::dataset::MapBuildings`]).
+pub fn read_map_buildings(path: &Path) -> Result<MapOutlines> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    let file: MapBuildings = serde_json::from_str(&text)
+        .map_err(|e| bad(path, format!("not a map-buildings file: {e}")))?;
+    if file.frame != "local" {
+        return Err(bad(
+            path,
+            format!("frame is {:?}, expected \"local\"", file.frame),
+        ));
+    }
+    if let Some(b) = file
+        .buildings
+        .iter()
+        .find(|b| b.outer.iter().flatten().any(|v| !v.is_finite()))
+    {
+        return Err(bad(
+            path,
+            format!("building {} has a vertex that is not finite", b.osm_id),
+        ));
+    }
+    Ok(MapOutlines::new(
+        file.buildings.into_iter().map(|b| b.outer),
+    ))
+}
+
+/// Loads one scene: reads its scan into a map and its labels; buildings standing in
+/// `outlines` are completed from them.
 pub fn load_scene(
     dir: &Path,
     index: usize,
     map_options: &MapOptions,
     objects: &ObjectOptions,
+    outlines: &MapOutlines,
 ) -> Result<Scene> {
     let json_path = dir.join(format!("scene_{index:03}.json"));
     let ply_path = dir.join(format!("scene_{index:03}.ply"));
@@ -196,7 +227,7 @@ pub fn load_scene(
     let view: Vec<ViewObject> = extracted
         .par_iter()
         .filter(|o| listed.contains(&o.id))
-        .map(|o| ViewObject::from_map_object(&map, o, &viewpoint))
+        .map(|o| ViewObject::from_map_object_with_outlines(&map, o, &viewpoint, outlines))
         .collect();
     let position = |id: u32| view.iter().position(|o| o.id == id);
     let mut pairs = Vec::new();
@@ -271,9 +302,21 @@ impl RelationsDataset {
                 ),
             ));
         }
+        let outlines = match meta.get("map_buildings") {
+            None => MapOutlines::default(),
+            Some(v) => {
+                let name = v.as_str().ok_or_else(|| {
+                    bad(
+                        &meta_path,
+                        format!("`map_buildings` is not a file name: {v}"),
+                    )
+                })?;
+                read_map_buildings(&dir.join(name))?
+            }
+        };
         let load = |ids: Vec<usize>| -> Result<Vec<Scene>> {
             ids.into_par_iter()
-                .map(|i| load_scene(dir, i, map_options, objects))
+                .map(|i| load_scene(dir, i, map_options, objects, &outlines))
                 .collect()
         };
         Ok(RelationsDataset {
@@ -314,5 +357,50 @@ mod tests {
                 .unwrap_or_default();
             assert!(message.contains("scene_007.json"), "{message}");
         }
+    }
+
+    #[test]
+    fn map_buildings_are_read_or_rejected_with_the_file() {
+        let dir = std::env::temp_dir().join(format!("srtree-map-buildings-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("map_buildings.json");
+        let good = json!({"frame": "local", "buildings": [
+            {"osm_id": 7, "outer": [[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [0.0, 5.0]]},
+            {"osm_id": 8, "outer": [[0.0, 0.0], [1.0, 0.0]]}
+        ]});
+        std::fs::write(&path, good.to_string()).unwrap();
+        let outlines = read_map_buildings(&path).unwrap();
+        assert_eq!(outlines.len(), 1, "a two-vertex ring is no outline");
+        for (text, want) in [
+            (
+                json!({"frame": "utm:32N", "buildings": []}).to_string(),
+                "frame",
+            ),
+            (json!({"frame": "local"}).to_string(), "buildings"),
+            (
+                json!({"frame": "local", "buildings": [{"osm_id": 1, "outer": [[0.0, "x"]]}]})
+                    .to_string(),
+                "not a map-buildings file",
+            ),
+            (
+                "{\"frame\": \"local\", \"buildings\": [".to_string(),
+                "not a map-buildings file",
+            ),
+        ] {
+            std::fs::write(&path, text).unwrap();
+            let message = read_map_buildings(&path)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(
+                message.contains("map_buildings.json") && message.contains(want),
+                "{message}"
+            );
+        }
+        let missing = read_map_buildings(&dir.join("absent.json"))
+            .err()
+            .map(|e| e.to_string());
+        assert!(missing.unwrap_or_default().contains("absent.json"));
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -16,7 +16,7 @@
 //!   difference and overlap as a fraction of the narrower, the same two from the cells'
 //!   azimuth extents, and the range differences of the centroids and of the nearest corners;
 //! - the top-view distance from a's footprint centre to b's nearest cell;
-//! - indicators: a in front, b in front (centroid x > 0), a is ground, b is ground
+//! - indicators: a in front, b in front ([`ViewObject::in_front`]), a is ground, b is ground
 //!   (street or sidewalk class in the map); the heights of both boxes;
 //! - support: a's lowest cell above the median height of b's cells within 2.5 m of a's
 //!   footprint centre (5 m if there are none), and the fraction of 8 compass sectors
@@ -156,6 +156,9 @@ pub struct ViewObject {
     pub hulls: [Vec<[f64; 2]>; 3],
     /// Yaw of the viewing direction in the map frame, radians.
     pub view_yaw_rad: f64,
+    /// The box of the map outlines the object stands in, view frame (buildings the map
+    /// knows; [`crate::amodal::MapOutlines`]).
+    pub map_box: Option<crate::amodal::AnnotatedBox>,
 }
 
 impl ViewObject {
@@ -214,7 +217,14 @@ impl ViewObject {
             near_range,
             hulls,
             view_yaw_rad: viewpoint.yaw_rad,
+            map_box: None,
         }
+    }
+
+    /// Whether the object lies in front of the observer: the centre of its map box if it
+    /// has one, else the centroid of its cells.
+    pub fn in_front(&self) -> bool {
+        self.map_box.map_or(self.centroid[0], |b| b.centre[0]) > 0.0
     }
 
     /// Range of the estimated box's centre from the observer, metres.
@@ -228,12 +238,26 @@ impl ViewObject {
         o: &MapObject,
         viewpoint: &Viewpoint,
     ) -> ViewObject {
+        Self::from_map_object_with_outlines(map, o, viewpoint, &Default::default())
+    }
+
+    /// A map object seen from `viewpoint`, a building completed from the map's outlines.
+    pub fn from_map_object_with_outlines(
+        map: &crate::map::SrMap,
+        o: &MapObject,
+        viewpoint: &Viewpoint,
+        outlines: &crate::amodal::MapOutlines,
+    ) -> ViewObject {
         let cells: Vec<[f64; 3]> = o
             .cells
             .iter()
             .map(|&i| map.centre(map.cells()[i as usize].key))
             .collect();
-        ViewObject::new(o.id, o.class, &cells, &o.bbox, viewpoint)
+        let mut v = ViewObject::new(o.id, o.class, &cells, &o.bbox, viewpoint);
+        if o.class == Class::Building {
+            v.map_box = outlines.box_of(&cells).map(|b| b.to_view(viewpoint));
+        }
+        v
     }
 }
 
@@ -462,8 +486,8 @@ pub fn pair_features(
         .map(|q| (q[0] - a.box_centre[0]).hypot(q[1] - a.box_centre[1]))
         .fold(f64::INFINITY, f64::min)
         .min(50.0);
-    f[28] = f64::from(u8::from(a.centroid[0] > 0.0));
-    f[29] = f64::from(u8::from(b.centroid[0] > 0.0));
+    f[28] = f64::from(u8::from(a.in_front()));
+    f[29] = f64::from(u8::from(b.in_front()));
     f[30] = f64::from(u8::from(is_ground(a.class)));
     f[31] = f64::from(u8::from(is_ground(b.class)));
     f[32] = a.hi[2] - a.lo[2];

@@ -27,6 +27,7 @@ use crate::features::{
 use crate::graph::{ObjectNode, Relation, RelationEdge, RelationGraph, Viewpoint};
 use crate::rules::{Rule, RuleOptions};
 use crate::svm::{cross_validate, CvResult, LinearSvm, SvmOptions};
+use geodata::classes::Class;
 use mln::infer::InferOptions;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -457,6 +458,27 @@ pub struct Evaluation {
     pub pairs: usize,
     /// Test pairs whose objects were missing from the maps (scored as predicted false).
     pub missing_pairs: usize,
+    /// Every test pair and relation where SVM or SVM + MLN disagrees with the truth.
+    pub errors: Vec<PairError>,
+}
+
+/// A test pair and relation that at least one output got wrong.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PairError {
+    /// Scene index in the dataset.
+    pub scene: usize,
+    /// The relation.
+    pub relation: Relation,
+    /// Subject and object ids.
+    pub ids: [u32; 2],
+    /// Subject and object classes (`None`: missing from the map).
+    pub classes: [Option<Class>; 2],
+    /// The noise-free truth.
+    pub truth: bool,
+    /// The classifiers' answer.
+    pub svm: bool,
+    /// The answer with MLN consistency.
+    pub mln: bool,
 }
 
 /// Runs a model on the test scenes of a dataset and scores both outputs.
@@ -473,6 +495,39 @@ pub fn evaluate(
     let mut ev = Evaluation::default();
     for (scene, out) in dataset.test.iter().zip(outputs) {
         let out = out?;
+        for p in &scene.pairs {
+            for r in Relation::BASE {
+                let truth = p.truth & r.bit() != 0;
+                let (svm, mln) = (out.svm.get(r, p.a, p.b), out.mln.get(r, p.a, p.b));
+                if svm != truth || mln != truth {
+                    let (a, b) = (&scene.objects[p.a], &scene.objects[p.b]);
+                    ev.errors.push(PairError {
+                        scene: scene.index,
+                        relation: r,
+                        ids: [a.id, b.id],
+                        classes: [Some(a.class), Some(b.class)],
+                        truth,
+                        svm,
+                        mln,
+                    });
+                }
+            }
+        }
+        for &(a, b, truth) in &scene.missing_pairs {
+            for r in Relation::BASE {
+                if truth & r.bit() != 0 {
+                    ev.errors.push(PairError {
+                        scene: scene.index,
+                        relation: r,
+                        ids: [a, b],
+                        classes: [None, None],
+                        truth: true,
+                        svm: false,
+                        mln: false,
+                    });
+                }
+            }
+        }
         for (which, x) in [(&mut ev.svm, &out.svm), (&mut ev.mln, &out.mln)] {
             which.violations += hard_violations(x);
             for p in &scene.pairs {

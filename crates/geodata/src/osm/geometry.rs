@@ -105,6 +105,55 @@ pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
 }
 
+/// A rectangle in the plane: centre, half side lengths along its yaw axis and across it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RingBox {
+    /// Centre, metres.
+    pub centre: [f64; 2],
+    /// Half extents along the yaw axis and across it, metres.
+    pub half: [f64; 2],
+    /// Yaw of the first axis, counter-clockwise from the x axis, radians.
+    pub yaw_rad: f64,
+}
+
+/// The bounding rectangle of a ring aligned with its longest edge (how a building's box is
+/// drawn from its outline); `None` for fewer than two distinct vertices.
+pub fn longest_edge_box(ring: &[[f64; 2]]) -> Option<RingBox> {
+    let n = ring.len();
+    let (mut best, mut yaw) = (0.0, 0.0);
+    for i in 0..n {
+        let (p, q) = (ring[i], ring[(i + 1) % n]);
+        let len = (q[0] - p[0]).hypot(q[1] - p[1]);
+        if len > best {
+            best = len;
+            yaw = (q[1] - p[1]).atan2(q[0] - p[0]);
+        }
+    }
+    if best <= 0.0 {
+        return None;
+    }
+    Some(bounding_box_at(ring, yaw))
+}
+
+/// The bounding rectangle of points with its first axis at `yaw_rad`.
+pub fn bounding_box_at(points: &[[f64; 2]], yaw_rad: f64) -> RingBox {
+    let (s, c) = f64::sin_cos(yaw_rad);
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in points {
+        let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+        for k in 0..2 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    let m = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+    RingBox {
+        centre: [c * m[0] - s * m[1], s * m[0] + c * m[1]],
+        half: [0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1])],
+        yaw_rad,
+    }
+}
+
 /// Whether a polygon (outer ring with holes) and an axis-aligned box share a point.
 pub fn polygon_intersects_box(
     outer: &[[f64; 2]],
@@ -142,6 +191,30 @@ pub fn rings_overlap(r1: &[[f64; 2]], r2: &[[f64; 2]]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn longest_edge_box_of_a_rotated_l_shape() {
+        // An L: 10 m long base along 30°, 4 m wide, with a 3 × 3 m arm on one end.
+        let (s, c) = (30f64.to_radians()).sin_cos();
+        let local = [
+            [0.0, 0.0],
+            [10.0, 0.0],
+            [10.0, 4.0],
+            [3.0, 4.0],
+            [3.0, 7.0],
+            [0.0, 7.0],
+        ];
+        let ring: Vec<[f64; 2]> = local
+            .iter()
+            .map(|p| [5.0 + c * p[0] - s * p[1], -2.0 + s * p[0] + c * p[1]])
+            .collect();
+        let b = longest_edge_box(&ring).expect("a box");
+        assert!((b.yaw_rad - 30f64.to_radians()).abs() < 1e-12);
+        assert!((b.half[0] - 5.0).abs() < 1e-9 && (b.half[1] - 3.5).abs() < 1e-9);
+        let want = [5.0 + c * 5.0 - s * 3.5, -2.0 + s * 5.0 + c * 3.5];
+        assert!((b.centre[0] - want[0]).abs() < 1e-9 && (b.centre[1] - want[1]).abs() < 1e-9);
+        assert_eq!(longest_edge_box(&[[1.0, 1.0], [1.0, 1.0]]), None);
+    }
 
     const SQUARE: [[f64; 2]; 4] = [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]];
 

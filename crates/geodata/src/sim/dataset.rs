@@ -42,10 +42,11 @@ use super::sensor::{scan_with, ScanFrame, SensorOptions};
 use super::{mix64, purpose, stream_rng, SimError};
 use crate::classes::Class;
 use crate::cloud::{write_cloud, PointCloud};
+use crate::osm::geometry::{longest_edge_box, point_in_ring, point_segment_distance};
 use crate::osm::OsmMap;
 use crate::sensors::SensorKind;
 use rand::Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -756,38 +757,16 @@ fn scene_objects(
             }
         } else if id >= 1 && (id as usize) <= scene.buildings.len() {
             let b = &scene.buildings[id as usize - 1];
-            // Box aligned with the longest outline edge.
-            let n = b.outer.len();
-            let (mut best, mut yaw) = (0.0, 0.0);
-            for i in 0..n {
-                let (p, q) = (b.outer[i], b.outer[(i + 1) % n]);
-                let len = (q[0] - p[0]).hypot(q[1] - p[1]);
-                if len > best {
-                    best = len;
-                    yaw = (q[1] - p[1]).atan2(q[0] - p[0]);
-                }
-            }
-            let (s, c) = f64::sin_cos(yaw);
-            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for p in &b.outer {
-                let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
-                for k in 0..2 {
-                    lo[k] = lo[k].min(q[k]);
-                    hi[k] = hi[k].max(q[k]);
-                }
-            }
-            let m = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+            let Some(rb) = longest_edge_box(&b.outer) else {
+                continue;
+            };
             RelationObject {
                 id,
                 class: Class::Building,
                 ground: false,
-                centre: [c * m[0] - s * m[1], s * m[0] + c * m[1], 0.5 * b.height_m],
-                half_extents: [
-                    0.5 * (hi[0] - lo[0]),
-                    0.5 * (hi[1] - lo[1]),
-                    0.5 * b.height_m,
-                ],
-                yaw_rad: yaw,
+                centre: [rb.centre[0], rb.centre[1], 0.5 * b.height_m],
+                half_extents: [rb.half[0], rb.half[1], 0.5 * b.height_m],
+                yaw_rad: rb.yaw_rad,
                 points,
                 support: 0,
             }
@@ -824,6 +803,66 @@ fn scene_objects(
         out.push(object);
     }
     out
+}
+
+/// How much farther than the scenes' range [`MAP_BUILDINGS_FILE`] reaches, metres.
+pub const MAP_BUILDINGS_MARGIN_M: f64 = 10.0;
+
+/// File of a relations dataset holding the map's building outlines near its scenes.
+pub const MAP_BUILDINGS_FILE: &str = "map_buildings.json";
+
+/// The map's building outlines near a dataset's scenes, in the scenes' local frame: what a
+/// robot that knows its OSM map knows about the buildings it sees (with map error on, the
+/// map's outlines, not the simulated world's).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapBuildings {
+    /// Frame of the outlines: `local`, the frame of the scenes' viewpoints and clouds.
+    pub frame: String,
+    /// The buildings within reach of a scene.
+    pub buildings: Vec<MapBuilding>,
+}
+
+/// One map building of [`MapBuildings`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapBuilding {
+    /// Id of the OSM way or relation.
+    pub osm_id: i64,
+    /// Outer ring, counter-clockwise, last vertex not repeated, metres.
+    pub outer: Vec<[f64; 2]>,
+}
+
+/// The map's buildings whose outline comes within `reach_m` of a pose (top view).
+fn map_buildings_near(map: &OsmMap, poses: &[Pose], reach_m: f64) -> MapBuildings {
+    let near = |outer: &[[f64; 2]]| {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in outer {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        poses.iter().any(|pose| {
+            let p = [pose.position[0], pose.position[1]];
+            let outside = (0..2).any(|k| p[k] < lo[k] - reach_m || p[k] > hi[k] + reach_m);
+            !outside
+                && (point_in_ring(p, outer)
+                    || (0..outer.len()).any(|i| {
+                        point_segment_distance(p, outer[i], outer[(i + 1) % outer.len()]) <= reach_m
+                    }))
+        })
+    };
+    MapBuildings {
+        frame: "local".into(),
+        buildings: map
+            .buildings
+            .iter()
+            .filter(|b| b.outer.len() >= 3 && near(&b.outer))
+            .map(|b| MapBuilding {
+                osm_id: b.osm_id,
+                outer: b.outer.clone(),
+            })
+            .collect(),
+    }
 }
 
 /// Writes a `relations` dataset; `progress(done, total)` is called after each scene.
@@ -897,10 +936,15 @@ pub fn write_relations(
     summary.cast_seconds = started.elapsed().as_secs_f64();
     let train = options.train.min(poses.len());
     write_json(
+        &out.join(MAP_BUILDINGS_FILE),
+        &map_buildings_near(map, &poses, options.max_range_m + MAP_BUILDINGS_MARGIN_M),
+    )?;
+    write_json(
         &out.join("dataset.json"),
         &json!({
             "kind": "relations",
             "map": map_path,
+            "map_buildings": MAP_BUILDINGS_FILE,
             "seed": seed,
             "scenes": poses.len(),
             "train": (0..train).collect::<Vec<_>>(),
@@ -1163,6 +1207,56 @@ mod tests {
             "{flipped} of {} flipped",
             pairs.len()
         );
+        // The map's outlines of every building a scene lists, and none beyond reach.
+        assert_eq!(meta["map_buildings"], json!(MAP_BUILDINGS_FILE));
+        let outlines: MapBuildings =
+            serde_json::from_slice(&std::fs::read(dir.join(MAP_BUILDINGS_FILE)).unwrap()).unwrap();
+        assert_eq!(outlines.frame, "local");
+        let ids: Vec<i64> = outlines.buildings.iter().map(|b| b.osm_id).collect();
+        let scene = Scene::build(&map, &options.scene, 2).unwrap();
+        let reach = options.max_range_m + MAP_BUILDINGS_MARGIN_M;
+        let mut viewpoints = Vec::new();
+        for i in 0..4 {
+            let s: Value = serde_json::from_slice(
+                &std::fs::read(dir.join(format!("scene_{i:03}.json"))).unwrap(),
+            )
+            .unwrap();
+            viewpoints.push([
+                s["viewpoint"]["x"].as_f64().unwrap(),
+                s["viewpoint"]["y"].as_f64().unwrap(),
+            ]);
+            for o in s["objects"].as_array().unwrap() {
+                if o["class"] == "Building" {
+                    let b = &scene.buildings[o["id"].as_u64().unwrap() as usize - 1];
+                    let m = &map.buildings[b.map_index.unwrap()];
+                    assert!(ids.contains(&m.osm_id), "scene {i}: building {}", m.osm_id);
+                }
+            }
+        }
+        let distance = |outer: &[[f64; 2]]| {
+            viewpoints
+                .iter()
+                .map(|&p| {
+                    if point_in_ring(p, outer) {
+                        return 0.0;
+                    }
+                    (0..outer.len())
+                        .map(|k| point_segment_distance(p, outer[k], outer[(k + 1) % outer.len()]))
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        for m in &map.buildings {
+            let kept = outlines.buildings.iter().find(|b| b.osm_id == m.osm_id);
+            assert_eq!(kept.is_some(), distance(&m.outer) <= reach, "{}", m.osm_id);
+            if let Some(b) = kept {
+                // serde_json reads floats to within an ulp or so.
+                assert_eq!(b.outer.len(), m.outer.len());
+                for (p, q) in b.outer.iter().zip(&m.outer) {
+                    assert!((p[0] - q[0]).abs() < 1e-9 && (p[1] - q[1]).abs() < 1e-9);
+                }
+            }
+        }
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -4,6 +4,7 @@ use anyhow::Context;
 use clap::Subcommand;
 use geodata::classes::Class;
 use serde_json::{json, Value};
+use srtree::amodal::MapOutlines;
 use srtree::dataset::RelationsDataset;
 use srtree::features::ViewObject;
 use srtree::graph::{Relation, Viewpoint};
@@ -122,6 +123,14 @@ pub enum RelationsCommand {
         /// Also write the map with its relation graph to this file.
         #[arg(long)]
         save: Option<PathBuf>,
+        /// OSM map (.osm, .osm.pbf) whose building outlines complete the map's buildings
+        /// (how deep a building is, which the scan never sees).
+        #[arg(long)]
+        osm: Option<PathBuf>,
+        /// Frame of the map's coordinates (the cloud it was built from): local (the OSM
+        /// map's local frame), utm:ZONE[N|S] or enu:LAT,LON; used with --osm.
+        #[arg(long, default_value = "local", requires = "osm")]
+        cloud_frame: geodata::georef::CloudFrame,
         /// Seed of the MAP search.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -138,6 +147,10 @@ pub enum RelationsCommand {
         /// several) and test on every scene of --dataset (none of them was seen in training).
         #[arg(long, value_delimiter = ',', conflicts_with = "model")]
         train_dataset: Vec<PathBuf>,
+        /// Write every test pair and relation that SVM or SVM + MLN got wrong to this file
+        /// (JSON lines: scene, relation, ids, classes, truth, svm, mln).
+        #[arg(long)]
+        errors: Option<PathBuf>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -410,6 +423,29 @@ fn eval_labels(
     Ok(())
 }
 
+/// The OSM map's building outlines in a cloud's frame.
+fn outlines_in_frame(
+    osm: &geodata::osm::OsmMap,
+    frame: &geodata::georef::CloudFrame,
+) -> anyhow::Result<MapOutlines> {
+    if *frame == geodata::georef::CloudFrame::Local {
+        return Ok(MapOutlines::new(
+            osm.buildings.iter().map(|b| b.outer.clone()),
+        ));
+    }
+    let mut rings = Vec::with_capacity(osm.buildings.len());
+    for b in &osm.buildings {
+        let mut ring = Vec::with_capacity(b.outer.len());
+        for &v in &b.outer {
+            let (lat, lon) = osm.frame.to_wgs84(v);
+            let p = frame.from_wgs84(lat, lon, 0.0, &osm.frame)?;
+            ring.push([p[0], p[1]]);
+        }
+        rings.push(ring);
+    }
+    Ok(MapOutlines::new(rings))
+}
+
 fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
     RelationsDataset::load(dir, &MapOptions::default(), &ObjectOptions::default())
         .with_context(|| format!("loading the relations dataset {}", dir.display()))
@@ -503,9 +539,21 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             json,
             dot,
             save,
+            osm,
+            cloud_frame,
             seed,
         } => {
             let v = parse_floats::<3>(&viewpoint, "--viewpoint")?;
+            let outlines = match &osm {
+                None => MapOutlines::default(),
+                Some(path) => {
+                    let osm = geodata::osm::OsmMap::load(path)
+                        .with_context(|| format!("loading {}", path.display()))?;
+                    outlines_in_frame(&osm, &cloud_frame).with_context(|| {
+                        format!("moving {}'s outlines into the map's frame", path.display())
+                    })?
+                }
+            };
             let mut m = read_map(&map).with_context(|| format!("reading {}", map.display()))?;
             let model = read_model(&model)?;
             let vp = Viewpoint {
@@ -515,7 +563,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             let objects = extract_objects(&m, &ObjectOptions::default());
             let view: Vec<ViewObject> = objects
                 .iter()
-                .map(|o| ViewObject::from_map_object(&m, o, &vp))
+                .map(|o| ViewObject::from_map_object_with_outlines(&m, o, &vp, &outlines))
                 .collect();
             let mut infer = mln::infer::InferOptions::default();
             infer.walksat.seed = seed;
@@ -555,6 +603,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             dataset,
             model,
             train_dataset,
+            errors,
             json,
             seed,
         } => {
@@ -600,6 +649,15 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             let mut infer = mln::infer::InferOptions::default();
             infer.walksat.seed = seed;
             let ev = evaluate(&model, &ds, &infer).context("evaluating")?;
+            if let Some(path) = &errors {
+                let mut lines = String::new();
+                for e in &ev.errors {
+                    lines += &serde_json::to_string(e)?;
+                    lines.push('\n');
+                }
+                geodata::fsio::write_atomic(path, lines)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
             if json {
                 println!("{}", serde_json::to_string_pretty(&evaluation_json(&ev))?);
             } else {
