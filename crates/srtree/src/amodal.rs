@@ -165,7 +165,8 @@ pub fn completed_view(a: &ViewObject, occluded_by_b: [bool; 2], prior: &ClassPri
     }
 }
 
-/// Cells within this distance of an outline's boundary stand in it (walls lie on it), metres.
+/// Cells within this distance of an outline's boundary stand in it (walls lie on it), metres;
+/// a cell within reach of several outlines counts for the one it is inside, else the nearest.
 pub const OUTLINE_MATCH_M: f64 = 1.0;
 
 /// Share of an object's cells an outline must hold to be the object's (the best one), and
@@ -225,18 +226,27 @@ impl MapOutlines {
         for c in cells.iter().step_by(stride) {
             tested += 1;
             let p = [c[0], c[1]];
+            // Each cell to one outline: one it stands in, else the nearest boundary within
+            // reach (touching outlines share a wall; the cell counts for one of them).
+            let mut owner: Option<(usize, f64)> = None;
             for (i, (lo, hi)) in self.bounds.iter().enumerate() {
                 if p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] {
                     continue;
                 }
                 let r = &self.rings[i];
-                let on = point_in_ring(p, r)
-                    || (0..r.len()).any(|k| {
-                        point_segment_distance(p, r[k], r[(k + 1) % r.len()]) <= OUTLINE_MATCH_M
-                    });
-                if on {
-                    *counts.entry(i).or_default() += 1;
+                let d = if point_in_ring(p, r) {
+                    0.0
+                } else {
+                    (0..r.len())
+                        .map(|k| point_segment_distance(p, r[k], r[(k + 1) % r.len()]))
+                        .fold(f64::INFINITY, f64::min)
+                };
+                if d <= OUTLINE_MATCH_M && owner.is_none_or(|(_, best)| d < best) {
+                    owner = Some((i, d));
                 }
+            }
+            if let Some((i, _)) = owner {
+                *counts.entry(i).or_default() += 1;
             }
         }
         let share = |n: usize| n as f64 / tested as f64;
@@ -694,6 +704,10 @@ mod tests {
         // Cells in no outline, or spread thinly, get no box.
         assert_eq!(outlines.box_of(&facade(60.0, -5.0, 5.0)), None);
         assert_eq!(outlines.box_of(&[]), None);
+        // Touching outlines share a wall: cells near it count for the one they face.
+        let row = MapOutlines::new([rect(10.0, -6.0, 40.0, 6.0), rect(10.0, 6.0, 40.0, 20.0)]);
+        let one = row.box_of(&facade(9.9, 2.0, 5.9)).expect("a box");
+        assert!((one.centre[1]).abs() < 1e-9, "{one:?}");
         let mut spread = facade(9.9, -5.0, 5.0);
         spread.extend(facade(60.0, -5.0, 8.0));
         assert_eq!(outlines.box_of(&spread), None);

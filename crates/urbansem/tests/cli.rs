@@ -551,4 +551,53 @@ fn relations_eval_trains_on_one_dataset_and_tests_on_every_scene_of_another() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("is the test dataset"));
+    // --errors lists the wrong pairs, one JSON object per line.
+    let errors = dir.join("errors.jsonl");
+    stdout_of(
+        urbansem()
+            .args(["relations", "eval", "--dataset"])
+            .arg(dir.join("b"))
+            .arg("--errors")
+            .arg(&errors),
+    );
+    for line in std::fs::read_to_string(&errors).unwrap().lines() {
+        let e: serde_json::Value = serde_json::from_str(line).unwrap();
+        for key in ["scene", "relation", "ids", "classes", "truth", "svm", "mln"] {
+            assert!(e.get(key).is_some(), "{line}");
+        }
+        assert!(e["truth"] != e["svm"] || e["truth"] != e["mln"], "{line}");
+    }
+    // relations infer completes buildings from an OSM map; a missing one is named.
+    let model = dir.join("model.json");
+    stdout_of(
+        urbansem()
+            .args(["relations", "train", "--dataset"])
+            .arg(dir.join("a"))
+            .arg("--out")
+            .arg(&model),
+    );
+    let map = dir.join("scene.srt");
+    stdout_of(
+        urbansem()
+            .args(["map", "build", "--cloud"])
+            .arg(dir.join("a").join("scene_000.ply"))
+            .arg("--out")
+            .arg(&map),
+    );
+    let infer = |extra: &[&str]| {
+        urbansem()
+            .args(["relations", "infer", "--map"])
+            .arg(&map)
+            .arg("--model")
+            .arg(&model)
+            .arg("--viewpoint=0,0,0")
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = infer(&["--osm", "no-such-map.osm"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-map.osm"));
+    let out = infer(&["--cloud-frame", "utm:32N"]);
+    assert_eq!(out.status.code(), Some(2), "--cloud-frame needs --osm");
 }
