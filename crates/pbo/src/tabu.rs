@@ -45,7 +45,7 @@ pub struct TabuOptions {
     /// Moves a flipped variable stays tabu (0: n/10 + 10, varied per chain).
     pub tenure: usize,
     /// Moves without a new best before restarting from a perturbed best (0: 5·n, at
-    /// least 2 000).
+    /// least 2 000, or 50·n below 40 variables).
     pub stall_moves: usize,
     /// Share of the variables flipped at random by a restart.
     pub perturb_fraction: f64,
@@ -371,12 +371,14 @@ fn tabu_chain(
     } else {
         options.tenure
     };
-    // Vary the tenure across chains for diversity.
-    let tenure = (base_tenure + chain * base_tenure / 4)
-        .min(n.saturating_sub(1))
-        .max(1);
+    // Vary the tenure across chains for diversity. At most half the variables are tabu: with
+    // n − 1 of 5 tabu, one move is left at each step and the chain cycles through a few
+    // states (a proptest case missed the optimum of a 5-variable residue that way).
+    let tenure = (base_tenure + chain * base_tenure / 4).min(n / 2).max(1);
+    // A small problem restarts sooner: its chain can cycle through a few states for as
+    // long as the stall allows (50 moves per variable below 40 variables; unchanged above).
     let stall = if options.stall_moves == 0 {
-        (5 * n).max(2_000)
+        (5 * n).max(2_000.min(50 * n))
     } else {
         options.stall_moves
     };
