@@ -34,9 +34,7 @@
 use crate::features::ViewObject;
 use crate::graph::Viewpoint;
 use geodata::classes::Class;
-use geodata::osm::geometry::{
-    bounding_box_at, longest_edge_box, point_in_ring, point_segment_distance,
-};
+use geodata::osm::geometry::{bounding_box_at, longest_edge_box, point_ring_distance, ring_bounds};
 use serde::{Deserialize, Serialize};
 
 /// Fewer annotated objects of a class than this leave its prior at zero (no completion).
@@ -191,14 +189,11 @@ impl MapOutlines {
         let bounds = rings
             .iter()
             .map(|r| {
-                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-                for p in r {
-                    for k in 0..2 {
-                        lo[k] = lo[k].min(p[k] - OUTLINE_MATCH_M);
-                        hi[k] = hi[k].max(p[k] + OUTLINE_MATCH_M);
-                    }
-                }
-                (lo, hi)
+                let (lo, hi) = ring_bounds(r);
+                (
+                    lo.map(|v| v - OUTLINE_MATCH_M),
+                    hi.map(|v| v + OUTLINE_MATCH_M),
+                )
             })
             .collect();
         MapOutlines { rings, bounds }
@@ -233,14 +228,7 @@ impl MapOutlines {
                 if p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] {
                     continue;
                 }
-                let r = &self.rings[i];
-                let d = if point_in_ring(p, r) {
-                    0.0
-                } else {
-                    (0..r.len())
-                        .map(|k| point_segment_distance(p, r[k], r[(k + 1) % r.len()]))
-                        .fold(f64::INFINITY, f64::min)
-                };
+                let d = point_ring_distance(p, &self.rings[i]);
                 if d <= OUTLINE_MATCH_M && owner.is_none_or(|(_, best)| d < best) {
                     owner = Some((i, d));
                 }

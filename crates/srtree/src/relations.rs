@@ -495,10 +495,14 @@ pub fn evaluate(
     let mut ev = Evaluation::default();
     for (scene, out) in dataset.test.iter().zip(outputs) {
         let out = out?;
+        ev.svm.violations += hard_violations(&out.svm);
+        ev.mln.violations += hard_violations(&out.mln);
         for p in &scene.pairs {
-            for r in Relation::BASE {
+            for (k, r) in Relation::BASE.into_iter().enumerate() {
                 let truth = p.truth & r.bit() != 0;
                 let (svm, mln) = (out.svm.get(r, p.a, p.b), out.mln.get(r, p.a, p.b));
+                ev.svm.confusion[k].add(svm, truth);
+                ev.mln.confusion[k].add(mln, truth);
                 if svm != truth || mln != truth {
                     let (a, b) = (&scene.objects[p.a], &scene.objects[p.b]);
                     ev.errors.push(PairError {
@@ -513,31 +517,22 @@ pub fn evaluate(
                 }
             }
         }
+        // Pairs whose objects the map lacks: predicted false by both outputs.
         for &(a, b, truth) in &scene.missing_pairs {
-            for r in Relation::BASE {
-                if truth & r.bit() != 0 {
+            for (k, r) in Relation::BASE.into_iter().enumerate() {
+                let truth = truth & r.bit() != 0;
+                ev.svm.confusion[k].add(false, truth);
+                ev.mln.confusion[k].add(false, truth);
+                if truth {
                     ev.errors.push(PairError {
                         scene: scene.index,
                         relation: r,
                         ids: [a, b],
                         classes: [None, None],
-                        truth: true,
+                        truth,
                         svm: false,
                         mln: false,
                     });
-                }
-            }
-        }
-        for (which, x) in [(&mut ev.svm, &out.svm), (&mut ev.mln, &out.mln)] {
-            which.violations += hard_violations(x);
-            for p in &scene.pairs {
-                for (k, r) in Relation::BASE.into_iter().enumerate() {
-                    which.confusion[k].add(x.get(r, p.a, p.b), p.truth & r.bit() != 0);
-                }
-            }
-            for &(_, _, truth) in &scene.missing_pairs {
-                for (k, r) in Relation::BASE.into_iter().enumerate() {
-                    which.confusion[k].add(false, truth & r.bit() != 0);
                 }
             }
         }

@@ -105,6 +105,29 @@ pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
 }
 
+/// Distance from `p` to a ring's area: 0 inside, else to the nearest edge.
+pub fn point_ring_distance(p: [f64; 2], ring: &[[f64; 2]]) -> f64 {
+    if point_in_ring(p, ring) {
+        return 0.0;
+    }
+    (0..ring.len())
+        .map(|k| point_segment_distance(p, ring[k], ring[(k + 1) % ring.len()]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Axis-aligned bounds (min, max) of points ((+∞, −∞) for none).
+pub fn ring_bounds(ring: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
+    ring.iter().fold(
+        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+        |(lo, hi), p| {
+            (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            )
+        },
+    )
+}
+
 /// A rectangle in the plane: centre, half side lengths along its yaw axis and across it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RingBox {

@@ -42,7 +42,7 @@ use super::sensor::{scan_with, ScanFrame, SensorOptions};
 use super::{mix64, purpose, stream_rng, SimError};
 use crate::classes::Class;
 use crate::cloud::{write_cloud, PointCloud};
-use crate::osm::geometry::{longest_edge_box, point_in_ring, point_segment_distance};
+use crate::osm::geometry::{longest_edge_box, point_ring_distance, ring_bounds};
 use crate::osm::OsmMap;
 use crate::sensors::SensorKind;
 use rand::Rng;
@@ -834,21 +834,11 @@ pub struct MapBuilding {
 /// The map's buildings whose outline comes within `reach_m` of a pose (top view).
 fn map_buildings_near(map: &OsmMap, poses: &[Pose], reach_m: f64) -> MapBuildings {
     let near = |outer: &[[f64; 2]]| {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in outer {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = ring_bounds(outer);
         poses.iter().any(|pose| {
             let p = [pose.position[0], pose.position[1]];
             let outside = (0..2).any(|k| p[k] < lo[k] - reach_m || p[k] > hi[k] + reach_m);
-            !outside
-                && (point_in_ring(p, outer)
-                    || (0..outer.len()).any(|i| {
-                        point_segment_distance(p, outer[i], outer[(i + 1) % outer.len()]) <= reach_m
-                    }))
+            !outside && point_ring_distance(p, outer) <= reach_m
         })
     };
     MapBuildings {
@@ -1236,14 +1226,7 @@ mod tests {
         let distance = |outer: &[[f64; 2]]| {
             viewpoints
                 .iter()
-                .map(|&p| {
-                    if point_in_ring(p, outer) {
-                        return 0.0;
-                    }
-                    (0..outer.len())
-                        .map(|k| point_segment_distance(p, outer[k], outer[(k + 1) % outer.len()]))
-                        .fold(f64::INFINITY, f64::min)
-                })
+                .map(|&p| point_ring_distance(p, outer))
                 .fold(f64::INFINITY, f64::min)
         };
         for m in &map.buildings {

@@ -32,7 +32,9 @@ use super::raycast::{Caster, Shape};
 use super::truth::{offset_centre_line, street_truth, StreetTruth, TruthOptions};
 use super::{mix64, normal, purpose, stream_rng, SimError};
 use crate::classes::Class;
-use crate::osm::geometry::{point_in_polygon, point_in_ring, point_segment_distance, signed_area};
+use crate::osm::geometry::{
+    point_in_polygon, point_in_ring, point_segment_distance, ring_bounds, signed_area,
+};
 use crate::osm::model::StreetSegment;
 use crate::osm::OsmMap;
 use crate::projection::LocalFrame;
@@ -532,18 +534,6 @@ pub struct Scene {
     caster: Caster,
     ground: GroundIndex,
     building_boxes: RTree<GeomWithData<Rectangle<[f64; 2]>, usize>>,
-}
-
-fn ring_bounds(ring: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
-    ring.iter().fold(
-        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
-        |(lo, hi), p| {
-            (
-                [lo[0].min(p[0]), lo[1].min(p[1])],
-                [hi[0].max(p[0]), hi[1].max(p[1])],
-            )
-        },
-    )
 }
 
 fn centroid(ring: &[[f64; 2]]) -> [f64; 2] {
