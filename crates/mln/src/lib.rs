@@ -11,7 +11,9 @@
 //! - [`walksat`]: MaxWalkSAT over weighted conjunctive factors.
 //! - [`wcnf`]: the ground problem as weighted partial MaxSAT for exact solvers.
 //! - [`generate`]: seeded generators of the thesis' F&S, −F&S and ID problems.
+//! - [`files`]: a problem on disk read and grounded, answers, benchmark problems, reports.
 
+pub mod files;
 pub mod generate;
 pub mod ground;
 pub mod infer;

@@ -3,10 +3,10 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+use mln::files::read_answer;
 use mln::ground::{ground, GroundOptions};
 use mln::infer::{map_inference, InferOptions};
 use mln::parse::{read_evidence, read_program, read_query};
-use std::collections::HashMap;
 use std::path::PathBuf;
 
 fn data(rel: &str) -> PathBuf {
@@ -34,20 +34,9 @@ fn costs(dir: &str, program: &str, reference: &str) -> (f64, f64, usize, usize) 
     )
     .unwrap();
     let ours = map_inference(&problem, &InferOptions::default()).scores;
-    let index: HashMap<String, usize> = (0..problem.atoms.len())
-        .map(|i| (problem.atom_name(&program, i), i))
-        .collect();
-    let mut x = vec![false; problem.atoms.len()];
-    for a in read_evidence(&data(reference), &program).unwrap() {
-        let name = format!(
-            "{}({})",
-            program.predicates[a.predicate].name,
-            a.args.join(",")
-        );
-        if let Some(&i) = index.get(&name) {
-            x[i] = a.value;
-        }
-    }
+    let x = read_answer(&program, &problem, &data(reference))
+        .unwrap()
+        .assignment;
     let theirs = problem.score(&x);
     (
         ours.cost,

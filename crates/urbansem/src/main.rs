@@ -51,7 +51,7 @@ enum Command {
     Relations(cmd::srtree::RelationsCommand),
     /// Benchmarks against the peer implementations named in the issues.
     #[command(subcommand)]
-    Bench(cmd::bench::BenchCommand),
+    Bench(urbansem_bench::BenchCommand),
 }
 
 /// Exit code of an error while running (a file that cannot be read, bad input data).
@@ -103,7 +103,7 @@ fn main() -> ExitCode {
         Command::Localize(a) => cmd::localize::run(*a),
         Command::Map(c) => cmd::srtree::run_map(c),
         Command::Relations(c) => cmd::srtree::run_relations(c),
-        Command::Bench(c) => cmd::bench::run(c),
+        Command::Bench(c) => urbansem_bench::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,11 +2,12 @@
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use mln::ground::{ground, GroundOptions};
+use mln::files::{
+    benchmark_problem, learn_program, load_and_ground, read_answer, result_text, Benchmark,
+    InferReport, LearnReport, ProblemFiles, QuerySource, ScoreReport,
+};
 use mln::infer::{map_inference, InferOptions, Method, Representation};
-use mln::parse::{parse_query_predicates, read_evidence, read_program, read_query};
 use pbo::quadratize::Quadratizer;
-use serde_json::json;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -196,109 +197,67 @@ pub fn run(command: MlnCommand) -> anyhow::Result<()> {
     }
 }
 
-/// Reads the evidence files and the query (`-q` list or query file) of a program.
-fn read_evidence_and_query(
-    args: &ProblemArgs,
-    program: &mln::parse::Program,
-) -> anyhow::Result<(Vec<mln::parse::EvidenceAtom>, Vec<mln::parse::Atom>)> {
-    let mut evidence = Vec::new();
-    for e in &args.evidence {
-        evidence
-            .extend(read_evidence(e, program).with_context(|| format!("reading {}", e.display()))?);
+impl ProblemArgs {
+    /// The problem's files; a usage error without a query.
+    pub fn files(&self) -> anyhow::Result<ProblemFiles> {
+        let query = match (self.queries.as_ref(), self.query_file.as_ref()) {
+            (Some(list), _) => QuerySource::Predicates(list.clone()),
+            (None, Some(f)) => QuerySource::File(f.clone()),
+            (None, None) => super::usage!("no query: give -q Pred1,Pred2 or --query-file FILE"),
+        };
+        Ok(ProblemFiles {
+            program: self.program.clone(),
+            evidence: self.evidence.clone(),
+            query,
+        })
     }
-    let query = match (args.queries.as_deref(), args.query_file.as_deref()) {
-        (Some(list), _) => parse_query_predicates(list, program)?,
-        (None, Some(f)) => read_query(f, program).context("reading the query file")?,
-        (None, None) => super::usage!("no query: give -q Pred1,Pred2 or --query-file FILE"),
-    };
-    Ok((evidence, query))
 }
 
-/// Reads program, evidence and query and grounds them (shared by infer, score and
-/// `bench mln`); also returns the seconds parsing and grounding.
-pub(crate) fn load_and_ground(
-    args: &ProblemArgs,
-) -> anyhow::Result<(
-    mln::parse::Program,
-    mln::ground::GroundProblem,
-    Vec<mln::parse::Atom>,
-    f64,
-    f64,
-)> {
-    let t0 = Instant::now();
-    let program = read_program(&args.program).context("reading the program")?;
-    let (evidence, query) = read_evidence_and_query(args, &program)?;
-    let parse_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let evidence_label = args
-        .evidence
-        .first()
-        .map_or_else(|| "(no evidence)".to_owned(), |p| p.display().to_string());
-    let problem = ground(
-        &program,
-        &evidence,
-        &evidence_label,
-        &query,
-        &GroundOptions::default(),
-    )
-    .context("grounding")?;
-    Ok((program, problem, query, parse_s, t1.elapsed().as_secs_f64()))
+impl From<Problem> for Benchmark {
+    fn from(p: Problem) -> Self {
+        match p {
+            Problem::Fs => Benchmark::FriendsSmokers,
+            Problem::NegFs => Benchmark::NegatedFriendsSmokers,
+            Problem::Id => Benchmark::ImageDenoising,
+            Problem::Ie => Benchmark::Ie,
+            Problem::Kb3 => Benchmark::Kb3,
+        }
+    }
 }
 
-fn score(args: &ScoreArgs) -> anyhow::Result<()> {
-    let (program, problem, _query, _, _) = load_and_ground(&args.problem)?;
-    let (x, answer_atoms, not_unknown) = read_answer(&program, &problem, &args.answer)?;
-    let s = problem.score(&x);
-    if args.json {
-        let out = json!({
-            "answer": args.answer.display().to_string(),
-            "answer_atoms": answer_atoms,
-            "answer_atoms_not_unknown": not_unknown,
-            "cost": s.cost,
-            "violated_weight": s.violated_weight,
-            "hard_violations": s.hard_violations,
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-    } else {
-        println!(
-            "{}: {} atoms ({} are not unknown atoms of this ground problem)",
-            args.answer.display(),
-            answer_atoms,
-            not_unknown
-        );
-        println!("cost              {}", s.cost);
-        println!("violated weight   {}", s.violated_weight);
-        println!("hard violations   {}", s.hard_violations);
-    }
+/// Prints a report as pretty JSON, keys sorted.
+pub(crate) fn print_json(report: &impl serde::Serialize) -> anyhow::Result<()> {
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&serde_json::to_value(report)?)?
+    );
     Ok(())
 }
 
-/// Reads another engine's MAP answer (true atoms, `!` lines false) as an assignment of
-/// the unknown atoms; also returns the number of answer lines and how many of them are not
-/// unknown atoms of `problem`.
-pub(crate) fn read_answer(
-    program: &mln::parse::Program,
-    problem: &mln::ground::GroundProblem,
-    path: &std::path::Path,
-) -> anyhow::Result<(Vec<bool>, usize, usize)> {
-    let answer = read_evidence(path, program).context("reading the answer")?;
-    let index: std::collections::HashMap<String, usize> = (0..problem.atoms.len())
-        .map(|i| (problem.atom_name(program, i), i))
-        .collect();
-    let mut x = vec![false; problem.atoms.len()];
-    let mut not_unknown = 0usize;
-    for a in &answer {
-        let name = format!(
-            "{}({})",
-            program.predicates[a.predicate].name,
-            a.args.join(",")
+fn score(args: &ScoreArgs) -> anyhow::Result<()> {
+    let loaded = load_and_ground(&args.problem.files()?)?;
+    let a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
+    let s = loaded.problem.score(&a.assignment);
+    let report = ScoreReport {
+        answer: args.answer.display().to_string(),
+        answer_atoms: a.atoms,
+        answer_atoms_not_unknown: a.not_unknown,
+        cost: s.cost,
+        violated_weight: s.violated_weight,
+        hard_violations: s.hard_violations,
+    };
+    if args.json {
+        print_json(&report)?;
+    } else {
+        println!(
+            "{}: {} atoms ({} are not unknown atoms of this ground problem)",
+            report.answer, report.answer_atoms, report.answer_atoms_not_unknown
         );
-        match index.get(&name) {
-            Some(&i) => x[i] = a.value,
-            None => not_unknown += 1,
-        }
+        println!("cost              {}", report.cost);
+        println!("violated weight   {}", report.violated_weight);
+        println!("hard violations   {}", report.hard_violations);
     }
-    Ok((x, answer.len(), not_unknown))
+    Ok(())
 }
 
 fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
@@ -310,11 +269,6 @@ fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads a data file with its path in the error.
-fn read_data(path: &std::path::Path) -> anyhow::Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))
-}
-
 /// Generates a synthetic problem (default size: the thesis') into `out`; IE and KB3 read
 /// their facts from the data folder `data`.
 pub(crate) fn write_generated(
@@ -324,83 +278,14 @@ pub(crate) fn write_generated(
     data: &std::path::Path,
     out: &std::path::Path,
 ) -> anyhow::Result<()> {
-    use mln::generate::{
-        friends_smokers, ie_evidence_from_mfoilp, image_denoising, kb3, FriendsSmokersOptions,
-        GeneratedMln, Kb3Options,
-    };
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let g = match problem {
-        Problem::Ie => {
-            let facts = data.join("ie/partial-evidence-mfoilp");
-            GeneratedMln {
-                program: read_data(&data.join("ie/tuffy/prog.mln"))?,
-                evidence: ie_evidence_from_mfoilp(
-                    &read_data(&facts.join("tokens"))?,
-                    &read_data(&facts.join("similartitles"))?,
-                    &read_data(&facts.join("jntinfcandidates"))?,
-                )
-                .with_context(|| format!("in {}", facts.display()))?,
-                query: read_data(&data.join("ie/tuffy/query.db"))?,
-            }
-        }
-        Problem::Kb3 => {
-            let dir = data.join("kb/mlcnn");
-            let k = kb3(
-                &read_data(&dir.join("evidence.db"))?,
-                &read_data(&dir.join("labels.db"))?,
-                &Kb3Options::default(),
-                seed,
-            )
-            .with_context(|| format!("in {}", dir.display()))?;
-            let path = out.join("training.db");
-            geodata::fsio::write_atomic(&path, &k.training)
-                .with_context(|| format!("writing {}", path.display()))?;
-            k.files
-        }
-        Problem::Fs | Problem::NegFs => friends_smokers(
-            &FriendsSmokersOptions {
-                persons: size.unwrap_or(200),
-                negate: matches!(problem, Problem::NegFs),
-                ..FriendsSmokersOptions::default()
-            },
-            seed,
-        ),
-        Problem::Id => image_denoising(size.unwrap_or(90), seed),
-    };
-    for (name, text) in [
-        ("prog.mln", &g.program),
-        ("evidence.db", &g.evidence),
-        ("query.db", &g.query),
-    ] {
+    let g = benchmark_problem(problem.into(), size, seed, data)?;
+    for (name, text) in g.named_files() {
         let path = out.join(name);
         geodata::fsio::write_atomic(&path, text)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
-}
-
-/// Learns the weights of `args.problem` and writes the program with them; returns the
-/// learnt weights (also used by `bench mln` for KB3).
-pub(crate) fn learn_program(
-    args: &ProblemArgs,
-    options: &mln::learn::LearnOptions,
-    output: &std::path::Path,
-) -> anyhow::Result<(mln::learn::Training, mln::learn::Learnt)> {
-    let source = read_data(&args.program)?;
-    let program = mln::parse::parse_program(&source, &args.program.display().to_string())
-        .context("reading the program")?;
-    let (database, query) = read_evidence_and_query(args, &program)?;
-    let label = args
-        .evidence
-        .first()
-        .map_or_else(|| "(no database)".to_owned(), |p| p.display().to_string());
-    let training = mln::learn::training_problem(&program, &database, &label, &query)
-        .context("setting up the training problem")?;
-    let learnt = mln::learn::learn_weights(&program, &training, options);
-    let text = mln::learn::with_weights(&source, &program, &learnt.weights);
-    geodata::fsio::write_atomic(output, text)
-        .with_context(|| format!("writing {}", output.display()))?;
-    Ok((training, learnt))
 }
 
 fn learn(args: &LearnArgs) -> anyhow::Result<()> {
@@ -413,53 +298,41 @@ fn learn(args: &LearnArgs) -> anyhow::Result<()> {
         ..mln::learn::LearnOptions::default()
     };
     options.infer.walksat.seed = args.seed;
-    let (training, learnt) = learn_program(&args.problem, &options, &args.output)?;
-    let seconds = t0.elapsed().as_secs_f64();
-    let first_errors = learnt.epochs.first().map_or(0, |e| e.errors);
+    let learnt = learn_program(&args.problem.files()?, &options)?;
+    geodata::fsio::write_atomic(&args.output, &learnt.text)
+        .with_context(|| format!("writing {}", args.output.display()))?;
+    let r = LearnReport::new(
+        &args.problem.program,
+        &args.output,
+        &learnt,
+        t0.elapsed().as_secs_f64(),
+    );
     if args.json {
-        let out = json!({
-            "program": args.problem.program.display().to_string(),
-            "output": args.output.display().to_string(),
-            "ground_atoms": training.problem.atoms.len(),
-            "ground_factors": training.problem.factors.len(),
-            "labels": training.labels,
-            "labels_unused": training.labels_unused,
-            "true_atoms": training.truth.iter().filter(|&&v| v).count(),
-            "epochs": learnt.epochs.iter().map(|e| json!({"errors": e.errors, "count_gap": e.count_gap})).collect::<Vec<_>>(),
-            "errors_start": first_errors,
-            "errors_learnt": learnt.final_errors,
-            "weights": learnt.weights,
-            "seconds": seconds,
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        print_json(&r)?;
     } else {
         println!(
             "{}: {} unknown atoms ({} true in the labels), {} ground formulas; {} labels ({} not unknown atoms)",
-            args.problem.program.display(),
-            training.problem.atoms.len(),
-            training.truth.iter().filter(|&&v| v).count(),
-            training.problem.factors.len(),
-            training.labels,
-            training.labels_unused
+            r.program, r.ground_atoms, r.true_atoms, r.ground_factors, r.labels, r.labels_unused
         );
         println!(
             "training errors   {} (MAP under the starting weights) -> {} (MAP under the learnt weights), {} epochs",
-            first_errors,
-            learnt.final_errors,
-            learnt.epochs.len()
+            r.errors_start,
+            r.errors_learnt,
+            r.epochs.len()
         );
-        println!("wrote {} in {seconds:.2} s", args.output.display());
+        println!("wrote {} in {:.2} s", r.output, r.seconds);
     }
     Ok(())
 }
 
 fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let (program, problem, query, parse_s, ground_s) = load_and_ground(&args.problem)?;
+    let loaded = load_and_ground(&args.problem.files()?)?;
+    let problem = &loaded.problem;
     if let Some(path) = &args.export_wcnf {
         let mut w = geodata::fsio::AtomicFile::create(path)
             .with_context(|| format!("creating the WCNF file {}", path.display()))?;
-        let summary = mln::wcnf::write_wcnf(&problem, args.wcnf_scale, &mut w)
+        let summary = mln::wcnf::write_wcnf(problem, args.wcnf_scale, &mut w)
             .and_then(|s| w.commit().map(|()| s))
             .with_context(|| format!("writing {}", path.display()))?;
         eprintln!(
@@ -490,63 +363,24 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     options.walksat.seed = args.seed;
     options.walksat.max_flips = args.flips;
     options.walksat.chains = args.chains;
-    let r = map_inference(&problem, &options);
+    let r = map_inference(problem, &options);
     let total_s = t0.elapsed().as_secs_f64();
 
     if let Some(path) = &args.result {
-        let query_preds: Vec<usize> = query.iter().map(|a| a.predicate).collect();
-        let mut lines: Vec<String> = (0..problem.atoms.len())
-            .filter(|&i| query_preds.contains(&problem.atoms[i].predicate))
-            .map(|i| {
-                format!(
-                    "{} {}",
-                    problem.atom_name(&program, i),
-                    u8::from(r.assignment[i])
-                )
-            })
-            .collect();
-        lines.sort();
-        let mut text = String::new();
-        for l in lines {
-            text.push_str(&l);
-            text.push('\n');
-        }
+        let text = result_text(&loaded.program, problem, &loaded.query, &r.assignment);
         geodata::fsio::write_atomic(path, text)
             .with_context(|| format!("writing the result file {}", path.display()))?;
     }
-    let higher = problem.higher_order_factors();
+    let report = InferReport::new(&loaded, &args.problem.program, &options, &r, total_s);
     if args.json {
-        let out = json!({
-            "program": args.problem.program.display().to_string(),
-            "method": args.method.name(),
-            "quadratize": args.quadratize.name(),
-            "representation": if args.multinomial { "multinomial" } else { args.representation.name() },
-            "seed": args.seed,
-            "cost": r.scores.cost,
-            "violated_weight": r.scores.violated_weight,
-            "hard_violations": r.scores.hard_violations,
-            "lower_bound": r.lower_bound,
-            "ground_atoms": problem.atoms.len(),
-            "ground_factors": problem.factors.len(),
-            "higher_order_factors": higher,
-            "persistent_fraction": r.persistent_fraction,
-            "true_atoms": r.assignment.iter().filter(|&&v| v).count(),
-            "seconds": {
-                "parse": parse_s,
-                "ground": ground_s,
-                "quadratize": r.seconds_quadratize,
-                "solve": r.seconds_solve,
-                "total": total_s,
-            },
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        print_json(&report)?;
     } else {
         println!(
             "{}: {} ground atoms, {} ground formulas ({} higher-order)",
             args.problem.program.display(),
-            problem.atoms.len(),
-            problem.factors.len(),
-            higher
+            report.ground_atoms,
+            report.ground_factors,
+            report.higher_order_factors
         );
         println!("method            {}", args.method.name());
         println!("cost              {}", r.scores.cost);
@@ -557,8 +391,12 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
             println!("persistent        {:.2} %", 100.0 * r.persistent_fraction);
         }
         println!(
-            "seconds           parse {parse_s:.3}  ground {ground_s:.3}  quadratize {:.3}  solve {:.3}  total {total_s:.3}",
-            r.seconds_quadratize, r.seconds_solve
+            "seconds           parse {:.3}  ground {:.3}  quadratize {:.3}  solve {:.3}  total {:.3}",
+            report.seconds.parse,
+            report.seconds.ground,
+            report.seconds.quadratize,
+            report.seconds.solve,
+            report.seconds.total
         );
     }
     Ok(())

@@ -1,17 +1,8 @@
 //! One module per command group; each has a clap `…Command` enum and a `run` function.
 
 /// An error in how a command was called (exit code 2), as opposed to a failure while it ran
-/// (exit code 1).
-#[derive(Debug)]
-pub struct UsageError(pub String);
-
-impl std::fmt::Display for UsageError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for UsageError {}
+/// (exit code 1); the bench harness raises the same type.
+pub use urbansem_bench::UsageError;
 
 /// Returns a [`UsageError`] from the enclosing function, formatted like `format!`.
 macro_rules! usage {
@@ -21,8 +12,6 @@ macro_rules! usage {
 }
 pub(crate) use usage;
 
-pub mod bench;
-pub mod bench_parsers;
 pub mod cloud;
 pub mod demo;
 pub mod localize;

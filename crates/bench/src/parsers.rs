@@ -64,11 +64,11 @@ pub fn run(args: &ParsersBenchArgs) -> anyhow::Result<()> {
     for f in &args.formats {
         if !all.iter().any(|g| g.name == f) {
             let names: Vec<&str> = all.iter().map(|g| g.name).collect();
-            super::usage!("unknown format {f:?}: expected one of {}", names.join(", "));
+            crate::usage!("unknown format {f:?}: expected one of {}", names.join(", "));
         }
     }
     if args.sizes_mb.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-        super::usage!("--sizes-mb {:?}: expected positive sizes", args.sizes_mb);
+        crate::usage!("--sizes-mb {:?}: expected positive sizes", args.sizes_mb);
     }
     let sizes: Vec<u64> = args.sizes_mb.iter().map(|s| (s * 1e6) as u64).collect();
     keep_freed_memory();
@@ -164,7 +164,7 @@ fn grid_end_to_end(args: &ParsersBenchArgs) -> anyhow::Result<Value> {
             .write_raw(&args.dir)
             .context("writing the raw grid for the peer")?;
         let json_out = args.dir.join("grid-peer.json");
-        let script = super::bench::script_path();
+        let script = crate::pbo::script_path();
         let status = Command::new(&args.python)
             .arg(&script)
             .arg(&raw)

@@ -1,0 +1,465 @@
+//! `urbansem bench mln` runs MAP inference (default QSSR + tabu) on the real MLN sets of
+//! `../shared/data/mln` (LP, RC, KB, ER; IE with its evidence rebuilt from mfoilp's facts)
+//! and on the generated F&S, −F&S, ID and KB3 (weights learnt first by `mln::learn`), reports
+//! sizes, persistencies, cost, bound and seconds per phase (fastest of `--repeat` runs),
+//! re-scores Tuffy's shipped MAP answers with the same evaluator, and quotes Tuffy's logged
+//! run time (another machine) and the issue's time target (thesis Table 3.5 / 10).
+
+use crate::pbo::fmt_opt;
+use anyhow::{bail, Context};
+use clap::Args;
+use mln::files::{
+    benchmark_problem, learn_program, load_and_ground, read_answer, AnswerAssignment, Benchmark,
+    LearntProgram, Loaded, ProblemFiles, QuerySource,
+};
+use pbo::quadratize::Quadratizer;
+use serde_json::Value;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Options of `urbansem bench mln`.
+#[derive(Args)]
+pub struct MlnBenchArgs {
+    /// Folder of the MLN benchmark sets (see its SOURCES.md).
+    #[arg(long, default_value = "../shared/data/mln")]
+    data: PathBuf,
+    /// Folder for the generated F&S, −F&S and ID problems.
+    #[arg(long, default_value = "target/bench-data/mln")]
+    data_dir: PathBuf,
+    /// Runs per set; the fastest is reported (the answer is the same for a seed).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Only these sets (comma-separated): ie, lp, rc, kb, er, fs, neg-fs, id, kb3.
+    #[arg(long, value_delimiter = ',')]
+    sets: Vec<String>,
+    /// MAP methods to run per set (comma-separated): qpbo, maxwalksat, maxwalksat-monomials.
+    #[arg(long, value_delimiter = ',', default_value = "qpbo", value_parser = parse_mln_method)]
+    methods: Vec<mln::infer::Method>,
+    /// Quadratizers for the qpbo method (comma-separated): ish, asm, fix.
+    #[arg(long, value_delimiter = ',', default_value = "asm", value_parser = parse_quadratizer)]
+    quadratizers: Vec<Quadratizer>,
+    /// Flips per MaxWalkSAT chain (maxwalksat methods).
+    #[arg(long, default_value_t = 1_000_000)]
+    flips: usize,
+    /// Seed of the generated problems and of inference.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Also run the qpbo method with probing once per set and quadratizer (Table 3.4's step
+    /// 3: `persistent_fraction_probe`, `seconds_probe_run`).
+    #[arg(long)]
+    probe: bool,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_quadratizer(s: &str) -> Result<Quadratizer, String> {
+    s.parse()
+}
+
+fn parse_mln_method(s: &str) -> Result<mln::infer::Method, String> {
+    s.parse()
+}
+
+/// One MLN benchmark set: files relative to the data folder (or the generated folder).
+struct MlnSet {
+    name: &'static str,
+    dir: &'static str,
+    program: &'static str,
+    generated: Option<Benchmark>,
+    /// Tuffy's MAP answer (true atoms), relative to the data folder.
+    reference: Option<&'static str>,
+    /// Tuffy's run log, relative to the data folder.
+    tuffy_log: Option<&'static str>,
+    /// The issue's time target in seconds (thesis Table 3.5 / 10).
+    target_s: f64,
+    /// The weights are learnt first (`urbansem mln learn` on `training.db` → `learnt.mln`).
+    learn: bool,
+}
+
+const MLN_SETS: [MlnSet; 9] = [
+    MlnSet {
+        name: "ie",
+        dir: "ie",
+        program: "prog.mln",
+        generated: Some(Benchmark::Ie),
+        reference: Some("ie/reference_outputs/tuffy_map_output_from_xeggora.db"),
+        tuffy_log: Some("ie/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 2.2,
+        learn: false,
+    },
+    MlnSet {
+        name: "lp",
+        dir: "lp/rockit",
+        program: "prog.mln",
+        generated: None,
+        reference: Some("lp/reference_outputs/tuffy_map_output_from_xeggora.db"),
+        tuffy_log: Some("lp/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 0.9,
+        learn: false,
+    },
+    MlnSet {
+        name: "rc",
+        dir: "rc/rockit",
+        program: "prog.mln",
+        generated: None,
+        reference: None,
+        tuffy_log: Some("rc/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 0.9,
+        learn: false,
+    },
+    MlnSet {
+        name: "kb",
+        dir: "kb/mlcnn",
+        program: "prog.mln",
+        generated: None,
+        reference: Some("kb/reference_outputs/tuffy_map_output_from_mlcnn.txt"),
+        tuffy_log: None,
+        target_s: 0.6,
+        learn: false,
+    },
+    MlnSet {
+        name: "er",
+        dir: "er/rockit",
+        program: "prog.mln",
+        generated: None,
+        reference: Some("er/reference_outputs/tuffy_map_output_from_xeggora.db"),
+        tuffy_log: Some("er/reference_outputs/tuffy_run_log_from_xeggora.txt"),
+        target_s: 10.0,
+        learn: false,
+    },
+    MlnSet {
+        name: "fs",
+        dir: "fs",
+        program: "prog.mln",
+        generated: Some(Benchmark::FriendsSmokers),
+        reference: None,
+        tuffy_log: None,
+        target_s: 0.6,
+        learn: false,
+    },
+    MlnSet {
+        name: "neg-fs",
+        dir: "neg-fs",
+        program: "prog.mln",
+        generated: Some(Benchmark::NegatedFriendsSmokers),
+        reference: None,
+        tuffy_log: None,
+        target_s: 1.2,
+        learn: false,
+    },
+    MlnSet {
+        name: "id",
+        dir: "id",
+        program: "prog.mln",
+        generated: Some(Benchmark::ImageDenoising),
+        reference: None,
+        tuffy_log: None,
+        target_s: 0.5,
+        learn: false,
+    },
+    MlnSet {
+        name: "kb3",
+        dir: "kb3",
+        program: "learnt.mln",
+        generated: Some(Benchmark::Kb3),
+        reference: None,
+        tuffy_log: None,
+        target_s: 5.7,
+        learn: true,
+    },
+];
+
+/// Tuffy's total run time from its log line `… after running for [3 min, 50.630 sec]`.
+fn tuffy_logged_seconds(text: &str) -> Option<f64> {
+    let start = text.find("after running for [")? + "after running for [".len();
+    let inner = &text[start..start + text[start..].find(']')?];
+    let mut total = 0.0;
+    for part in inner.split(',') {
+        let mut words = part.split_whitespace();
+        let value: f64 = words.next()?.parse().ok()?;
+        total += value
+            * match words.next()? {
+                "hr" | "hour" | "hours" => 3600.0,
+                "min" => 60.0,
+                "sec" => 1.0,
+                _ => return None,
+            };
+    }
+    Some(total)
+}
+
+/// Runs `urbansem bench mln`.
+pub fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
+    use mln::infer::{map_inference, InferOptions};
+    if !args.data.exists() {
+        bail!(
+            "MLN data folder {} not found (give --data ../shared/data/mln)",
+            args.data.display()
+        );
+    }
+    let unknown: Vec<&String> = args
+        .sets
+        .iter()
+        .filter(|s| !MLN_SETS.iter().any(|m| m.name == s.as_str()))
+        .collect();
+    if !unknown.is_empty() {
+        crate::usage!(
+            "unknown MLN set(s) {unknown:?}: expected ie, lp, rc, kb, er, fs, neg-fs, id, kb3"
+        );
+    }
+    let mut rows: Vec<Value> = Vec::new();
+    for set in MLN_SETS
+        .iter()
+        .filter(|m| args.sets.is_empty() || args.sets.iter().any(|s| s == m.name))
+    {
+        let dir = match set.generated {
+            Some(problem) => {
+                let out = args.data_dir.join(set.dir);
+                write_generated(problem, args.seed, &args.data, &out)?;
+                out
+            }
+            None => args.data.join(set.dir),
+        };
+        let problem_files = ProblemFiles {
+            program: dir.join(set.program),
+            evidence: vec![dir.join("evidence.db")],
+            query: QuerySource::File(dir.join("query.db")),
+        };
+        let mut learning = Value::Null;
+        if set.learn {
+            let t = Instant::now();
+            let training_files = ProblemFiles {
+                program: dir.join("prog.mln"),
+                evidence: vec![dir.join("training.db")],
+                query: QuerySource::File(dir.join("query.db")),
+            };
+            let mut options = mln::learn::LearnOptions::default();
+            options.infer.walksat.seed = args.seed;
+            let LearntProgram {
+                training,
+                learnt,
+                text,
+            } = learn_program(&training_files, &options)
+                .with_context(|| format!("learning the weights of set {}", set.name))?;
+            let out = &problem_files.program;
+            geodata::fsio::write_atomic(out, text)
+                .with_context(|| format!("writing {}", out.display()))?;
+            learning = serde_json::json!({
+                "labels": training.labels,
+                "epochs": learnt.epochs.len(),
+                "errors_start": learnt.epochs.first().map(|e| e.errors),
+                "errors_learnt": learnt.final_errors,
+                "seconds": t.elapsed().as_secs_f64(),
+            });
+        }
+        let runs: Vec<(mln::infer::Method, Quadratizer)> = args
+            .methods
+            .iter()
+            .flat_map(|&m| {
+                let qs: Vec<Quadratizer> = if m == mln::infer::Method::Qpbo {
+                    args.quadratizers.clone()
+                } else {
+                    vec![Quadratizer::Asm]
+                };
+                qs.into_iter().map(move |q| (m, q))
+            })
+            .collect();
+        for (method, quadratizer) in &runs {
+            let mut options = InferOptions {
+                method: *method,
+                quadratizer: *quadratizer,
+                ..InferOptions::default()
+            };
+            options.walksat.seed = args.seed;
+            options.walksat.max_flips = args.flips;
+            let mut best: Option<serde_json::Value> = None;
+            let mut best_total = f64::INFINITY;
+            let mut reference = serde_json::Value::Null;
+            for run in 0..args.repeat.max(1) {
+                let t0 = Instant::now();
+                let Loaded {
+                    program,
+                    problem,
+                    parse_seconds: parse_s,
+                    ground_seconds: ground_s,
+                    ..
+                } = load_and_ground(&problem_files).with_context(|| format!("set {}", set.name))?;
+                let r = map_inference(&problem, &options);
+                let total_s = t0.elapsed().as_secs_f64();
+                if run == 0 {
+                    if let Some(rel) = set.reference {
+                        let path = args.data.join(rel);
+                        let AnswerAssignment {
+                            assignment: x,
+                            atoms: lines,
+                            not_unknown,
+                        } = read_answer(&program, &problem, &path)?;
+                        let s = problem.score(&x);
+                        reference = serde_json::json!({
+                            "answer": path.display().to_string(),
+                            "answer_atoms": lines,
+                            "answer_atoms_not_unknown": not_unknown,
+                            "cost": s.cost,
+                            "hard_violations": s.hard_violations,
+                        });
+                    }
+                }
+                if total_s < best_total {
+                    best_total = total_s;
+                    best = Some(serde_json::json!({
+                        "set": set.name,
+                        "method": method.name(),
+                        "program": problem_files.program.display().to_string(),
+                        "ground_atoms": problem.atoms.len(),
+                        "ground_factors": problem.factors.len(),
+                        "higher_order_factors": problem.higher_order_factors(),
+                        "cost": r.scores.cost,
+                        "hard_violations": r.scores.hard_violations,
+                        "lower_bound": r.lower_bound,
+                        "persistent_fraction": r.persistent_fraction,
+                        "quadratize": options.quadratizer.name(),
+                        "qssr_rounds": r.qssr_rounds.len(),
+                        // Table 3.2's "after QPBO": the first round's share of the atoms.
+                        "persistent_fraction_first_qpbo": r.qssr_rounds.first().map(|q| {
+                            q.fixed_by_qpbo as f64 / q.free_variables.max(1) as f64
+                        }),
+                        "seconds": {
+                            "parse": parse_s,
+                            "ground": ground_s,
+                            "quadratize": r.seconds_quadratize,
+                            "solve": r.seconds_solve,
+                            "total": total_s,
+                        },
+                    }));
+                }
+            }
+            let Some(mut row) = best else { continue };
+            row["learning"] = learning.clone();
+            if args.probe && *method == mln::infer::Method::Qpbo {
+                let problem = load_and_ground(&problem_files)?.problem;
+                let t = Instant::now();
+                let r = map_inference(
+                    &problem,
+                    &InferOptions {
+                        probe: true,
+                        ..options.clone()
+                    },
+                );
+                row["persistent_fraction_probe"] = serde_json::json!(r.persistent_fraction);
+                row["cost_probe_run"] = serde_json::json!(r.scores.cost);
+                row["seconds_probe_run"] = serde_json::json!(t.elapsed().as_secs_f64());
+            }
+            let tuffy_s = match set.tuffy_log {
+                Some(rel) => {
+                    let path = args.data.join(rel);
+                    let text = std::fs::read_to_string(&path)
+                        .with_context(|| format!("reading {}", path.display()))?;
+                    tuffy_logged_seconds(&text)
+                }
+                None => None,
+            };
+            let ref_cost = reference.get("cost").and_then(Value::as_f64);
+            let our_cost = row["cost"].as_f64();
+            row["reference"] = reference;
+            row["cost_minus_reference"] =
+                serde_json::json!(our_cost.zip(ref_cost).map(|(a, b)| a - b));
+            row["tuffy_logged_seconds"] = serde_json::json!(tuffy_s);
+            row["seconds_over_tuffy"] = serde_json::json!(tuffy_s.map(|t| best_total / t));
+            row["target_seconds"] = serde_json::json!(set.target_s);
+            row["seconds_over_target"] = serde_json::json!(best_total / set.target_s);
+            if !args.json {
+                eprintln!("{} {}: done", set.name, method.name());
+            }
+            rows.push(row);
+        }
+    }
+    if args.json {
+        let out = serde_json::json!({
+            "repeat": args.repeat.max(1),
+            "seed": args.seed,
+            "sets": rows,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "{:<7} {:<22} {:>7} {:>8} {:>6} {:>7} {:>7} | {:>13} {:>13} {:>10} {:>13} | {:>7} {:>7} {:>6} {:>8} {:>7}",
+        "set", "method (1st QPBO %)", "atoms", "factors", "h.o.", "pers %", "probe %", "cost", "Tuffy cost", "diff", "bound",
+        "ground", "total", "target", "/target", "Tuffy s"
+    );
+    for r in &rows {
+        let f = |v: &Value| v.as_f64();
+        let secs = &r["seconds"];
+        println!(
+            "{:<7} {:<22} {:>7} {:>8} {:>6} {:>7.2} {:>7} | {:>13.2} {:>13} {:>10} {:>13} | {:>7.3} {:>7.3} {:>6.1} {:>8.2} {:>7}",
+            r["set"].as_str().unwrap_or("?"),
+            format!(
+                "{}{}",
+                r["method"].as_str().unwrap_or("?"),
+                if r["method"] == "qpbo" {
+                    format!(
+                        "/{} {:.1}%",
+                        r["quadratize"].as_str().unwrap_or("?"),
+                        100.0 * r["persistent_fraction_first_qpbo"].as_f64().unwrap_or(0.0)
+                    )
+                } else {
+                    String::new()
+                }
+            ),
+            r["ground_atoms"].as_u64().unwrap_or(0),
+            r["ground_factors"].as_u64().unwrap_or(0),
+            r["higher_order_factors"].as_u64().unwrap_or(0),
+            100.0 * f(&r["persistent_fraction"]).unwrap_or(0.0),
+            fmt_opt(f(&r["persistent_fraction_probe"]).map(|p| 100.0 * p), 2),
+            f(&r["cost"]).unwrap_or(f64::NAN),
+            fmt_opt(f(&r["reference"]["cost"]), 2),
+            fmt_opt(f(&r["cost_minus_reference"]), 2),
+            fmt_opt(f(&r["lower_bound"]), 2),
+            f(&secs["ground"]).unwrap_or(f64::NAN),
+            f(&secs["total"]).unwrap_or(f64::NAN),
+            f(&r["target_seconds"]).unwrap_or(f64::NAN),
+            f(&r["seconds_over_target"]).unwrap_or(f64::NAN),
+            fmt_opt(f(&r["tuffy_logged_seconds"]), 1),
+        );
+    }
+    println!(
+        "cost = −Σ w·[ground formula true] over soft groundings with unknown atoms (lower is \
+         better); Tuffy cost = Tuffy's shipped MAP answer scored by the same evaluator; diff = \
+         ours − Tuffy (< 0: ours better); bound = QPBO/QSSR lower bound (= cost: proven optimal); \
+         1st QPBO % = atoms labelled by the first QPBO round, pers % = after all QSSR rounds, probe % = after QSSR with probing (--probe; Table 3.4's steps 1-3); seconds are the fastest of the runs, parse + ground + solve; target = thesis Table 3.5 \
+         time / 10; Tuffy s = Tuffy's logged run time on its authors' machine (PostgreSQL \
+         grounding included), not measured here."
+    );
+    Ok(())
+}
+
+/// Generates a benchmark problem into `out` (prog.mln, evidence.db, query.db; KB3 also
+/// training.db).
+fn write_generated(
+    kind: Benchmark,
+    seed: u64,
+    data: &std::path::Path,
+    out: &std::path::Path,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let g = benchmark_problem(kind, None, seed, data)?;
+    for (name, text) in g.named_files() {
+        let path = out.join(name);
+        geodata::fsio::write_atomic(&path, text)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tuffy_log_time_is_parsed() {
+        let log = "*** Tuffy exited at 17:03:11 12/9/18 after running for [3 min, 50.630 sec]\n";
+        assert_eq!(tuffy_logged_seconds(log), Some(230.63));
+        assert_eq!(tuffy_logged_seconds("no time here"), None);
+    }
+}

@@ -1,0 +1,631 @@
+//! A problem on disk: program, evidence and query files read and grounded, another engine's
+//! answer read as an assignment, the benchmark problems generated, weights learnt from a
+//! training database — and the typed reports the command line and the Python package print.
+//!
+//! This module reads files and returns values; writing them (result files, generated
+//! folders, learnt programs) is the caller's, which gets their text from here.
+
+use crate::generate::{self, GenerateError, GeneratedMln};
+use crate::ground::{ground, GroundError, GroundOptions, GroundProblem};
+use crate::infer::MapResult;
+use crate::learn::{self, LearnError, LearnOptions, Learnt, Training};
+use crate::parse::{
+    parse_query_predicates, read_evidence, read_program, read_query, Atom, EvidenceAtom,
+    ParseError, Program,
+};
+use serde::Serialize;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use thiserror::Error;
+
+/// Why a problem's files could not be read, grounded or generated.
+#[derive(Debug, Error)]
+pub enum FilesError {
+    /// The program does not parse (or cannot be read).
+    #[error("reading the program")]
+    Program(#[source] ParseError),
+    /// An evidence file does not parse (or cannot be read).
+    #[error("reading {}", path.display())]
+    Evidence {
+        /// The evidence file.
+        path: PathBuf,
+        /// What is wrong in it.
+        #[source]
+        source: ParseError,
+    },
+    /// A query predicate list names an unknown predicate.
+    #[error(transparent)]
+    QueryList(ParseError),
+    /// The query file does not parse (or cannot be read).
+    #[error("reading the query file")]
+    QueryFile(#[source] ParseError),
+    /// Grounding failed (a type clash, an empty domain…).
+    #[error("grounding")]
+    Ground(#[source] GroundError),
+    /// The answer file does not parse (or cannot be read).
+    #[error("reading the answer")]
+    Answer(#[source] ParseError),
+    /// A data file cannot be read.
+    #[error("reading {}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A benchmark's data files do not hold the facts expected.
+    #[error("in {}", path.display())]
+    Data {
+        /// The data folder.
+        path: PathBuf,
+        /// What is wrong.
+        #[source]
+        source: GenerateError,
+    },
+    /// The training database cannot serve for learning.
+    #[error("setting up the training problem")]
+    Training(#[source] LearnError),
+}
+
+/// Where the query atoms come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum QuerySource {
+    /// Query predicates, comma-separated (`Cancer,Smokes`): all their atoms.
+    Predicates(String),
+    /// A query file: one atom per line (variables allowed; ground atoms list a canopy).
+    File(PathBuf),
+}
+
+/// The files of one MLN problem.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProblemFiles {
+    /// The program (Alchemy/Tuffy/RockIt syntax).
+    pub program: PathBuf,
+    /// Evidence files, read in order.
+    pub evidence: Vec<PathBuf>,
+    /// The query.
+    pub query: QuerySource,
+}
+
+impl ProblemFiles {
+    /// The label grounding errors name for the evidence: its first file.
+    fn evidence_label(&self, none: &str) -> String {
+        self.evidence
+            .first()
+            .map_or_else(|| none.to_owned(), |p| p.display().to_string())
+    }
+
+    /// Reads the evidence files and the query against `program`.
+    pub fn read_evidence_and_query(
+        &self,
+        program: &Program,
+    ) -> Result<(Vec<EvidenceAtom>, Vec<Atom>), FilesError> {
+        let mut evidence = Vec::new();
+        for e in &self.evidence {
+            evidence.extend(
+                read_evidence(e, program).map_err(|source| FilesError::Evidence {
+                    path: e.clone(),
+                    source,
+                })?,
+            );
+        }
+        let query = match &self.query {
+            QuerySource::Predicates(list) => {
+                parse_query_predicates(list, program).map_err(FilesError::QueryList)?
+            }
+            QuerySource::File(f) => read_query(f, program).map_err(FilesError::QueryFile)?,
+        };
+        Ok((evidence, query))
+    }
+}
+
+/// A problem read and grounded, with the seconds each step took.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    /// The program.
+    pub program: Program,
+    /// The ground problem.
+    pub problem: GroundProblem,
+    /// The query atoms as read.
+    pub query: Vec<Atom>,
+    /// Seconds reading program, evidence and query.
+    pub parse_seconds: f64,
+    /// Seconds grounding.
+    pub ground_seconds: f64,
+}
+
+/// Reads program, evidence and query and grounds them.
+pub fn load_and_ground(files: &ProblemFiles) -> Result<Loaded, FilesError> {
+    let t0 = Instant::now();
+    let program = read_program(&files.program).map_err(FilesError::Program)?;
+    let (evidence, query) = files.read_evidence_and_query(&program)?;
+    let parse_seconds = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let problem = ground(
+        &program,
+        &evidence,
+        &files.evidence_label("(no evidence)"),
+        &query,
+        &GroundOptions::default(),
+    )
+    .map_err(FilesError::Ground)?;
+    Ok(Loaded {
+        program,
+        problem,
+        query,
+        parse_seconds,
+        ground_seconds: t1.elapsed().as_secs_f64(),
+    })
+}
+
+/// Another engine's MAP answer as an assignment of a ground problem's unknown atoms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnswerAssignment {
+    /// Truth value per unknown atom (atoms the answer does not list are false).
+    pub assignment: Vec<bool>,
+    /// Atoms (lines) in the answer.
+    pub atoms: usize,
+    /// Answer atoms that are not unknown atoms of the ground problem.
+    pub not_unknown: usize,
+}
+
+/// The assignment an answer's atoms (true ones, `!` ones false) give the unknown atoms of
+/// `problem`; atoms it does not list are false.
+pub fn assignment_from_atoms(
+    program: &Program,
+    problem: &GroundProblem,
+    answer: &[EvidenceAtom],
+) -> AnswerAssignment {
+    let index: HashMap<String, usize> = (0..problem.atoms.len())
+        .map(|i| (problem.atom_name(program, i), i))
+        .collect();
+    let mut assignment = vec![false; problem.atoms.len()];
+    let mut not_unknown = 0usize;
+    for a in answer {
+        let name = format!(
+            "{}({})",
+            program.predicates[a.predicate].name,
+            a.args.join(",")
+        );
+        match index.get(&name) {
+            Some(&i) => assignment[i] = a.value,
+            None => not_unknown += 1,
+        }
+    }
+    AnswerAssignment {
+        assignment,
+        atoms: answer.len(),
+        not_unknown,
+    }
+}
+
+/// Reads another engine's MAP answer file (true atoms, `!` lines false; Tuffy's and
+/// Alchemy's result files) as an assignment of `problem`.
+pub fn read_answer(
+    program: &Program,
+    problem: &GroundProblem,
+    path: &Path,
+) -> Result<AnswerAssignment, FilesError> {
+    let answer = read_evidence(path, program).map_err(FilesError::Answer)?;
+    Ok(assignment_from_atoms(program, problem, &answer))
+}
+
+/// The MAP state of the query atoms in Alchemy's result format (`Atom(A,B) 1`, one per
+/// line, sorted).
+pub fn result_text(
+    program: &Program,
+    problem: &GroundProblem,
+    query: &[Atom],
+    assignment: &[bool],
+) -> String {
+    let query_preds: Vec<usize> = query.iter().map(|a| a.predicate).collect();
+    let mut lines: Vec<String> = (0..problem.atoms.len())
+        .filter(|&i| query_preds.contains(&problem.atoms[i].predicate))
+        .map(|i| {
+            format!(
+                "{} {}",
+                problem.atom_name(program, i),
+                u8::from(assignment.get(i).copied().unwrap_or(false))
+            )
+        })
+        .collect();
+    lines.sort();
+    let mut text = String::new();
+    for l in lines {
+        text.push_str(&l);
+        text.push('\n');
+    }
+    text
+}
+
+/// A benchmark problem of the thesis that [`benchmark_problem`] generates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Benchmark {
+    /// Friends & Smokers (Table 3.1).
+    FriendsSmokers,
+    /// Friends & Smokers with every weight negated.
+    NegatedFriendsSmokers,
+    /// Image denoising with triple smoothing rules.
+    ImageDenoising,
+    /// IE: Tuffy's program with its evidence rebuilt from mfoilp's facts (`<data>/ie`).
+    Ie,
+    /// KB3: third-order webKB from `<data>/kb/mlcnn` (weights 0, learnt from its training
+    /// database).
+    Kb3,
+}
+
+/// A generated benchmark: the three files' contents and, for KB3, the training database.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneratedBenchmark {
+    /// `prog.mln`, `evidence.db`, `query.db`.
+    pub files: GeneratedMln,
+    /// `training.db` (KB3 only).
+    pub training: Option<String>,
+}
+
+impl GeneratedBenchmark {
+    /// The files of the problem folder as (name, text), in the order to write them.
+    pub fn named_files(&self) -> Vec<(&'static str, &str)> {
+        let mut out = Vec::with_capacity(4);
+        if let Some(t) = &self.training {
+            out.push(("training.db", t.as_str()));
+        }
+        out.push(("prog.mln", self.files.program.as_str()));
+        out.push(("evidence.db", self.files.evidence.as_str()));
+        out.push(("query.db", self.files.query.as_str()));
+        out
+    }
+}
+
+/// Reads a data file with its path in the error.
+fn read_data(path: &Path) -> Result<String, FilesError> {
+    std::fs::read_to_string(path).map_err(|source| FilesError::Read {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Generates a benchmark problem (default size: the thesis'; persons for F&S, image side
+/// for ID); IE and KB3 read their facts from the benchmark data folder `data`.
+pub fn benchmark_problem(
+    kind: Benchmark,
+    size: Option<usize>,
+    seed: u64,
+    data: &Path,
+) -> Result<GeneratedBenchmark, FilesError> {
+    Ok(match kind {
+        Benchmark::Ie => {
+            let facts = data.join("ie/partial-evidence-mfoilp");
+            GeneratedBenchmark {
+                files: GeneratedMln {
+                    program: read_data(&data.join("ie/tuffy/prog.mln"))?,
+                    evidence: generate::ie_evidence_from_mfoilp(
+                        &read_data(&facts.join("tokens"))?,
+                        &read_data(&facts.join("similartitles"))?,
+                        &read_data(&facts.join("jntinfcandidates"))?,
+                    )
+                    .map_err(|source| FilesError::Data {
+                        path: facts.clone(),
+                        source,
+                    })?,
+                    query: read_data(&data.join("ie/tuffy/query.db"))?,
+                },
+                training: None,
+            }
+        }
+        Benchmark::Kb3 => {
+            let dir = data.join("kb/mlcnn");
+            let k = generate::kb3(
+                &read_data(&dir.join("evidence.db"))?,
+                &read_data(&dir.join("labels.db"))?,
+                &generate::Kb3Options::default(),
+                seed,
+            )
+            .map_err(|source| FilesError::Data {
+                path: dir.clone(),
+                source,
+            })?;
+            GeneratedBenchmark {
+                files: k.files,
+                training: Some(k.training),
+            }
+        }
+        Benchmark::FriendsSmokers | Benchmark::NegatedFriendsSmokers => GeneratedBenchmark {
+            files: generate::friends_smokers(
+                &generate::FriendsSmokersOptions {
+                    persons: size.unwrap_or(200),
+                    negate: kind == Benchmark::NegatedFriendsSmokers,
+                    ..generate::FriendsSmokersOptions::default()
+                },
+                seed,
+            ),
+            training: None,
+        },
+        Benchmark::ImageDenoising => GeneratedBenchmark {
+            files: generate::image_denoising(size.unwrap_or(90), seed),
+            training: None,
+        },
+    })
+}
+
+/// Weights learnt from a training database, with the program text carrying them.
+#[derive(Debug, Clone)]
+pub struct LearntProgram {
+    /// The ground training problem.
+    pub training: Training,
+    /// The learnt weights and learning curve.
+    pub learnt: Learnt,
+    /// The program's source with the learnt weights written in.
+    pub text: String,
+}
+
+/// Learns the soft weights of `files.program` from the training database `files.evidence`
+/// (every atom of a query predicate in it is a label).
+pub fn learn_program(
+    files: &ProblemFiles,
+    options: &LearnOptions,
+) -> Result<LearntProgram, FilesError> {
+    let source = read_data(&files.program)?;
+    let program = crate::parse::parse_program(&source, &files.program.display().to_string())
+        .map_err(FilesError::Program)?;
+    let (database, query) = files.read_evidence_and_query(&program)?;
+    let training = learn::training_problem(
+        &program,
+        &database,
+        &files.evidence_label("(no database)"),
+        &query,
+    )
+    .map_err(FilesError::Training)?;
+    let learnt = learn::learn_weights(&program, &training, options);
+    let text = learn::with_weights(&source, &program, &learnt.weights);
+    Ok(LearntProgram {
+        training,
+        learnt,
+        text,
+    })
+}
+
+/// Seconds per phase of one `mln infer` run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct InferSeconds {
+    /// Reading the files.
+    pub parse: f64,
+    /// Grounding.
+    pub ground: f64,
+    /// Quadratizing.
+    pub quadratize: f64,
+    /// Solving.
+    pub solve: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// What MAP inference on one problem found (`mln infer --json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InferReport {
+    /// The program file.
+    pub program: String,
+    /// MAP algorithm.
+    pub method: String,
+    /// Order reduction.
+    pub quadratize: String,
+    /// Polynomial form.
+    pub representation: String,
+    /// Seed of every random step.
+    pub seed: u64,
+    /// Cost of the MAP state (violated soft weight, signed).
+    pub cost: f64,
+    /// Weight of the violated soft formulas.
+    pub violated_weight: f64,
+    /// Violated hard formulas.
+    pub hard_violations: usize,
+    /// A lower bound on the cost (QPBO method).
+    pub lower_bound: Option<f64>,
+    /// Unknown ground atoms.
+    pub ground_atoms: usize,
+    /// Ground formulas.
+    pub ground_factors: usize,
+    /// Ground formulas of order above two.
+    pub higher_order_factors: usize,
+    /// Share of atoms fixed by persistencies.
+    pub persistent_fraction: f64,
+    /// Atoms true in the MAP state.
+    pub true_atoms: usize,
+    /// Seconds per phase.
+    pub seconds: InferSeconds,
+}
+
+impl InferReport {
+    /// The report of `result` on `loaded` (`total_seconds` from the start of reading).
+    pub fn new(
+        loaded: &Loaded,
+        program: &Path,
+        options: &crate::infer::InferOptions,
+        result: &MapResult,
+        total_seconds: f64,
+    ) -> Self {
+        Self {
+            program: program.display().to_string(),
+            method: options.method.name().to_owned(),
+            quadratize: options.quadratizer.name().to_owned(),
+            representation: options.representation.name().to_owned(),
+            seed: options.walksat.seed,
+            cost: result.scores.cost,
+            violated_weight: result.scores.violated_weight,
+            hard_violations: result.scores.hard_violations,
+            lower_bound: result.lower_bound,
+            ground_atoms: loaded.problem.atoms.len(),
+            ground_factors: loaded.problem.factors.len(),
+            higher_order_factors: loaded.problem.higher_order_factors(),
+            persistent_fraction: result.persistent_fraction,
+            true_atoms: result.assignment.iter().filter(|&&v| v).count(),
+            seconds: InferSeconds {
+                parse: loaded.parse_seconds,
+                ground: loaded.ground_seconds,
+                quadratize: result.seconds_quadratize,
+                solve: result.seconds_solve,
+                total: total_seconds,
+            },
+        }
+    }
+}
+
+/// Another engine's answer scored by our evaluator (`mln score --json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScoreReport {
+    /// The answer file.
+    pub answer: String,
+    /// Atoms in the answer.
+    pub answer_atoms: usize,
+    /// Answer atoms that are not unknown atoms of the ground problem.
+    pub answer_atoms_not_unknown: usize,
+    /// Cost of the answer.
+    pub cost: f64,
+    /// Weight of the violated soft formulas.
+    pub violated_weight: f64,
+    /// Violated hard formulas.
+    pub hard_violations: usize,
+}
+
+/// One epoch of weight learning in a [`LearnReport`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LearnEpoch {
+    /// Unknown atoms whose MAP value differs from the label.
+    pub errors: usize,
+    /// Σ_i |n_i(y) − n_i(y_w)| over learnable formulas.
+    pub count_gap: f64,
+}
+
+/// What weight learning did (`mln learn --json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LearnReport {
+    /// The program file.
+    pub program: String,
+    /// The program written with the learnt weights.
+    pub output: String,
+    /// Unknown ground atoms of the training problem.
+    pub ground_atoms: usize,
+    /// Its ground formulas.
+    pub ground_factors: usize,
+    /// Labels in the database.
+    pub labels: usize,
+    /// Labels that are not unknown atoms.
+    pub labels_unused: usize,
+    /// Unknown atoms labelled true.
+    pub true_atoms: usize,
+    /// The learning curve.
+    pub epochs: Vec<LearnEpoch>,
+    /// Training errors of the MAP state under the starting weights.
+    pub errors_start: usize,
+    /// Training errors of the MAP state under the learnt weights.
+    pub errors_learnt: usize,
+    /// Per formula: the learnt weight (`None` for hard formulas).
+    pub weights: Vec<Option<f64>>,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+impl LearnReport {
+    /// The report of a learnt program (`output`: where its text was written).
+    pub fn new(program: &Path, output: &Path, learnt: &LearntProgram, seconds: f64) -> Self {
+        let LearntProgram {
+            training, learnt, ..
+        } = learnt;
+        Self {
+            program: program.display().to_string(),
+            output: output.display().to_string(),
+            ground_atoms: training.problem.atoms.len(),
+            ground_factors: training.problem.factors.len(),
+            labels: training.labels,
+            labels_unused: training.labels_unused,
+            true_atoms: training.truth.iter().filter(|&&v| v).count(),
+            epochs: learnt
+                .epochs
+                .iter()
+                .map(|e| LearnEpoch {
+                    errors: e.errors,
+                    count_gap: e.count_gap,
+                })
+                .collect(),
+            errors_start: learnt.epochs.first().map_or(0, |e| e.errors),
+            errors_learnt: learnt.final_errors,
+            weights: learnt.weights.clone(),
+            seconds,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+    use crate::parse::{parse_evidence, parse_program, parse_query};
+
+    fn smokers() -> (Program, GroundProblem, Vec<Atom>) {
+        let program = parse_program(
+            "Smokes(person)\nCancer(person)\n1.5 Smokes(x) => Cancer(x)\n0.5 !Cancer(x)\n",
+            "t.mln",
+        )
+        .unwrap();
+        let evidence = parse_evidence("Smokes(Anna)\n!Smokes(Bob)\n", "e.db", &program).unwrap();
+        let query = parse_query("Cancer(x)\n", "q.db", &program).unwrap();
+        let problem = ground(
+            &program,
+            &evidence,
+            "e.db",
+            &query,
+            &GroundOptions::default(),
+        )
+        .unwrap();
+        (program, problem, query)
+    }
+
+    #[test]
+    fn answer_atoms_map_to_unknown_atoms_and_the_rest_are_counted() {
+        let (program, problem, _) = smokers();
+        let answer = parse_evidence(
+            "Cancer(Anna)\n!Cancer(Bob)\nSmokes(Anna)\n",
+            "a.db",
+            &program,
+        )
+        .unwrap();
+        let a = assignment_from_atoms(&program, &problem, &answer);
+        assert_eq!(a.atoms, 3);
+        assert_eq!(a.not_unknown, 1, "Smokes(Anna) is evidence, not unknown");
+        let names: Vec<(String, bool)> = (0..problem.atoms.len())
+            .map(|i| (problem.atom_name(&program, i), a.assignment[i]))
+            .collect();
+        assert!(names.contains(&("Cancer(Anna)".to_owned(), true)));
+        assert!(names.contains(&("Cancer(Bob)".to_owned(), false)));
+    }
+
+    #[test]
+    fn result_text_lists_query_atoms_sorted_with_their_values() {
+        let (program, problem, query) = smokers();
+        let x: Vec<bool> = (0..problem.atoms.len())
+            .map(|i| problem.atom_name(&program, i) == "Cancer(Anna)")
+            .collect();
+        assert_eq!(
+            result_text(&program, &problem, &query, &x),
+            "Cancer(Anna) 1\nCancer(Bob) 0\n"
+        );
+    }
+
+    #[test]
+    fn missing_files_name_their_step() {
+        let files = ProblemFiles {
+            program: PathBuf::from("/nonexistent/prog.mln"),
+            evidence: vec![],
+            query: QuerySource::Predicates("Cancer".into()),
+        };
+        let err = load_and_ground(&files).unwrap_err();
+        assert!(matches!(err, FilesError::Program(_)), "{err}");
+        let err = benchmark_problem(Benchmark::Ie, None, 0, Path::new("/nonexistent")).unwrap_err();
+        assert!(
+            err.to_string().contains("/nonexistent/ie/tuffy/prog.mln"),
+            "{err}"
+        );
+    }
+}
