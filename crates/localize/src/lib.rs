@@ -27,7 +27,8 @@
 //! - [`track`]: a window of scans tied by odometry, searched as one (localization along a
 //!   track), odometry files and simulated drift.
 //! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables;
-//!   [`extract_eval`]: extraction precision/recall on labelled real scans.
+//!   [`extract_eval`]: extraction precision/recall on labelled real scans; [`report`]: the
+//!   answers in WGS84 as the command line prints them.
 
 pub mod candidates;
 pub mod chamfer;
@@ -40,6 +41,7 @@ pub mod index;
 pub mod pipeline;
 pub mod rank;
 pub mod refine;
+pub mod report;
 pub mod segments;
 pub mod sensor;
 pub mod surfaces;

@@ -15,13 +15,18 @@ use crate::report::Svg;
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::osm::OsmMap;
-use localize::distractors::{embed_among_distractors, DistractorOptions, DistractorSummary};
-use localize::eval::{accurate_within, is_mcd, mcd_scans, Accuracy, EvalScan, SimDataset};
+use localize::distractors::{embed_among_distractors, DistractorOptions};
+use localize::eval::report::{
+    radius_name, DistractorsReport, EvalReport, EvalSetup, RankMethod, ScanOutcome, TrackSetup, KS,
+    RADII_M,
+};
+use localize::eval::{is_mcd, mcd_scans, Accuracy, EvalScan, SimDataset};
 use localize::extract_eval::{evaluate, labelled_scans};
 use localize::hashing::{CornerIndex, HashingOptions};
 use localize::index::{is_index, PreparedMap};
 use localize::pipeline::{Localization, LocalizeOptions, Localizer};
-use localize::rank::{rank_order, CostKind, Costs};
+use localize::rank::CostKind;
+use localize::report::{LocalizeReport, TrackReport, TrackRow, TrackSeconds};
 use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
 use localize::{Pose2, Segment};
 use serde_json::{json, Value};
@@ -417,28 +422,6 @@ fn options(
     Ok(o)
 }
 
-fn candidate_json(map: &OsmMap, rank: usize, c: &localize::pipeline::Candidate) -> Value {
-    let xy = [c.pose.x, c.pose.y];
-    let (lat, lon) = map.frame.to_wgs84(xy);
-    let yaw_geo =
-        (c.pose.yaw_rad + map.frame.convergence_rad(xy)).rem_euclid(std::f64::consts::TAU);
-    json!({
-        "rank": rank + 1,
-        "x": c.pose.x,
-        "y": c.pose.y,
-        "lat": lat,
-        "lon": lon,
-        "yaw": yaw_geo,
-        "yaw_grid": c.pose.yaw_rad,
-        "dcm": c.costs.dcm,
-        "forward": c.costs.forward,
-        "reverse": c.costs.reverse,
-        "symmetric": c.costs.symmetric,
-        "refined": c.refined,
-        "confidence": c.confidence,
-    })
-}
-
 /// The map of `--map`: an OSM file, or an index (`.uloc`) with the map it was built from.
 fn load_map_or_index(path: &Path) -> anyhow::Result<(OsmMap, Option<PreparedMap>)> {
     if is_index(path) {
@@ -565,51 +548,19 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         geodata::fsio::write_atomic(svg_path, svg)
             .with_context(|| format!("writing {}", svg_path.display()))?;
     }
-    let top: Vec<Value> = result
-        .candidates
-        .iter()
-        .take(args.top)
-        .enumerate()
-        .map(|(i, c)| candidate_json(&map, i, c))
-        .collect();
-    let s = &result.seconds;
+    let report = LocalizeReport::new(
+        &localizer,
+        &map_path.display().to_string(),
+        &scan_path.display().to_string(),
+        &result,
+        args.top,
+        load_map_s,
+        read_scan_s,
+    );
     if args.json {
-        let v = json!({
-            "map": map_path.display().to_string(),
-            "scan": scan_path.display().to_string(),
-            "cost": result.rank_by.name(),
-            "candidates": top,
-            "candidate_count": result.candidates.len(),
-            "confidence": result.confidence,
-            "segments": result.segments.len(),
-            "sensor": result.sensor,
-            "clearance_m": result.clearance_m,
-            "vertical_cells": result.vertical_cells,
-            "raw_poses": result.raw_poses,
-            "after_suppression": result.after_suppression,
-            "filtered": result.filtered,
-            "search": result.search,
-            "message": result.message,
-            "seconds": {
-                "load_map": load_map_s,
-                "map_edges": localizer.seconds.edges,
-                "distance_transform": localizer.seconds.distance_transform,
-                "pyramid": localizer.seconds.pyramid,
-                "feasible_mask": localizer.seconds.feasible,
-                "read_scan": read_scan_s,
-                "surfaces": s.surfaces,
-                "segments": s.segments,
-                "templates": s.templates,
-                "search": s.search,
-                "filter": s.filter,
-                "visibility_costs": s.visibility_costs,
-                "refine": s.refine,
-                "total": s.total,
-            },
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        return super::mln::print_json(&report);
     }
+    let (s, stages) = (&report.seconds, &report.seconds.scan);
     println!(
         "{}: {} points, {} vertical cells, {} segments; {} raw poses → {} after suppression → {} candidates (ranked by {})",
         scan_path.display(),
@@ -640,36 +591,37 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         "{:>4} {:>10} {:>10} {:>11} {:>11} {:>8} {:>7} {:>7} {:>7} {:>7}",
         "rank", "x", "y", "lat", "lon", "yaw°", "dcm", "fwd", "rev", "sym"
     );
-    for v in &top {
-        let f = |k: &str| v.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+    for c in &report.candidates {
         println!(
             "{:>4} {:>10.2} {:>10.2} {:>11.6} {:>11.6} {:>8.2} {:>7.3} {:>7.3} {:>7.3} {:>7.3}",
-            f("rank"),
-            f("x"),
-            f("y"),
-            f("lat"),
-            f("lon"),
-            f("yaw").to_degrees(),
-            f("dcm"),
-            f("forward"),
-            f("reverse"),
-            f("symmetric")
+            c.rank,
+            c.x,
+            c.y,
+            c.lat,
+            c.lon,
+            c.yaw.to_degrees(),
+            c.dcm,
+            c.forward,
+            c.reverse,
+            c.symmetric
         );
     }
     println!("confidence {:.3}", result.confidence);
     println!(
-        "seconds: map load {load_map_s:.2}, edges {:.3}, DT tensor {:.3}, pyramid {:.3}, scan read {read_scan_s:.3}, surfaces {:.3}, segments {:.3}, templates {:.3}, search {:.3}, filter {:.3}, visibility+costs {:.3}, refine {:.3}, total {:.3}",
-        localizer.seconds.edges,
-        localizer.seconds.distance_transform,
-        localizer.seconds.pyramid,
-        s.surfaces,
-        s.segments,
-        s.templates,
-        s.search,
-        s.filter,
-        s.visibility_costs,
-        s.refine,
-        s.total
+        "seconds: map load {:.2}, edges {:.3}, DT tensor {:.3}, pyramid {:.3}, scan read {:.3}, surfaces {:.3}, segments {:.3}, templates {:.3}, search {:.3}, filter {:.3}, visibility+costs {:.3}, refine {:.3}, total {:.3}",
+        s.load_map,
+        s.map_edges,
+        s.distance_transform,
+        s.pyramid,
+        s.read_scan,
+        stages.surfaces,
+        stages.segments,
+        stages.templates,
+        stages.search,
+        stages.filter,
+        stages.visibility_costs,
+        stages.refine,
+        stages.total
     );
     Ok(())
 }
@@ -727,40 +679,25 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     };
     let results = localizer.localize_track(&extracted, &odometry, &track_options)?;
     let seconds = t.elapsed().as_secs_f64();
-    let rows: Vec<Value> = names
-        .iter()
-        .zip(&results)
-        .zip(&extracted)
-        .map(|((name, r), e)| {
-            let best = r.candidates.first().map(|c| candidate_json(&map, 0, c));
-            let f = |k: &str| best.as_ref().and_then(|b| b.get(k).cloned()).unwrap_or(Value::Null);
-            json!({
-                "scan": name,
-                "lat": f("lat"),
-                "lon": f("lon"),
-                "yaw": f("yaw"),
-                "x": f("x"),
-                "y": f("y"),
-                "confidence": r.confidence,
-                "candidates": r.candidates.iter().take(args.top).enumerate().map(|(i, c)| candidate_json(&map, i, c)).collect::<Vec<_>>(),
-                "segments": e.segments.len(),
-                "sensor": e.sensor,
-                "message": r.message,
-            })
-        })
-        .collect();
+    let report = TrackReport {
+        map: args.map.display().to_string(),
+        scans_dir: args.scans.display().to_string(),
+        odometry: args.odometry.display().to_string(),
+        window: args.window,
+        cost: results.first().map_or("reverse", |r| r.rank_by.name()),
+        scans: names
+            .iter()
+            .zip(&results)
+            .zip(&extracted)
+            .map(|((name, r), e)| TrackRow::new(&map, name, r, e, args.top))
+            .collect(),
+        seconds: TrackSeconds {
+            total: seconds,
+            per_scan: seconds / files.len() as f64,
+        },
+    };
     if args.json {
-        let v = json!({
-            "map": args.map.display().to_string(),
-            "scans_dir": args.scans.display().to_string(),
-            "odometry": args.odometry.display().to_string(),
-            "window": args.window,
-            "cost": results.first().map_or("reverse", |r| r.rank_by.name()),
-            "scans": rows,
-            "seconds": {"total": seconds, "per_scan": seconds / files.len() as f64},
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        return super::mln::print_json(&report);
     }
     println!(
         "{}: {} scans, window {}, {:.2} s per scan",
@@ -773,16 +710,16 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
         "{:>24} {:>5} {:>11} {:>11} {:>8} {:>6}",
         "scan", "segs", "lat", "lon", "yaw°", "conf"
     );
-    for row in &rows {
-        let g = |k: &str| row.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+    for row in &report.scans {
+        let g = |v: Option<f64>| v.unwrap_or(f64::NAN);
         println!(
             "{:>24} {:>5} {:>11.6} {:>11.6} {:>8.2} {:>6.3}",
-            row["scan"].as_str().unwrap_or(""),
-            row["segments"].as_u64().unwrap_or(0),
-            g("lat"),
-            g("lon"),
-            g("yaw").to_degrees(),
-            g("confidence")
+            row.scan,
+            row.segments,
+            g(row.lat),
+            g(row.lon),
+            g(row.yaw).to_degrees(),
+            row.confidence
         );
     }
     Ok(())
@@ -922,41 +859,25 @@ fn figure(
     svg.finish()
 }
 
-/// Per-scan evaluation record.
-struct ScanRecord {
-    name: String,
-    truth: Pose2,
-    /// Candidate poses ranked by each cost (dcm, forward, reverse, symmetric).
-    ranked: [Vec<Pose2>; 4],
-    /// Best costs of the top candidate by reverse.
-    top_costs: Option<Costs>,
-    hashing: Vec<Pose2>,
-    result: Localization,
-    hashing_s: f64,
-}
-
-const RADII: [f64; 6] = [50.0, 100.0, 200.0, 500.0, 1000.0, f64::INFINITY];
-const KS: [usize; 3] = [1, 5, 10];
-
-fn radius_name(w: f64) -> String {
-    if w.is_finite() {
-        format!("{w:.0}")
-    } else {
-        "map".into()
+impl Method {
+    /// The library's ranking method (`None` for `all`).
+    fn rank_method(self) -> Option<RankMethod> {
+        match self {
+            Method::All => None,
+            Method::Dcm => Some(RankMethod::Dcm),
+            Method::Forward => Some(RankMethod::Forward),
+            Method::Reverse => Some(RankMethod::Reverse),
+            Method::Symmetric => Some(RankMethod::Symmetric),
+            Method::Hashing => Some(RankMethod::Hashing),
+        }
     }
 }
 
 fn eval(args: EvalArgs) -> anyhow::Result<()> {
-    let methods: Vec<Method> = if args.method.contains(&Method::All) || args.method.is_empty() {
-        vec![
-            Method::Dcm,
-            Method::Forward,
-            Method::Reverse,
-            Method::Symmetric,
-            Method::Hashing,
-        ]
+    let methods: Vec<RankMethod> = if args.method.contains(&Method::All) || args.method.is_empty() {
+        RankMethod::ALL.to_vec()
     } else {
-        args.method.clone()
+        args.method.iter().filter_map(|m| m.rank_method()).collect()
     };
     let mcd = is_mcd(&args.dataset);
     let (map_path, sim) = if mcd {
@@ -1000,7 +921,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
                         other_path.display()
                     )
                 })?;
-            (composed, Some((other_path.clone(), options, summary)))
+            let report =
+                DistractorsReport::new(&other_path.display().to_string(), &options, summary);
+            (composed, Some(report))
         }
         None => (map, None),
     };
@@ -1071,7 +994,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let mut records: Vec<ScanRecord> = Vec::new();
+    let mut records: Vec<ScanOutcome> = Vec::new();
     for i in 0..count {
         let scan = match &sim {
             Some(d) => d
@@ -1088,16 +1011,8 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
                 .localize_points(&scan.points)
                 .with_context(|| format!("localizing {}", scan.name))?,
         };
-        let costs: Vec<Costs> = result.candidates.iter().map(|c| c.costs).collect();
-        let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
-        let ranked = CostKind::ALL.map(|k| {
-            rank_order(&costs, &poses, k)
-                .into_iter()
-                .map(|j| poses[j])
-                .collect()
-        });
         let t = Instant::now();
-        let hashing: Vec<Pose2> = if methods.contains(&Method::Hashing) {
+        let hashing: Vec<Pose2> = if methods.contains(&RankMethod::Hashing) {
             hashing_index
                 .localize(&result.segments)
                 .into_iter()
@@ -1112,55 +1027,55 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             geodata::fsio::write_atomic(&path, figure(&localizer, &result, Some(scan.truth), 90.0))
                 .with_context(|| format!("writing {}", path.display()))?;
         }
-        let rec = ScanRecord {
-            name: scan.name.clone(),
-            truth: scan.truth,
-            ranked,
-            top_costs: result.candidates.first().map(|c| c.costs),
-            hashing,
-            result,
-            hashing_s,
-        };
+        let rec = ScanOutcome::new(scan.name.clone(), scan.truth, result, hashing, hashing_s);
         if !args.json {
             print_scan_line(&rec);
         }
         records.push(rec);
     }
-    summarize(
-        &args,
-        &methods,
-        &map_path,
-        load_map_s,
-        hashing_index_s,
-        &localizer,
+    let report = EvalReport::new(
+        EvalSetup {
+            dataset: args.dataset.display().to_string(),
+            map: map_path.display().to_string(),
+            methods,
+            localizer: &localizer,
+            load_map_seconds: load_map_s,
+            hashing_index_seconds: hashing_index_s,
+            distractors,
+            track: args.track.map(|window| TrackSetup {
+                window,
+                odometry_drift: args.odometry_drift,
+                odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
+            }),
+        },
         &records,
-        mcd,
-        distractors.as_ref(),
-    )
+    );
+    if let Some(dir) = &args.figures {
+        let path = dir.join("curves.svg");
+        geodata::fsio::write_atomic(&path, report.curves_svg())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if args.json {
+        return super::mln::print_json(&report);
+    }
+    print_eval(&report, mcd);
+    Ok(())
 }
 
-/// The distractor map, its options and what was built.
-type Distractors = (PathBuf, DistractorOptions, DistractorSummary);
-
-fn top1_error(ranked: &[Pose2], truth: &Pose2) -> (f64, f64) {
-    ranked.first().map_or((f64::NAN, f64::NAN), |p| {
-        (p.distance_to(truth), p.yaw_error_to(truth).to_degrees())
-    })
-}
-
-fn print_scan_line(r: &ScanRecord) {
+fn print_scan_line(r: &ScanOutcome) {
     let mut line = format!(
         "{:<14} segs {:>3} cands {:>5}",
         r.name,
         r.result.segments.len(),
         r.result.candidates.len()
     );
-    for (k, name) in ["dcm", "fwd", "rev", "sym"].iter().enumerate() {
-        let (m, d) = top1_error(&r.ranked[k], &r.truth);
-        line += &format!(" | {name} {m:>7.2} m {d:>6.2}°");
+    for (m, name) in RankMethod::ALL
+        .iter()
+        .zip(["dcm", "fwd", "rev", "sym", "hash"])
+    {
+        let e = r.top1_error(*m);
+        line += &format!(" | {name} {:>7.2} m {:>6.2}°", e.error_m, e.error_deg);
     }
-    let (m, d) = top1_error(&r.hashing, &r.truth);
-    line += &format!(" | hash {m:>7.2} m {d:>6.2}°");
     line += &format!(
         " | conf {:.2} | {:.2} s",
         r.result.confidence, r.result.seconds.total
@@ -1171,268 +1086,26 @@ fn print_scan_line(r: &ScanRecord) {
     println!("{line}");
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-#[allow(clippy::too_many_arguments)]
-fn summarize(
-    args: &EvalArgs,
-    methods: &[Method],
-    map_path: &Path,
-    load_map_s: f64,
-    hashing_index_s: f64,
-    localizer: &Localizer<'_>,
-    records: &[ScanRecord],
-    mcd: bool,
-    distractors: Option<&Distractors>,
-) -> anyhow::Result<()> {
-    let n = records.len();
-    let method_rows: Vec<(&str, Method)> = methods
-        .iter()
-        .filter_map(|m| match m {
-            Method::Dcm => Some(("dcm", *m)),
-            Method::Forward => Some(("forward", *m)),
-            Method::Reverse => Some(("reverse", *m)),
-            Method::Symmetric => Some(("symmetric", *m)),
-            Method::Hashing => Some(("hashing", *m)),
-            Method::All => None,
-        })
-        .collect();
-    let ranked_for = |r: &ScanRecord, m: Method| -> Vec<Pose2> {
-        match m {
-            Method::Dcm => r.ranked[0].clone(),
-            Method::Forward => r.ranked[1].clone(),
-            Method::Reverse => r.ranked[2].clone(),
-            Method::Symmetric => r.ranked[3].clone(),
-            Method::Hashing => r.hashing.clone(),
-            Method::All => Vec::new(),
-        }
-    };
-    let mut table = serde_json::Map::new();
-    for (name, m) in &method_rows {
-        let acc = if *m == Method::Hashing {
-            Accuracy::HASHING
-        } else {
-            Accuracy::THESIS
-        };
-        let mut per_k = serde_json::Map::new();
-        for k in KS {
-            let mut per_w = serde_json::Map::new();
-            for w in RADII {
-                let c = records
-                    .iter()
-                    .filter(|r| accurate_within(&ranked_for(r, *m), &r.truth, k, w, acc))
-                    .count();
-                per_w.insert(radius_name(w), json!(c));
-            }
-            per_k.insert(k.to_string(), Value::Object(per_w));
-        }
-        table.insert(name.to_string(), Value::Object(per_k));
-    }
-    let in_set = records
-        .iter()
-        .filter(|r| {
-            accurate_within(
-                &r.ranked[2],
-                &r.truth,
-                usize::MAX,
-                f64::INFINITY,
-                Accuracy::THESIS,
-            )
-        })
-        .count();
-    let strict = Accuracy::STRICT;
-    let strict_top1: Vec<usize> = (0..4)
-        .map(|k| {
-            records
-                .iter()
-                .filter(|r| {
-                    r.ranked[k]
-                        .first()
-                        .is_some_and(|p| strict.accepts(p, &r.truth))
-                })
-                .count()
-        })
-        .collect();
-    // Top 10 by d_r within 2 m / 3° (issue 15's car-mounted target), and the sensors seen.
-    let strict_top10 = records
-        .iter()
-        .filter(|r| {
-            r.ranked[2]
-                .iter()
-                .take(10)
-                .any(|p| strict.accepts(p, &r.truth))
-        })
-        .count();
-    // Track mode: the scans after the first window.
-    // Track mode ranks by the chains of its window: judged in the localizer's own order.
-    let track_summary = args.track.map(|k| {
-        let after: Vec<&ScanRecord> = records.iter().skip(k.saturating_sub(1)).collect();
-        let within = |r: &ScanRecord, n: usize| {
-            r.result
-                .candidates
-                .iter()
-                .take(n)
-                .any(|c| strict.accepts(&c.pose, &r.truth))
-        };
-        let top1 = after.iter().filter(|r| within(r, 1)).count();
-        let top10 = after.iter().filter(|r| within(r, 10)).count();
-        (k, after.len(), top1, top10)
-    });
-    let mut sensors: Vec<(&str, usize)> = Vec::new();
-    for r in records.iter() {
-        let name = r.result.sensor.map_or("manual", |s| s.profile);
-        match sensors.iter_mut().find(|(p, _)| *p == name) {
-            Some(e) => e.1 += 1,
-            None => sensors.push((name, 1)),
-        }
-    }
-    let accurate_top1_err: Vec<f64> = records
-        .iter()
-        .filter_map(|r| {
-            r.ranked[2]
-                .first()
-                .filter(|p| Accuracy::THESIS.accepts(p, &r.truth))
-                .map(|p| p.distance_to(&r.truth))
-        })
-        .collect();
-    let median_err = median(accurate_top1_err);
-    let stage = |f: &dyn Fn(&ScanRecord) -> f64| -> (f64, f64, f64) {
-        let v: Vec<f64> = records.iter().map(f).collect();
-        let mean = if v.is_empty() {
-            0.0
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        };
-        let max = v.iter().copied().fold(0.0, f64::max);
-        (mean, median(v), max)
-    };
-    type StageFn = fn(&ScanRecord) -> f64;
-    let stages: [(&str, StageFn); 9] = [
-        ("surfaces", |r| r.result.seconds.surfaces),
-        ("segments", |r| r.result.seconds.segments),
-        ("templates", |r| r.result.seconds.templates),
-        ("search", |r| r.result.seconds.search),
-        ("filter", |r| r.result.seconds.filter),
-        ("visibility_costs", |r| r.result.seconds.visibility_costs),
-        ("refine", |r| r.result.seconds.refine),
-        ("total", |r| r.result.seconds.total),
-        ("hashing", |r| r.hashing_s),
-    ];
-    let timing: Vec<(&str, (f64, f64, f64))> = stages.iter().map(|(n, f)| (*n, stage(f))).collect();
-    let threads = rayon::current_num_threads();
-    let grid_m = localizer.dt.grid_m;
-    let search_area_km2 = localizer.domain.cells() as f64 * grid_m * grid_m / 1e6;
-    let distractors_json = distractors.map(|(path, o, s)| {
-        json!({
-            "map": path.display().to_string(),
-            "seed": o.seed,
-            "ring_m": o.ring_m,
-            "gap_m": o.gap_m,
-            "tile_m": o.tile_m,
-            "summary": s,
-        })
-    });
-    if let Some(dir) = &args.figures {
-        let path = dir.join("curves.svg");
-        let names: Vec<&str> = method_rows.iter().map(|(n, _)| *n).collect();
-        geodata::fsio::write_atomic(&path, curves_svg(&table, &names, n))
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    if args.json {
-        let scans: Vec<Value> = records
-            .iter()
-            .map(|r| {
-                let errs: serde_json::Map<String, Value> =
-                    ["dcm", "forward", "reverse", "symmetric"]
-                        .iter()
-                        .enumerate()
-                        .map(|(k, name)| {
-                            let (m, d) = top1_error(&r.ranked[k], &r.truth);
-                            (name.to_string(), json!({"error_m": m, "error_deg": d}))
-                        })
-                        .chain(std::iter::once({
-                            let (m, d) = top1_error(&r.hashing, &r.truth);
-                            ("hashing".to_string(), json!({"error_m": m, "error_deg": d}))
-                        }))
-                        .collect();
-                json!({
-                    "scan": r.name,
-                    "truth": {"x": r.truth.x, "y": r.truth.y, "yaw_grid": r.truth.yaw_rad},
-                    "segments": r.result.segments.len(),
-                    "sensor": r.result.sensor,
-                    "clearance_m": r.result.clearance_m,
-                    "raw_poses": r.result.raw_poses,
-                    "search": r.result.search,
-                    "candidates": r.result.candidates.len(),
-                    "confidence": r.result.confidence,
-                    "top1": errs,
-                    "top_costs": r.top_costs,
-                    "message": r.result.message,
-                    "seconds": r.result.seconds,
-                    "hashing_seconds": r.hashing_s,
-                })
-            })
-            .collect();
-        let v = json!({
-            "dataset": args.dataset.display().to_string(),
-            "map": map_path.display().to_string(),
-            "scans": n,
-            "thresholds": {"chamfer": {"m": 4.0, "rad": 0.2}, "hashing": {"m": 5.0, "rad": std::f64::consts::FRAC_PI_6}},
-            "distractors": distractors_json,
-            "search_area_km2": search_area_km2,
-            "n_accurate": table,
-            "accurate_in_candidate_set": in_set,
-            "top1_within_2m_3deg": {"dcm": strict_top1[0], "forward": strict_top1[1], "reverse": strict_top1[2], "symmetric": strict_top1[3]},
-            "top10_within_2m_3deg_reverse": strict_top10,
-            "track": track_summary.map(|(k, n, t1, t10)| json!({
-                "window": k,
-                "odometry_drift": args.odometry_drift,
-                "odometry_yaw_drift_deg_per_50m": args.odometry_yaw_drift_deg,
-                "scans_after_first_window": n,
-                "top1_within_2m_3deg": t1,
-                "top10_within_2m_3deg": t10,
-            })),
-            "sensors": sensors.iter().map(|(p, n)| (p.to_string(), json!(n))).collect::<serde_json::Map<String, Value>>(),
-            "median_error_accurate_top1_reverse_m": median_err,
-            "map_seconds": {
-                "load_map": load_map_s,
-                "map_edges": localizer.seconds.edges,
-                "distance_transform": localizer.seconds.distance_transform,
-                "pyramid": localizer.seconds.pyramid,
-                "feasible_mask": localizer.seconds.feasible,
-                "hashing_index": hashing_index_s,
-            },
-            "tensor": {"width": localizer.dt.width, "height": localizer.dt.height, "channels": localizer.dt.channels, "grid_m": localizer.dt.grid_m, "bytes": localizer.dt.bytes()},
-            "stage_seconds": timing.iter().map(|(n, (mean, med, max))| (n.to_string(), json!({"mean": mean, "median": med, "max": max}))).collect::<serde_json::Map<String, Value>>(),
-            "threads": threads,
-            "per_scan": scans,
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
-    }
+/// Prints the evaluation as tables.
+fn print_eval(r: &EvalReport, mcd: bool) {
+    let n = r.scans;
     println!();
     println!(
         "{} scans of {} on {} ({})",
         n,
-        args.dataset.display(),
-        map_path.display(),
+        r.dataset,
+        r.map,
         if mcd { "real MCD scans" } else { "simulated" }
     );
-    if let Some((path, o, s)) = distractors {
+    if let Some(d) = &r.distractors {
+        let s = &d.summary;
         println!(
             "embedded among distractors from {} (seed {}, ring {} m, gap {} m, tiles {} m): {} target buildings, {} distractor buildings ({} dropped at tile seams), {} distractor street segments in {} tiles; building box {:.2} km² → {:.2} km²",
-            path.display(),
-            o.seed,
-            o.ring_m,
-            o.gap_m,
-            o.tile_m,
+            d.map,
+            d.seed,
+            d.ring_m,
+            d.gap_m,
+            d.tile_m,
             s.target_buildings,
             s.distractor_buildings,
             s.dropped_overlapping,
@@ -1443,164 +1116,80 @@ fn summarize(
         );
     }
     println!(
-        "search area {search_area_km2:.2} km² ({} cells × {} yaws)",
-        localizer.domain.cells(),
-        records.first().map_or(0, |r| r.result.search.space
-            / localizer.domain.cells().max(1))
+        "search area {:.2} km² ({} cells × {} yaws)",
+        r.search_area_km2, r.domain_cells, r.yaws_per_cell
     );
     println!("N_accurate (thresholds 4 m / 0.2 rad; hashing 5 m / π/6), k best candidates within radius w (m) of the truth:");
     let mut header = format!("{:<10} {:>3}", "method", "k");
-    for w in RADII {
+    for w in RADII_M {
         header += &format!(" {:>6}", radius_name(w));
     }
     println!("{header}");
-    for (name, _) in &method_rows {
+    for &m in &r.methods {
         for k in KS {
-            let mut line = format!("{name:<10} {k:>3}");
-            for w in RADII {
-                let c = table
-                    .get(*name)
-                    .and_then(|v| v.get(k.to_string()))
-                    .and_then(|v| v.get(radius_name(w)))
-                    .and_then(Value::as_u64)
-                    .unwrap_or(0);
-                line += &format!(" {c:>6}");
+            let mut line = format!("{:<10} {k:>3}", m.name());
+            for w in RADII_M {
+                line += &format!(" {:>6}", r.n_accurate_at(m, k, w));
             }
             println!("{line}");
         }
     }
+    let t1 = &r.top1_within_2m_3deg;
     println!(
-        "accurate candidate in the candidate set: {in_set}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; top 10 (reverse) within 2 m and 3°: {strict_top10}/{n}; median error of accurate top-1 (reverse, refined) {median_err:.2} m",
-        strict_top1[0], strict_top1[1], strict_top1[2], strict_top1[3]
+        "accurate candidate in the candidate set: {}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; top 10 (reverse) within 2 m and 3°: {}/{n}; median error of accurate top-1 (reverse, refined) {:.2} m",
+        r.accurate_in_candidate_set,
+        t1.dcm,
+        t1.forward,
+        t1.reverse,
+        t1.symmetric,
+        r.top10_within_2m_3deg_reverse,
+        r.median_error_accurate_top1_reverse_m
     );
-    let sensor_counts: Vec<String> = sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
+    let sensor_counts: Vec<String> = r
+        .sensors_in_order
+        .iter()
+        .map(|(p, c)| format!("{p} ×{c}"))
+        .collect();
     println!("sensor profiles: {}", sensor_counts.join(", "));
-    if let Some((k, after, t1, t10)) = track_summary {
+    if let Some(t) = &r.track {
         println!(
-            "track mode (window {k}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 (reverse) within 2 m and 3° for {t1}/{after} scans, top 10 for {t10}/{after}",
-            100.0 * args.odometry_drift,
-            args.odometry_yaw_drift_deg
+            "track mode (window {}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 (reverse) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
+            t.window,
+            100.0 * t.odometry_drift,
+            t.odometry_yaw_drift_deg_per_50m,
+            t.top1_within_2m_3deg,
+            t.scans_after_first_window,
+            t.top10_within_2m_3deg,
+            t.scans_after_first_window
         );
     }
+    let (s, dt) = (&r.map_seconds, &r.tensor);
     println!(
-        "map: load {load_map_s:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, feasible-pose mask {:.3} s ({} of {} cells), hashing index {hashing_index_s:.3} s ({threads} threads)",
-        localizer.seconds.edges,
-        localizer.dt.width,
-        localizer.dt.height,
-        localizer.dt.channels,
-        localizer.dt.grid_m,
-        localizer.seconds.distance_transform,
-        localizer.seconds.pyramid,
-        localizer.seconds.feasible,
-        localizer.feasible.as_ref().map_or(localizer.domain.cells(), |m| m.feasible_cells),
-        localizer.domain.cells()
+        "map: load {:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, feasible-pose mask {:.3} s ({} of {} cells), hashing index {:.3} s ({} threads)",
+        s.load_map,
+        s.map_edges,
+        dt.width,
+        dt.height,
+        dt.channels,
+        dt.grid_m,
+        s.distance_transform,
+        s.pyramid,
+        s.feasible_mask,
+        r.feasible_cells,
+        r.domain_cells,
+        s.hashing_index,
+        r.threads
     );
     println!(
         "{:<18} {:>9} {:>9} {:>9}",
         "stage (s/scan)", "mean", "median", "max"
     );
-    for (name, (mean, med, max)) in &timing {
-        println!("{name:<18} {mean:>9.4} {med:>9.4} {max:>9.4}");
-    }
-    Ok(())
-}
-
-/// The curves of thesis Figs. 5.5/5.6: N_accurate against the search radius w, one panel per
-/// k, one line per method (`table[method][k][w]` as built by `summarize`).
-fn curves_svg(table: &serde_json::Map<String, Value>, methods: &[&str], scans: usize) -> String {
-    use std::fmt::Write as _;
-    let (pw, ph, left, top, gap) = (260.0, 220.0, 48.0, 30.0, 30.0);
-    let width = left + KS.len() as f64 * (pw + gap) + 110.0;
-    let height = top + ph + 50.0;
-    let colour = |m: &str| match m {
-        "dcm" => "#7f7f7f",
-        "forward" => "#1f77b4",
-        "reverse" => "#d62728",
-        "symmetric" => "#2ca02c",
-        _ => "#9467bd",
-    };
-    let mut out = format!(
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="11"><rect width="100%" height="100%" fill="white"/>"#
-    );
-    let ymax = scans.max(1) as f64;
-    for (p, k) in KS.iter().enumerate() {
-        let x0 = left + p as f64 * (pw + gap);
-        let px = |i: usize| x0 + pw * i as f64 / (RADII.len() - 1) as f64;
-        let py = |v: f64| top + ph * (1.0 - v / ymax);
-        let _ = write!(
-            out,
-            r#"<rect x="{x0:.1}" y="{top:.1}" width="{pw:.1}" height="{ph:.1}" fill="none" stroke="dimgray"/><text x="{:.1}" y="{:.1}" text-anchor="middle">k = {k}</text>"#,
-            x0 + pw / 2.0,
-            top - 8.0
-        );
-        for (i, w) in RADII.iter().enumerate() {
-            let _ = write!(
-                out,
-                r#"<line x1="{x:.1}" y1="{y0:.1}" x2="{x:.1}" y2="{y1:.1}" stroke="gainsboro"/><text x="{x:.1}" y="{ty:.1}" text-anchor="middle">{}</text>"#,
-                radius_name(*w),
-                x = px(i),
-                y0 = top,
-                y1 = top + ph,
-                ty = top + ph + 14.0
-            );
-        }
-        for q in 0..=4 {
-            let v = ymax * q as f64 / 4.0;
-            let _ = write!(
-                out,
-                r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{v:.0}</text>"#,
-                x0 - 4.0,
-                py(v) + 4.0
-            );
-        }
-        let _ = write!(
-            out,
-            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">search radius w (m)</text>"#,
-            x0 + pw / 2.0,
-            top + ph + 32.0
-        );
-        for m in methods {
-            let pts: Vec<String> = RADII
-                .iter()
-                .enumerate()
-                .map(|(i, w)| {
-                    let c = table
-                        .get(*m)
-                        .and_then(|v| v.get(k.to_string()))
-                        .and_then(|v| v.get(radius_name(*w)))
-                        .and_then(Value::as_u64)
-                        .unwrap_or(0);
-                    format!("{:.1},{:.1}", px(i), py(c as f64))
-                })
-                .collect();
-            let _ = write!(
-                out,
-                r#"<polyline points="{}" fill="none" stroke="{}" stroke-width="2"/>"#,
-                pts.join(" "),
-                colour(m)
-            );
-        }
-    }
-    let _ = write!(
-        out,
-        r#"<text x="12" y="{:.1}" transform="rotate(-90 12 {:.1})" text-anchor="middle">N_accurate of {scans}</text>"#,
-        top + ph / 2.0,
-        top + ph / 2.0
-    );
-    let lx = left + KS.len() as f64 * (pw + gap);
-    for (i, m) in methods.iter().enumerate() {
-        let y = top + 14.0 + 18.0 * i as f64;
-        let _ = write!(
-            out,
-            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{}" stroke-width="2"/><text x="{:.1}" y="{:.1}">{m}</text>"#,
-            lx + 22.0,
-            colour(m),
-            lx + 28.0,
-            y + 4.0
+    for (name, t) in &r.stages_in_order {
+        println!(
+            "{name:<18} {:>9.4} {:>9.4} {:>9.4}",
+            t.mean, t.median, t.max
         );
     }
-    out.push_str("</svg>");
-    out
 }
 
 /// An HTML table of JSON rows: one column per (header, key, decimals).

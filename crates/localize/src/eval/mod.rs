@@ -1,6 +1,10 @@
 //! Evaluation inputs and measures: simulated `localization` datasets (`dataset.json`,
 //! `truth.json`, `scan_NNN.ply`), the real MCD `kth_day_06` scans levelled into the sensor
-//! frame with their documented poses, and N_accurate of thesis §5.4.3.
+//! frame with their documented poses, and N_accurate of thesis §5.4.3; [`report`] tabulates
+//! a dataset's outcomes.
+
+pub mod report;
+pub use report::{EvalReport, EvalSetup, RankMethod, ScanOutcome};
 
 use crate::{LocalizeError, Pose2, Result};
 use geodata::datasets::mcd::McdSequence;
