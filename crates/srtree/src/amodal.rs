@@ -199,6 +199,30 @@ impl MapOutlines {
         MapOutlines { rings, bounds }
     }
 
+    /// The building outlines of an OSM map, moved into the frame of a cloud (`frame`: the
+    /// cloud's georeference; `Local` is the map's own frame).
+    pub fn from_osm(
+        osm: &geodata::osm::OsmMap,
+        frame: &geodata::georef::CloudFrame,
+    ) -> std::result::Result<MapOutlines, geodata::georef::GeorefError> {
+        if *frame == geodata::georef::CloudFrame::Local {
+            return Ok(MapOutlines::new(
+                osm.buildings.iter().map(|b| b.outer.clone()),
+            ));
+        }
+        let mut rings = Vec::with_capacity(osm.buildings.len());
+        for b in &osm.buildings {
+            let mut ring = Vec::with_capacity(b.outer.len());
+            for &v in &b.outer {
+                let (lat, lon) = osm.frame.to_wgs84(v);
+                let p = frame.from_wgs84(lat, lon, 0.0, &osm.frame)?;
+                ring.push([p[0], p[1]]);
+            }
+            rings.push(ring);
+        }
+        Ok(MapOutlines::new(rings))
+    }
+
     /// Number of outlines.
     pub fn len(&self) -> usize {
         self.rings.len()

@@ -62,6 +62,15 @@ pub struct RelationsDataset {
     pub test: Vec<Scene>,
 }
 
+/// A cross-dataset split ([`RelationsDataset::load_across`]).
+#[derive(Debug, Clone)]
+pub struct CrossSplit {
+    /// The test dataset, every scene in `test` (its `train` empty).
+    pub test: RelationsDataset,
+    /// The training scenes of the other datasets.
+    pub train: Vec<Scene>,
+}
+
 fn read_json(path: &Path) -> Result<Value> {
     let text = std::fs::read_to_string(path).map_err(io_err(path))?;
     serde_json::from_str(&text).map_err(|e| SrtreeError::Dataset {
@@ -284,6 +293,36 @@ pub fn load_scene(
 }
 
 impl RelationsDataset {
+    /// A cross-dataset split: a model trains on every scene of `train_dirs` (their own
+    /// train/test split ignored) and is tested on **every** scene of `test_dir`, none of
+    /// which it saw. A test folder among the training folders is an error.
+    pub fn load_across(
+        test_dir: &Path,
+        train_dirs: &[PathBuf],
+        map_options: &MapOptions,
+        objects: &ObjectOptions,
+    ) -> Result<CrossSplit> {
+        let test_canonical = test_dir.canonicalize().map_err(io_err(test_dir))?;
+        if let Some(p) = train_dirs
+            .iter()
+            .find(|p| p.canonicalize().ok().as_ref() == Some(&test_canonical))
+        {
+            return Err(SrtreeError::Dataset {
+                path: p.clone(),
+                message: "is the test dataset; a cross-dataset split trains on other datasets"
+                    .into(),
+            });
+        }
+        let mut test = RelationsDataset::load(test_dir, map_options, objects)?;
+        let mut train = Vec::new();
+        for p in train_dirs {
+            train.extend(RelationsDataset::load(p, map_options, objects)?.train);
+        }
+        let own_train = std::mem::take(&mut test.train);
+        test.test.splice(0..0, own_train);
+        Ok(CrossSplit { test, train })
+    }
+
     /// Loads every train and test scene of a dataset folder (scenes in parallel).
     pub fn load(
         dir: impl AsRef<Path>,

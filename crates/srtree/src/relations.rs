@@ -31,6 +31,7 @@ use geodata::classes::Class;
 use mln::infer::InferOptions;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
 /// Options of [`train`].
 #[derive(Debug, Clone)]
@@ -460,6 +461,96 @@ pub struct Evaluation {
     pub missing_pairs: usize,
     /// Every test pair and relation where SVM or SVM + MLN disagrees with the truth.
     pub errors: Vec<PairError>,
+}
+
+/// Precision, recall and F1 of both values of one relation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ValueMetrics {
+    /// Of the True value.
+    #[serde(rename = "true")]
+    pub true_value: Prf,
+    /// Of the False value.
+    #[serde(rename = "false")]
+    pub false_value: Prf,
+}
+
+/// Hard-rule violations of both outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Violations {
+    /// The classifiers alone.
+    pub svm: usize,
+    /// With MLN consistency.
+    pub mln: usize,
+}
+
+/// The Table 3.6 analogue as a value (`relations eval --json`): per output and relation
+/// name, the metrics of both values.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalReport {
+    /// The classifiers alone.
+    pub svm: BTreeMap<String, ValueMetrics>,
+    /// With MLN consistency.
+    pub mln: BTreeMap<String, ValueMetrics>,
+    /// Hard-rule violations.
+    pub violations: Violations,
+}
+
+impl OutputEval {
+    /// Metrics per relation name.
+    pub fn metrics(&self) -> BTreeMap<String, ValueMetrics> {
+        Relation::BASE
+            .into_iter()
+            .zip(&self.confusion)
+            .map(|(rel, c)| {
+                let m = ValueMetrics {
+                    true_value: c.true_value(),
+                    false_value: c.false_value(),
+                };
+                (rel.name().to_owned(), m)
+            })
+            .collect()
+    }
+}
+
+impl Evaluation {
+    /// The report of this evaluation.
+    pub fn report(&self) -> EvalReport {
+        EvalReport {
+            svm: self.svm.metrics(),
+            mln: self.mln.metrics(),
+            violations: Violations {
+                svm: self.svm.violations,
+                mln: self.mln.violations,
+            },
+        }
+    }
+
+    /// The Table 3.6 analogue as text: precision, recall and F1 per relation, output and
+    /// value, and the hard-rule violations.
+    pub fn table_text(&self) -> String {
+        let mut s = String::from("Relation  Model    Value  Precision  Recall  F1\n");
+        for (k, rel) in Relation::BASE.into_iter().enumerate() {
+            for (name, o) in [("SVM+MLN", &self.mln), ("SVM", &self.svm)] {
+                let c = &o.confusion[k];
+                for (value, m) in [("False", c.false_value()), ("True", c.true_value())] {
+                    s += &format!(
+                        "{:<9} {:<8} {:<6} {:>9.3} {:>7.3} {:>5.3}\n",
+                        rel.name(),
+                        name,
+                        value,
+                        m.precision,
+                        m.recall,
+                        m.f1
+                    );
+                }
+            }
+        }
+        s += &format!(
+            "hard-rule violations: SVM {}, SVM+MLN {}\n",
+            self.svm.violations, self.mln.violations
+        );
+        s
+    }
 }
 
 /// A test pair and relation that at least one output got wrong.

@@ -24,7 +24,7 @@ fn osm(name: &str) -> PathBuf {
     p
 }
 
-fn dataset(map: &Path, out: &Path) -> RelationsDataset {
+fn dataset(map: &Path, out: &Path) {
     let osm = OsmMap::load(map).unwrap();
     let options = RelationsOptions {
         train: 48,
@@ -40,23 +40,30 @@ fn dataset(map: &Path, out: &Path) -> RelationsDataset {
         &|_, _| {},
     )
     .unwrap();
-    RelationsDataset::load(out, &MapOptions::default(), &ObjectOptions::default()).unwrap()
 }
 
 #[test]
 fn a_model_trained_in_helsinki_holds_at_kth() {
     let dir = std::env::temp_dir().join(format!("srtree-cross-city-{}", std::process::id()));
-    let hel = dataset(&osm("helsinki_centre.osm.pbf"), &dir.join("hel"));
-    let mut kth = dataset(&osm("kth_campus_stockholm.osm"), &dir.join("kth"));
+    let (hel, kth) = (dir.join("hel"), dir.join("kth"));
+    dataset(&osm("helsinki_centre.osm.pbf"), &hel);
+    dataset(&osm("kth_campus_stockholm.osm"), &kth);
+    let (m, o) = (MapOptions::default(), ObjectOptions::default());
+    // The test dataset among the training ones is refused.
+    let err = RelationsDataset::load_across(&kth, &[hel.clone(), kth.clone()], &m, &o).unwrap_err();
+    assert!(err.to_string().contains("is the test dataset"), "{err}");
+    let split = RelationsDataset::load_across(&kth, std::slice::from_ref(&hel), &m, &o).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     // Every KTH scene is tested: none was seen in training.
-    let train_scenes = std::mem::take(&mut kth.train);
-    kth.test.splice(0..0, train_scenes);
-    assert_eq!((hel.train.len(), kth.test.len()), (48, 62));
+    let kth = split.test;
+    assert_eq!(
+        (split.train.len(), kth.test.len(), kth.train.len()),
+        (48, 62, 0)
+    );
     let mut options = TrainOptions::default();
     options.svm.seed = 1;
     options.learn.infer.walksat.seed = 1;
-    let model = train(&hel.train, &options).unwrap();
+    let model = train(&split.train, &options).unwrap();
     let mut infer = InferOptions::default();
     infer.walksat.seed = 1;
     let ev = evaluate(&model, &kth, &infer).unwrap();

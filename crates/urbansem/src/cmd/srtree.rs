@@ -11,7 +11,7 @@ use srtree::graph::{Relation, Viewpoint};
 use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
-use srtree::relations::{evaluate, relation_graph, train, Evaluation, RelationModel, TrainOptions};
+use srtree::relations::{evaluate, relation_graph, train, RelationModel, TrainOptions};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -423,29 +423,6 @@ fn eval_labels(
     Ok(())
 }
 
-/// The OSM map's building outlines in a cloud's frame.
-fn outlines_in_frame(
-    osm: &geodata::osm::OsmMap,
-    frame: &geodata::georef::CloudFrame,
-) -> anyhow::Result<MapOutlines> {
-    if *frame == geodata::georef::CloudFrame::Local {
-        return Ok(MapOutlines::new(
-            osm.buildings.iter().map(|b| b.outer.clone()),
-        ));
-    }
-    let mut rings = Vec::with_capacity(osm.buildings.len());
-    for b in &osm.buildings {
-        let mut ring = Vec::with_capacity(b.outer.len());
-        for &v in &b.outer {
-            let (lat, lon) = osm.frame.to_wgs84(v);
-            let p = frame.from_wgs84(lat, lon, 0.0, &osm.frame)?;
-            ring.push([p[0], p[1]]);
-        }
-        rings.push(ring);
-    }
-    Ok(MapOutlines::new(rings))
-}
-
 fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
     RelationsDataset::load(dir, &MapOptions::default(), &ObjectOptions::default())
         .with_context(|| format!("loading the relations dataset {}", dir.display()))
@@ -462,52 +439,6 @@ fn read_model(path: &Path) -> anyhow::Result<RelationModel> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{}: not a relation model", path.display()))
-}
-
-/// The JSON of an evaluation: `{"svm": R, "mln": R, "violations": {"svm": n, "mln": n}}`.
-pub(crate) fn evaluation_json(ev: &Evaluation) -> Value {
-    let r = |o: &srtree::relations::OutputEval| {
-        let mut m = serde_json::Map::new();
-        for (k, rel) in Relation::BASE.into_iter().enumerate() {
-            let c = &o.confusion[k];
-            m.insert(
-                rel.name().into(),
-                json!({"true": c.true_value(), "false": c.false_value()}),
-            );
-        }
-        Value::Object(m)
-    };
-    json!({
-        "svm": r(&ev.svm),
-        "mln": r(&ev.mln),
-        "violations": {"svm": ev.svm.violations, "mln": ev.mln.violations},
-    })
-}
-
-/// The Table 3.6 analogue as text.
-pub(crate) fn evaluation_table(ev: &Evaluation) -> String {
-    let mut s = String::from("Relation  Model    Value  Precision  Recall  F1\n");
-    for (k, rel) in Relation::BASE.into_iter().enumerate() {
-        for (name, o) in [("SVM+MLN", &ev.mln), ("SVM", &ev.svm)] {
-            let c = &o.confusion[k];
-            for (value, m) in [("False", c.false_value()), ("True", c.true_value())] {
-                s += &format!(
-                    "{:<9} {:<8} {:<6} {:>9.3} {:>7.3} {:>5.3}\n",
-                    rel.name(),
-                    name,
-                    value,
-                    m.precision,
-                    m.recall,
-                    m.f1
-                );
-            }
-        }
-    }
-    s += &format!(
-        "hard-rule violations: SVM {}, SVM+MLN {}\n",
-        ev.svm.violations, ev.mln.violations
-    );
-    s
 }
 
 /// Runs one `urbansem relations` subcommand.
@@ -549,7 +480,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 Some(path) => {
                     let osm = geodata::osm::OsmMap::load(path)
                         .with_context(|| format!("loading {}", path.display()))?;
-                    outlines_in_frame(&osm, &cloud_frame).with_context(|| {
+                    MapOutlines::from_osm(&osm, &cloud_frame).with_context(|| {
                         format!("moving {}'s outlines into the map's frame", path.display())
                     })?
                 }
@@ -608,7 +539,6 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             seed,
         } => {
             let t = Instant::now();
-            let mut ds = load_dataset(&dataset)?;
             let same = |p: &Path| {
                 p.canonicalize()
                     .ok()
@@ -620,21 +550,20 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                     p.display()
                 );
             }
-            let train_scenes: Option<Vec<_>> = if train_dataset.is_empty() {
-                None
+            // Across datasets every scene of the test dataset is unseen: test on all of
+            // them (a 14-scene test split holds as few as 7 Behind pairs).
+            let (ds, train_scenes) = if train_dataset.is_empty() {
+                (load_dataset(&dataset)?, None)
             } else {
-                let mut all = Vec::new();
-                for p in &train_dataset {
-                    all.extend(load_dataset(p)?.train);
-                }
-                Some(all)
+                let split = RelationsDataset::load_across(
+                    &dataset,
+                    &train_dataset,
+                    &MapOptions::default(),
+                    &ObjectOptions::default(),
+                )
+                .with_context(|| format!("loading the relations datasets {}", dataset.display()))?;
+                (split.test, Some(split.train))
             };
-            if train_scenes.is_some() {
-                // Across datasets every scene of the test dataset is unseen: test on all of
-                // them (a 14-scene test split holds as few as 7 Behind pairs).
-                let train_scenes = std::mem::take(&mut ds.train);
-                ds.test.splice(0..0, train_scenes);
-            }
             let load_s = t.elapsed().as_secs_f64();
             let t = Instant::now();
             let model = match model {
@@ -659,7 +588,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             if json {
-                println!("{}", serde_json::to_string_pretty(&evaluation_json(&ev))?);
+                super::mln::print_json(&ev.report())?;
             } else {
                 println!(
                     "{}: {} train{} / {} test scenes, {} test pairs ({} with an object missing from the map)",
@@ -676,7 +605,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                     ev.pairs,
                     ev.missing_pairs
                 );
-                print!("{}", evaluation_table(&ev));
+                print!("{}", ev.table_text());
                 println!(
                     "MLN weights: transitivity {:?}, evidence {:?}; {:.1} s loading, {:.1} s training, {:.1} s testing",
                     model.mln.transitivity,
@@ -875,7 +804,7 @@ pub(crate) fn demo_stage(
         summary: json!({
             "scenes": {"train": ds.train.len(), "test": ds.test.len()},
             "sim_seconds": sim_s,
-            "evaluation": evaluation_json(&ev),
+            "evaluation": ev.report(),
             "scene": scene.index,
             "cells": m.len(),
             "bytes_per_cell": mem.bytes_per_cell,
