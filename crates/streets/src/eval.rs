@@ -662,3 +662,83 @@ fn select_tempering(candidates: &[Tempering], sel: &Selection) -> Tempering {
     }
     candidates[best]
 }
+
+/// One method's row of the Table 4.1 analogue.
+fn scores_row(name: &str, s: &Scores) -> String {
+    let m = |v: Option<f64>| v.map_or("n/a".to_string(), |r| format!("{r:.2}"));
+    format!(
+        "  {name:<16} {:>6.3} {:>6.3} {:>6.3} {:>8} {:>8}",
+        s.precision,
+        s.recall,
+        s.f1,
+        m(s.rmse_w),
+        m(s.rmse_d)
+    )
+}
+
+impl EvalReport {
+    /// The Table 4.1 analogue as text: per target, precision, recall, F1, RMSE_w and the
+    /// offset RMSE of every method, then the seconds per stage.
+    pub fn table_text(&self) -> String {
+        let r = self;
+        let mut out = format!(
+            "{} segments, {:.0} m of street, {} usable bins\n",
+            r.segments, r.street_m, r.bins
+        );
+        for (name, t) in [
+            ("driving area & sidewalk", &r.with_sidewalk),
+            ("driving area only", &r.driving_area),
+        ] {
+            out += &format!(
+                "{name}\n  {:<16} {:>6} {:>6} {:>6} {:>8} {:>8}\n",
+                "method", "P", "R", "F1", "RMSE_w", "RMSE_d"
+            );
+            out += &(scores_row("raw", &t.raw) + "\n");
+            out += &(scores_row("single segment", &t.single_segment) + "\n");
+            out += &(scores_row("full model", &t.full_model) + "\n");
+            out += &(scores_row("opt. on truth", &t.opt_on_truth) + "\n");
+            out += &(scores_row("true geometry", &t.true_geometry) + "\n");
+        }
+        out += "seconds:";
+        for (k, v) in &r.seconds {
+            out += &format!(" {k}={v:.4}");
+        }
+        out
+    }
+
+    /// Diagnostics per target as text: max-product against MCMC, coupled pairs, support
+    /// vectors, confusion, tempering.
+    pub fn details_text(&self) -> String {
+        let r = self;
+        let mut out = format!(
+            "cost per metre of street: {:.2} ms (thesis 7.6 s)",
+            1000.0 * r.seconds.get("per_metre").copied().unwrap_or(f64::NAN)
+        );
+        for (k, d) in &r.details {
+            out += &format!(
+            "\n{k}: max-product ({}) log P {:.3}, MCMC log P {:.3} (gap {:.3}); MCMC F1 {:.3} RMSE_w {}; {} coupled pairs; {:.0} SVs/fold; confusion on the classifiers' held-out bins {:?}, on the test folds {:?}; tempering per fold (τ, floor, prior weight, coupling cap) {}",
+            if d.exact { "exact, tree" } else { "loopy" },
+            d.max_product_log_p,
+            d.mcmc_log_p,
+            d.max_product_log_p - d.mcmc_log_p,
+            d.mcmc.f1,
+            d.mcmc.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
+            d.edges,
+            d.support_vectors,
+            d.confusion,
+            d.confusion_test,
+            d.temperings
+                .iter()
+                .map(|t| {
+                    format!(
+                        "({}, {}, {}, {})",
+                        t.tau, t.floor_nats, t.prior_weight, t.coupling_cap_nats
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+        }
+        out
+    }
+}

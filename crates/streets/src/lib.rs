@@ -124,6 +124,23 @@ pub enum StreetsError {
         /// What is wrong (JSON line and column, or the field and its accepted range).
         message: String,
     },
+    /// A labelled sequence whose drive has too few segments with a derived truth for the
+    /// round-robin evaluation.
+    #[error("{dataset}: the drive passes {passed} drivable segments of {map} but only {with_truth} have a derived truth (street-labelled points on both sides of the centre line, bounded by sidewalk, terrain or buildings, in at least {min_slices} slices); the {folds}-fold evaluation needs {folds}")]
+    TooFewTruths {
+        /// The sequence folder.
+        dataset: PathBuf,
+        /// The map.
+        map: PathBuf,
+        /// Drivable segments the drive passes.
+        passed: usize,
+        /// Of them, with a derived truth.
+        with_truth: usize,
+        /// Slices a truth needs.
+        min_slices: usize,
+        /// Folds of the evaluation.
+        folds: usize,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {cause}")]
     Io {

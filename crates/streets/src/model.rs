@@ -341,6 +341,47 @@ pub fn network_edges(map: &OsmMap, which: &[usize], max_turn_deg: f64) -> Vec<Ed
     edges
 }
 
+/// The labelled bins of a dataset for training: features, labels and the true geometry of
+/// each segment they come from.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrainingBins {
+    /// Feature rows, [`FEATURE_DIMS`] per bin.
+    pub features: Vec<f32>,
+    /// Whether each bin is street for the target.
+    pub labels: Vec<bool>,
+    /// (offset, width) of every segment with usable bins, metres.
+    pub geometries: Vec<(f64, f64)>,
+}
+
+/// Features and labels (for `target`) of all usable labelled bins of a dataset's observed
+/// drivable segments.
+pub fn dataset_bins(
+    ds: &crate::dataset::StreetsDataset,
+    geometry: &GeometryOptions,
+    target: Target,
+) -> TrainingBins {
+    let which: Vec<usize> = (0..ds.segments.len())
+        .filter(|&s| ds.segments[s].drivable && ds.segments[s].observed)
+        .collect();
+    let bins = segment_bins(&ds.map, &ds.cloud, &which, geometry);
+    let mut out = TrainingBins::default();
+    for (&s, b) in which.iter().zip(&bins) {
+        let Some(b) = b else { continue };
+        let t = &ds.segments[s];
+        out.geometries.push(match target {
+            Target::DrivingArea => (t.offset_m, t.width_m),
+            Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
+        });
+        for k in b.usable() {
+            if let Some(c) = b.features.truth[k] {
+                out.features.extend_from_slice(b.features.row(k));
+                out.labels.push(target.positive(c));
+            }
+        }
+    }
+    out
+}
+
 /// A trained model for `urbansem streets estimate`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StreetModel {
@@ -386,6 +427,24 @@ pub const MIN_BIN_M: f64 = 0.05;
 pub const MAX_CORRIDOR_COLS: usize = 1000;
 
 impl StreetModel {
+    /// Trains a model for `target` on every usable labelled bin of a dataset (default
+    /// geometry options) and fits the geometry prior to its segments.
+    pub fn train(
+        ds: &crate::dataset::StreetsDataset,
+        target: Target,
+        classifier: &ClassifierOptions,
+    ) -> Result<StreetModel> {
+        let geometry = GeometryOptions::default();
+        let bins = dataset_bins(ds, &geometry, target);
+        let classifier = BinClassifier::train(&bins.features, &bins.labels, classifier)?;
+        Ok(StreetModel {
+            target,
+            geometry,
+            classifier,
+            prior: GeometryPrior::fit(&bins.geometries),
+        })
+    }
+
     /// Reads a model written by `urbansem streets train` (JSON) and checks every value
     /// [`StreetModel::estimate`] relies on: feature dimensions, finite numbers, positive
     /// scales, and a corridor of at most [`MAX_CORRIDOR_COLS`] bins of at least

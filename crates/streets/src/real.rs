@@ -27,6 +27,7 @@
 
 use crate::corridor::{map_corridors, Corridor, CorridorOptions};
 use crate::dataset::{SegmentTruth, StreetsDataset};
+use crate::eval::{EvalReport, SegmentGeometry};
 use crate::model::Target;
 use crate::{Result, StreetsError};
 use geodata::classes::Class;
@@ -565,6 +566,199 @@ pub fn load_sequence(
         observations,
         passed,
     })
+}
+
+/// One passed segment's observation, derived truth and (after the evaluation) estimate
+/// (`streets eval-real --segments-out`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SegmentRow<'a> {
+    /// Segment index in the map.
+    pub segment: usize,
+    /// Length, metres.
+    pub length_m: f64,
+    /// OSM highway tag.
+    pub highway: &'a str,
+    /// What the labelled points show.
+    pub observation: &'a SegmentObservation,
+    /// The full model's estimate and the truth, once evaluated.
+    pub estimate: Option<&'a SegmentGeometry>,
+}
+
+impl RealDataset {
+    /// The rows of the segments the drive passes (`geometries`: the evaluation's, if any).
+    pub fn segment_rows<'a>(
+        &'a self,
+        geometries: Option<&'a [SegmentGeometry]>,
+    ) -> Vec<SegmentRow<'a>> {
+        let segs = &self.dataset.map.streets.segments;
+        self.observations
+            .iter()
+            .filter(|o| self.passed.contains(&o.segment))
+            .map(|o| SegmentRow {
+                segment: o.segment,
+                length_m: segs[o.segment].length_m,
+                highway: &segs[o.segment].highway,
+                observation: o,
+                estimate: geometries.and_then(|g| g.iter().find(|s| s.segment == o.segment)),
+            })
+            .collect()
+    }
+
+    /// Passed segments with a derived truth; an error when fewer than `folds` have one.
+    pub fn check_evaluable(
+        &self,
+        dataset: &Path,
+        map: &Path,
+        folds: usize,
+        truth: &TruthOptions,
+    ) -> Result<usize> {
+        let with_truth = self
+            .passed
+            .iter()
+            .filter(|&&s| self.dataset.segments[s].observed)
+            .count();
+        if with_truth < folds {
+            return Err(StreetsError::TooFewTruths {
+                dataset: dataset.to_path_buf(),
+                map: map.to_path_buf(),
+                passed: self.passed.len(),
+                with_truth,
+                min_slices: truth.min_slices,
+                folds,
+            });
+        }
+        Ok(with_truth)
+    }
+}
+
+/// How many of the segments a drive passes have a truth and an estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Drivable segments the drive passes.
+    pub passed: usize,
+    /// Of them, with labelled points outside the intersection masks.
+    pub estimable: usize,
+    /// Of them, with a derived driving-area truth.
+    pub with_truth: usize,
+    /// Of them, also with a sidewalk truth.
+    pub with_sidewalk_truth: usize,
+    /// Of them, with a full-model estimate.
+    pub with_estimate: usize,
+    /// `with_estimate / with_truth`.
+    pub estimate_share_of_truth: f64,
+    /// `with_truth / passed`.
+    pub truth_share_of_passed: f64,
+    /// `with_truth / estimable`.
+    pub truth_share_of_estimable: f64,
+    /// Length of the passed segments, metres.
+    pub passed_m: f64,
+    /// Length of those with a truth, metres.
+    pub with_truth_m: f64,
+}
+
+/// The derived truth's options and the spread of its widths.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TruthSummary {
+    /// Options of the derivation.
+    pub options: TruthOptions,
+    /// Narrowest true driving area, metres.
+    pub width_m_min: f64,
+    /// Median true driving area, metres.
+    pub width_m_median: f64,
+    /// Widest true driving area, metres.
+    pub width_m_max: f64,
+}
+
+/// The sequence read.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SequenceSummary {
+    /// Its layout.
+    pub kind: SequenceKind,
+    /// Scans read.
+    pub scans: usize,
+    /// Points registered.
+    pub points: usize,
+}
+
+/// The Table 4.1 analogue on a real sequence (`streets eval-real --json`): the evaluation
+/// with the coverage, the truth's spread and the sequence read.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RealEvalReport {
+    /// The evaluation, as `streets eval` reports it.
+    #[serde(flatten)]
+    pub report: EvalReport,
+    /// Segments with a truth and an estimate.
+    pub coverage: Coverage,
+    /// The derived truth.
+    pub truth: TruthSummary,
+    /// The sequence.
+    pub dataset: SequenceSummary,
+}
+
+impl RealEvalReport {
+    /// The report of `report`, an evaluation of `real` with a truth derived under `truth`.
+    pub fn new(real: &RealDataset, report: EvalReport, truth: TruthOptions) -> Self {
+        let segs = &real.dataset.map.streets.segments;
+        let truths = &real.dataset.segments;
+        let passed = &real.passed;
+        let with_truth = passed.iter().filter(|&&s| truths[s].observed).count();
+        let estimated: std::collections::BTreeSet<usize> = report
+            .geometries
+            .get("driving_area")
+            .map(|g| g.iter().map(|s| s.segment).collect())
+            .unwrap_or_default();
+        let with_outer = passed
+            .iter()
+            .filter(|&&s| truths[s].observed && truths[s].outer_observed)
+            .count();
+        let with_estimate = passed.iter().filter(|&&s| estimated.contains(&s)).count();
+        // Segments with labelled points outside the intersection masks: a segment lying
+        // wholly within 10 m of intersections has no bins of its own, for any method.
+        let estimable = passed
+            .iter()
+            .filter(|&&s| real.observations[s].slices > 0)
+            .count();
+        let passed_m: f64 = passed.iter().map(|&s| segs[s].length_m).sum();
+        let with_truth_m: f64 = passed
+            .iter()
+            .filter(|&&s| truths[s].observed)
+            .map(|&s| segs[s].length_m)
+            .sum();
+        let mut widths: Vec<f64> = passed
+            .iter()
+            .filter(|&&s| truths[s].observed)
+            .map(|&s| truths[s].width_m)
+            .collect();
+        let width_m_min = widths.iter().copied().fold(f64::INFINITY, f64::min);
+        let width_m_max = widths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let width_m_median = median(&mut widths);
+        RealEvalReport {
+            report,
+            coverage: Coverage {
+                passed: passed.len(),
+                estimable,
+                with_truth,
+                with_sidewalk_truth: with_outer,
+                with_estimate,
+                estimate_share_of_truth: with_estimate as f64 / with_truth.max(1) as f64,
+                truth_share_of_passed: with_truth as f64 / passed.len().max(1) as f64,
+                truth_share_of_estimable: with_truth as f64 / estimable.max(1) as f64,
+                passed_m,
+                with_truth_m,
+            },
+            truth: TruthSummary {
+                options: truth,
+                width_m_min,
+                width_m_median,
+                width_m_max,
+            },
+            dataset: SequenceSummary {
+                kind: real.kind,
+                scans: real.scans,
+                points: real.dataset.cloud.len(),
+            },
+        }
+    }
 }
 
 #[cfg(test)]

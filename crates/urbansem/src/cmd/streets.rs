@@ -10,14 +10,10 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use streets::dataset::StreetsDataset;
-use streets::eval::{evaluate, EvalOptions, EvalReport, Scores};
-use streets::features::FEATURE_DIMS;
-use streets::model::{
-    segment_bins, BinClassifier, ClassifierOptions, GeometryOptions, Scaler, StreetModel, Target,
-};
-use streets::potentials::GeometryPrior;
-use streets::real::{load_sequence, TruthOptions};
-use streets::svm::{Svm, SvmOptions};
+use streets::eval::{evaluate, EvalOptions, Scores};
+use streets::model::{dataset_bins, ClassifierOptions, GeometryOptions, StreetModel, Target};
+use streets::real::{load_sequence, RealEvalReport, TruthOptions};
+use streets::svm::SvmOptions;
 
 /// Arguments of `urbansem streets`.
 #[derive(Args)]
@@ -259,10 +255,10 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             }
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
-                eprintln!("{}", details_text(&report));
+                eprintln!("{}", report.details_text());
             } else {
-                println!("{}", table_text(&report));
-                println!("{}", details_text(&report));
+                println!("{}", report.table_text());
+                println!("{}", report.details_text());
             }
             Ok(())
         }
@@ -281,7 +277,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         } => {
             let ds = StreetsDataset::load(&dataset)
                 .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
-            let model = train_model(&ds, target.into(), &training)?;
+            let model = StreetModel::train(&ds, target.into(), &training.classifier())?;
             geodata::fsio::write_atomic(&out, serde_json::to_vec(&model)?)
                 .with_context(|| format!("writing {}", out.display()))?;
             println!(
@@ -353,7 +349,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             cache_mb,
             seed,
             json,
-        } => bench_svm(
+        } => urbansem_bench::streets_svm::bench_svm(
             &dataset,
             train,
             test,
@@ -364,64 +360,6 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             json,
         ),
     }
-}
-
-/// Features and labels (for a target) of all usable labelled bins of a dataset.
-fn dataset_bins(
-    ds: &StreetsDataset,
-    geometry: &GeometryOptions,
-    target: Target,
-) -> (Vec<f32>, Vec<bool>, Vec<(f64, f64)>) {
-    let which: Vec<usize> = (0..ds.segments.len())
-        .filter(|&s| ds.segments[s].drivable && ds.segments[s].observed)
-        .collect();
-    let bins = segment_bins(&ds.map, &ds.cloud, &which, geometry);
-    let mut x = Vec::new();
-    let mut y = Vec::new();
-    let mut geoms = Vec::new();
-    for (&s, b) in which.iter().zip(&bins) {
-        let Some(b) = b else { continue };
-        let t = &ds.segments[s];
-        geoms.push(match target {
-            Target::DrivingArea => (t.offset_m, t.width_m),
-            Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
-        });
-        for k in b.usable() {
-            if let Some(c) = b.features.truth[k] {
-                x.extend_from_slice(b.features.row(k));
-                y.push(target.positive(c));
-            }
-        }
-    }
-    (x, y, geoms)
-}
-
-fn train_model(
-    ds: &StreetsDataset,
-    target: Target,
-    training: &TrainingArgs,
-) -> anyhow::Result<StreetModel> {
-    let geometry = GeometryOptions::default();
-    let (x, y, geoms) = dataset_bins(ds, &geometry, target);
-    let classifier = BinClassifier::train(&x, &y, &training.classifier())?;
-    Ok(StreetModel {
-        target,
-        geometry,
-        classifier,
-        prior: GeometryPrior::fit(&geoms),
-    })
-}
-
-fn scores_row(name: &str, s: &Scores) -> String {
-    let m = |v: Option<f64>| v.map_or("n/a".to_string(), |r| format!("{r:.2}"));
-    format!(
-        "  {name:<16} {:>6.3} {:>6.3} {:>6.3} {:>8} {:>8}",
-        s.precision,
-        s.recall,
-        s.f1,
-        m(s.rmse_w),
-        m(s.rmse_d)
-    )
 }
 
 /// `urbansem streets eval-real`.
@@ -454,110 +392,28 @@ fn eval_real(
         )
     })?;
     let load_s = t.elapsed().as_secs_f64();
-    let segs = &real.dataset.map.streets.segments;
-    let truth = &real.dataset.segments;
-    let passed = &real.passed;
     // The derived truth is written before the evaluation, so that a sequence too poorly
     // observed to evaluate can still be inspected.
     let write_segments = |geometries: Option<&Vec<streets::eval::SegmentGeometry>>| {
         let Some(p) = segments_out else {
             return Ok(());
         };
-        let rows: Vec<serde_json::Value> = real
-            .observations
-            .iter()
-            .filter(|o| passed.contains(&o.segment))
-            .map(|o| {
-                json!({
-                    "segment": o.segment,
-                    "length_m": segs[o.segment].length_m,
-                    "highway": segs[o.segment].highway,
-                    "observation": o,
-                    "estimate": geometries.and_then(|g| g.iter().find(|s| s.segment == o.segment)),
-                })
-            })
-            .collect();
+        let rows = real.segment_rows(geometries.map(Vec::as_slice));
         geodata::fsio::write_atomic(p, serde_json::to_vec_pretty(&rows)?)
             .with_context(|| format!("writing {}", p.display()))
     };
     write_segments(None)?;
-    let with_truth = passed.iter().filter(|&&s| truth[s].observed).count();
-    if with_truth < options.folds {
-        bail!(
-            "{}: the drive passes {} drivable segments of {} but only {} have a derived truth (street-labelled points on both sides of the centre line, bounded by sidewalk, terrain or buildings, in at least {} slices); the {}-fold evaluation needs {}",
-            dataset.display(),
-            passed.len(),
-            map.display(),
-            with_truth,
-            truth_options.min_slices,
-            options.folds,
-            options.folds
-        );
-    }
+    real.check_evaluable(dataset, map, options.folds, &truth_options)?;
     let mut report = evaluate(&real.dataset, &options)
         .with_context(|| format!("evaluating {} on {}", dataset.display(), map.display()))?;
     report.seconds.insert("load_and_truth".into(), load_s);
     write_segments(report.geometries.get("driving_area"))?;
-    let estimated: std::collections::BTreeSet<usize> = report
-        .geometries
-        .get("driving_area")
-        .map(|g| g.iter().map(|s| s.segment).collect())
-        .unwrap_or_default();
-    let with_outer = passed
-        .iter()
-        .filter(|&&s| truth[s].observed && truth[s].outer_observed)
-        .count();
-    let with_estimate = passed.iter().filter(|&&s| estimated.contains(&s)).count();
-    // Segments with labelled points outside the intersection masks: a segment lying wholly
-    // within 10 m of intersections has no bins of its own, for any method.
-    let estimable = passed
-        .iter()
-        .filter(|&&s| real.observations[s].slices > 0)
-        .count();
-    let passed_m: f64 = passed.iter().map(|&s| segs[s].length_m).sum();
-    let truth_m: f64 = passed
-        .iter()
-        .filter(|&&s| truth[s].observed)
-        .map(|&s| segs[s].length_m)
-        .sum();
-    let coverage = json!({
-        "passed": passed.len(),
-        "estimable": estimable,
-        "with_truth": with_truth,
-        "with_sidewalk_truth": with_outer,
-        "with_estimate": with_estimate,
-        "estimate_share_of_truth": with_estimate as f64 / with_truth.max(1) as f64,
-        "truth_share_of_passed": with_truth as f64 / passed.len().max(1) as f64,
-        "truth_share_of_estimable": with_truth as f64 / estimable.max(1) as f64,
-        "passed_m": passed_m,
-        "with_truth_m": truth_m,
-    });
-    let mut widths: Vec<f64> = passed
-        .iter()
-        .filter(|&&s| truth[s].observed)
-        .map(|&s| truth[s].width_m)
-        .collect();
-    let width_min = widths.iter().copied().fold(f64::INFINITY, f64::min);
-    let width_max = widths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let width_median = streets::real::median(&mut widths);
-    let truth_summary = json!({
-        "options": truth_options,
-        "width_m_min": width_min,
-        "width_m_median": width_median,
-        "width_m_max": width_max,
-    });
+    let r = RealEvalReport::new(&real, report, truth_options);
     if json {
-        let mut v = serde_json::to_value(&report)?;
-        v["coverage"] = coverage;
-        v["truth"] = truth_summary;
-        v["dataset"] = json!({
-            "kind": real.kind,
-            "scans": real.scans,
-            "points": real.dataset.cloud.len(),
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        eprintln!("{}", details_text(&report));
+        super::mln::print_json(&r)?;
+        eprintln!("{}", r.report.details_text());
     } else {
+        let (c, t) = (&r.coverage, &r.truth);
         println!(
             "{:?} sequence {}: {} scans, {} points registered into {}",
             real.kind,
@@ -568,81 +424,22 @@ fn eval_real(
         );
         println!(
             "coverage: the drive passes {} drivable segments ({:.0} m), {} of them with bins outside the intersection masks; {} have a derived truth ({:.0} m; {} also with sidewalk), {} an estimate",
-            passed.len(),
-            passed_m,
-            estimable,
-            with_truth,
-            truth_m,
-            with_outer,
-            with_estimate
+            c.passed,
+            c.passed_m,
+            c.estimable,
+            c.with_truth,
+            c.with_truth_m,
+            c.with_sidewalk_truth,
+            c.with_estimate
         );
         println!(
             "true driving-area widths: median {:.1} m (min {:.1}, max {:.1})",
-            width_median, width_min, width_max
+            t.width_m_median, t.width_m_min, t.width_m_max
         );
-        println!("{}", table_text(&report));
-        println!("{}", details_text(&report));
+        println!("{}", r.report.table_text());
+        println!("{}", r.report.details_text());
     }
     Ok(())
-}
-
-fn table_text(r: &EvalReport) -> String {
-    let mut out = format!(
-        "{} segments, {:.0} m of street, {} usable bins\n",
-        r.segments, r.street_m, r.bins
-    );
-    for (name, t) in [
-        ("driving area & sidewalk", &r.with_sidewalk),
-        ("driving area only", &r.driving_area),
-    ] {
-        out += &format!(
-            "{name}\n  {:<16} {:>6} {:>6} {:>6} {:>8} {:>8}\n",
-            "method", "P", "R", "F1", "RMSE_w", "RMSE_d"
-        );
-        out += &(scores_row("raw", &t.raw) + "\n");
-        out += &(scores_row("single segment", &t.single_segment) + "\n");
-        out += &(scores_row("full model", &t.full_model) + "\n");
-        out += &(scores_row("opt. on truth", &t.opt_on_truth) + "\n");
-        out += &(scores_row("true geometry", &t.true_geometry) + "\n");
-    }
-    out += "seconds:";
-    for (k, v) in &r.seconds {
-        out += &format!(" {k}={v:.4}");
-    }
-    out
-}
-
-fn details_text(r: &EvalReport) -> String {
-    let mut out = format!(
-        "cost per metre of street: {:.2} ms (thesis 7.6 s)",
-        1000.0 * r.seconds.get("per_metre").copied().unwrap_or(f64::NAN)
-    );
-    for (k, d) in &r.details {
-        out += &format!(
-            "\n{k}: max-product ({}) log P {:.3}, MCMC log P {:.3} (gap {:.3}); MCMC F1 {:.3} RMSE_w {}; {} coupled pairs; {:.0} SVs/fold; confusion on the classifiers' held-out bins {:?}, on the test folds {:?}; tempering per fold (τ, floor, prior weight, coupling cap) {}",
-            if d.exact { "exact, tree" } else { "loopy" },
-            d.max_product_log_p,
-            d.mcmc_log_p,
-            d.max_product_log_p - d.mcmc_log_p,
-            d.mcmc.f1,
-            d.mcmc.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
-            d.edges,
-            d.support_vectors,
-            d.confusion,
-            d.confusion_test,
-            d.temperings
-                .iter()
-                .map(|t| {
-                    format!(
-                        "({}, {}, {}, {})",
-                        t.tau, t.floor_nats, t.prior_weight, t.coupling_cap_nats
-                    )
-                })
-                .collect::<Vec<_>>()
-                .join(" ")
-        );
-    }
-    out
 }
 
 /// KITTI-360: per-scan bins (0.2 m, 40 m × 40 m around the sensor, in the sensor's level frame).
@@ -677,9 +474,14 @@ fn kitti(
                 },
                 ..GeometryOptions::default()
             };
-            let (x, y, _) = dataset_bins(&ds, &geometry, target);
-            let r2 =
-                streets::kitti::train_xy_and_test(&x, &y, &test, target, &training.classifier())?;
+            let bins = dataset_bins(&ds, &geometry, target);
+            let r2 = streets::kitti::train_xy_and_test(
+                &bins.features,
+                &bins.labels,
+                &test,
+                target,
+                &training.classifier(),
+            )?;
             entry["sim_to_kitti"] =
                 json!({"precision": r2.precision, "recall": r2.recall, "f1": r2.f1});
         }
@@ -715,103 +517,6 @@ fn kitti(
                 }
             );
         }
-    }
-    Ok(())
-}
-
-/// Peak resident memory of this process, bytes (Linux `VmHWM`).
-fn peak_rss_bytes() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn bench_svm(
-    dataset: &Path,
-    n_train: usize,
-    n_test: usize,
-    export: Option<&Path>,
-    c: f64,
-    cache_mb: usize,
-    seed: u64,
-    json: bool,
-) -> anyhow::Result<()> {
-    use rand::seq::SliceRandom;
-    use rand::SeedableRng;
-    let ds = StreetsDataset::load(dataset)
-        .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
-    let (x, y, _) = dataset_bins(&ds, &GeometryOptions::default(), Target::DrivingArea);
-    drop(ds);
-    let n = y.len();
-    if n < n_train + n_test {
-        bail!(
-            "{} has {n} labelled bins, fewer than --train {n_train} + --test {n_test}",
-            dataset.display()
-        );
-    }
-    let mut order: Vec<usize> = (0..n).collect();
-    order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
-    let gather = |ids: &[usize]| {
-        let mut xs = Vec::with_capacity(ids.len() * FEATURE_DIMS);
-        for &i in ids {
-            xs.extend_from_slice(&x[i * FEATURE_DIMS..(i + 1) * FEATURE_DIMS]);
-        }
-        (xs, ids.iter().map(|&i| y[i]).collect::<Vec<bool>>())
-    };
-    let (mut xtr, ytr) = gather(&order[..n_train]);
-    let (mut xte, yte) = gather(&order[n_train..n_train + n_test]);
-    let scaler = Scaler::fit(&xtr, FEATURE_DIMS);
-    scaler.apply(&mut xtr);
-    scaler.apply(&mut xte);
-    if let Some(dir) = export {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        for (name, xs, ys) in [("train.svm", &xtr, &ytr), ("test.svm", &xte, &yte)] {
-            let mut s = String::new();
-            for (row, &l) in xs.chunks_exact(FEATURE_DIMS).zip(ys.iter()) {
-                s += if l { "+1" } else { "-1" };
-                for (k, v) in row.iter().enumerate() {
-                    if *v != 0.0 {
-                        s += &format!(" {}:{}", k + 1, v);
-                    }
-                }
-                s += "\n";
-            }
-            let p = dir.join(name);
-            geodata::fsio::write_atomic(&p, s)
-                .with_context(|| format!("writing {}", p.display()))?;
-        }
-    }
-    let options = SvmOptions {
-        c,
-        cache_mb,
-        ..SvmOptions::default()
-    };
-    // Reset the peak-RSS counter so that it measures training (Linux; ignored elsewhere).
-    drop(x);
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
-    let t = Instant::now();
-    let svm = Svm::train_flat(&xtr, FEATURE_DIMS, &ytr, &options)?;
-    let train_peak = peak_rss_bytes();
-    let train_s = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let pred = svm.predict_flat(&xte)?;
-    let predict_s = t.elapsed().as_secs_f64();
-    let acc =
-        pred.iter().zip(&yte).filter(|(a, b)| a == b).count() as f64 / yte.len().max(1) as f64;
-    let v = json!({
-        "train_bins": n_train, "test_bins": n_test, "features": FEATURE_DIMS,
-        "c": c, "gamma": svm.gamma, "eps": options.eps, "cache_mb": cache_mb,
-        "train_seconds": train_s, "predict_seconds": predict_s, "accuracy": acc,
-        "support_vectors": svm.support_count(), "iterations": svm.stats.iterations,
-        "objective": svm.stats.objective, "peak_rss_bytes": train_peak,
-        "threads": rayon::current_num_threads(),
-    });
-    if json {
-        println!("{}", serde_json::to_string(&v)?);
-    } else {
-        println!("{}", serde_json::to_string_pretty(&v)?);
     }
     Ok(())
 }
