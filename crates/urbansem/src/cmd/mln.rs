@@ -225,15 +225,6 @@ impl From<Problem> for Benchmark {
     }
 }
 
-/// Prints a report as pretty JSON, keys sorted.
-pub(crate) fn print_json(report: &impl serde::Serialize) -> anyhow::Result<()> {
-    println!(
-        "{}",
-        serde_json::to_string_pretty(&serde_json::to_value(report)?)?
-    );
-    Ok(())
-}
-
 fn score(args: &ScoreArgs) -> anyhow::Result<()> {
     let loaded = load_and_ground(&args.problem.files()?)?;
     let a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
@@ -247,7 +238,7 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
         hard_violations: s.hard_violations,
     };
     if args.json {
-        print_json(&report)?;
+        super::print_json(&report)?;
     } else {
         println!(
             "{}: {} atoms ({} are not unknown atoms of this ground problem)",
@@ -308,7 +299,7 @@ fn learn(args: &LearnArgs) -> anyhow::Result<()> {
         t0.elapsed().as_secs_f64(),
     );
     if args.json {
-        print_json(&r)?;
+        super::print_json(&r)?;
     } else {
         println!(
             "{}: {} unknown atoms ({} true in the labels), {} ground formulas; {} labels ({} not unknown atoms)",
@@ -373,7 +364,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     }
     let report = InferReport::new(&loaded, &args.problem.program, &options, &r, total_s);
     if args.json {
-        print_json(&report)?;
+        super::print_json(&report)?;
     } else {
         println!(
             "{}: {} ground atoms, {} ground formulas ({} higher-order)",

@@ -21,3 +21,12 @@ pub mod pbo;
 pub mod sim;
 pub mod srtree;
 pub mod streets;
+
+/// Prints a report as pretty JSON, keys sorted.
+pub(crate) fn print_json(report: &impl serde::Serialize) -> anyhow::Result<()> {
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&serde_json::to_value(report)?)?
+    );
+    Ok(())
+}

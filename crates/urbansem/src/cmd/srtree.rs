@@ -7,7 +7,7 @@ use serde_json::{json, Value};
 use srtree::amodal::MapOutlines;
 use srtree::dataset::RelationsDataset;
 use srtree::features::ViewObject;
-use srtree::graph::{Relation, Viewpoint};
+use srtree::graph::Viewpoint;
 use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
@@ -423,12 +423,12 @@ fn eval_labels(
     Ok(())
 }
 
-fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
+pub(crate) fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
     RelationsDataset::load(dir, &MapOptions::default(), &ObjectOptions::default())
         .with_context(|| format!("loading the relations dataset {}", dir.display()))
 }
 
-fn train_options(seed: u64) -> TrainOptions {
+pub(crate) fn train_options(seed: u64) -> TrainOptions {
     let mut o = TrainOptions::default();
     o.svm.seed = seed;
     o.learn.infer.walksat.seed = seed;
@@ -588,7 +588,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             if json {
-                super::mln::print_json(&ev.report())?;
+                super::print_json(&ev.report())?;
             } else {
                 println!(
                     "{}: {} train{} / {} test scenes, {} test pairs ({} with an object missing from the map)",
@@ -620,239 +620,9 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
     }
 }
 
-/// The demo stage: a small simulated relations dataset, a model trained on it, and one test
-/// scene's labelled map (top view) with its relation graph.
-pub(crate) fn demo_stage(
-    args: &crate::cmd::demo::DemoArgs,
-) -> anyhow::Result<crate::cmd::demo::StageOutput> {
-    use crate::report::{encode_png_rgb, escape, Html, Svg};
-    use geodata::sim::dataset::{write_relations, RelationsOptions};
-    use geodata::sim::sensor::SensorOptions;
-
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
-    let dir = args.out.join("relations-dataset");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let defaults = RelationsOptions::default();
-    let options = RelationsOptions {
-        scenes: 10,
-        train: 8,
-        annotator_noise: 0.05,
-        sensor: SensorOptions {
-            h_step_deg: 1.0,
-            v_step_deg: 1.0,
-            ..defaults.sensor.clone()
-        },
-        ..defaults
-    };
-    let t = Instant::now();
-    write_relations(
-        &map,
-        "embedded default city",
-        &dir,
-        &options,
-        args.seed,
-        &|_, _| {},
-    )
-    .context("simulating the relations dataset")?;
-    let sim_s = t.elapsed().as_secs_f64();
-    let ds = load_dataset(&dir)?;
-    let mut train_opts = train_options(args.seed);
-    train_opts.folds = 4;
-    train_opts.cs = vec![0.01, 0.1];
-    train_opts.positive_weights = vec![1.0, 2.0];
-    train_opts.learn.epochs = 2;
-    let model = train(&ds.train, &train_opts).context("training the demo relation model")?;
-    let mut infer = mln::infer::InferOptions::default();
-    infer.walksat.seed = args.seed;
-    let ev = evaluate(&model, &ds, &infer).context("evaluating the demo model")?;
-
-    // One test scene as a map: labelled top view and relation graph.
-    let scene = ds
-        .test
-        .first()
-        .context("the demo dataset has no test scene")?;
-    let ply = dir.join(format!("scene_{:03}.ply", scene.index));
-    let cloud =
-        geodata::cloud::read_cloud(&ply).with_context(|| format!("reading {}", ply.display()))?;
-    let mut m = SrMap::new(MapOptions::default())?;
-    m.insert_cloud(&cloud, Some(scene.viewpoint.position))?;
-    let vp = scene.viewpoint;
-    let objects: Vec<_> = extract_objects(&m, &ObjectOptions::default())
-        .into_iter()
-        .filter(|o| {
-            let v = vp.to_view(o.centroid);
-            v[0].hypot(v[1]) < 25.0
-        })
-        .collect();
-    let view: Vec<ViewObject> = objects
-        .iter()
-        .map(|o| ViewObject::from_map_object(&m, o, &vp))
-        .collect();
-    let out = model
-        .infer(&view, &infer)
-        .context("inferring the demo scene")?;
-    let nodes: Vec<_> = objects.iter().map(|o| o.node()).collect();
-    let graph = relation_graph(&nodes, &out.mln, vp);
-    m.relations = graph.clone();
-    let map_path = args.out.join("relations-scene.srt");
-    write_map(&map_path, &m).with_context(|| format!("writing {}", map_path.display()))?;
-
-    // Top view raster, 0.2 m per pixel, 60 m around the viewpoint; the highest cell wins.
-    let (half, px_m) = (30.0, 0.2);
-    let side = (2.0 * half / px_m) as usize;
-    let mut rgb = vec![244u8; side * side * 3];
-    let mut top = vec![f64::NEG_INFINITY; side * side];
-    for c in m.cells() {
-        let p = m.centre(c.key);
-        let (u, v) = (
-            ((p[0] - vp.position[0] + half) / px_m).floor(),
-            ((vp.position[1] + half - p[1]) / px_m).floor(),
-        );
-        if u < 0.0 || v < 0.0 || u >= side as f64 || v >= side as f64 {
-            continue;
-        }
-        let i = v as usize * side + u as usize;
-        if p[2] > top[i] {
-            top[i] = p[2];
-            rgb[3 * i..3 * i + 3].copy_from_slice(&c.class().color_rgb());
-        }
-    }
-    let png = encode_png_rgb(side as u32, side as u32, &rgb);
-    let mut svg = Svg::new(
-        600.0,
-        [vp.position[0] - half, vp.position[1] - half],
-        [vp.position[0] + half, vp.position[1] + half],
-    );
-    for o in &objects {
-        let [r, g, b] = o.class.color_rgb();
-        svg.polygon(
-            &o.bbox.footprint(),
-            &format!(
-                "fill:rgb({r},{g},{b});fill-opacity:0.35;stroke:rgb({r},{g},{b});stroke-width:1"
-            ),
-        );
-    }
-    let centre = |id: u32| graph.object(id).map(|o| [o.centroid[0], o.centroid[1]]);
-    // LeftOf and Behind drawn as their transitive reductions (a chain, not every implied
-    // pair); On as it is.
-    for (rel, colour) in [
-        (Relation::LeftOf, "#d62728"),
-        (Relation::Behind, "#1f77b4"),
-        (Relation::On, "#2ca02c"),
-    ] {
-        let edges: Vec<(u32, u32)> = if rel == Relation::On {
-            graph
-                .edges
-                .iter()
-                .filter(|e| e.has(rel))
-                .map(|e| (e.a, e.b))
-                .collect()
-        } else {
-            graph.transitive_reduction(rel)
-        };
-        for (ea, eb) in edges {
-            if let (Some(a), Some(b)) = (centre(ea), centre(eb)) {
-                // Arrow shaft plus a short head at b.
-                let d = [b[0] - a[0], b[1] - a[1]];
-                let len = d[0].hypot(d[1]).max(1e-9);
-                let u = [d[0] / len, d[1] / len];
-                let tip = [b[0] - 0.8 * u[0], b[1] - 0.8 * u[1]];
-                let l = [
-                    tip[0] - 0.8 * u[0] + 0.4 * u[1],
-                    tip[1] - 0.8 * u[1] - 0.4 * u[0],
-                ];
-                let r = [
-                    tip[0] - 0.8 * u[0] - 0.4 * u[1],
-                    tip[1] - 0.8 * u[1] + 0.4 * u[0],
-                ];
-                let w = if rel == Relation::LeftOf { 0.8 } else { 1.4 };
-                svg.polyline(
-                    &[a, tip],
-                    &format!("stroke:{colour};stroke-width:{w};stroke-opacity:0.7"),
-                );
-                svg.polyline(&[l, tip, r], &format!("stroke:{colour};stroke-width:{w}"));
-            }
-        }
-    }
-    let ahead = [
-        vp.position[0] + 4.0 * vp.yaw_rad.cos(),
-        vp.position[1] + 4.0 * vp.yaw_rad.sin(),
-    ];
-    svg.circle([vp.position[0], vp.position[1]], 6.0, "fill:black");
-    svg.polyline(
-        &[[vp.position[0], vp.position[1]], ahead],
-        "stroke:black;stroke-width:3",
-    );
-    svg.scale_bar(10.0);
-
-    let counts = |bit: Relation| graph.edges.iter().filter(|e| e.has(bit)).count();
-    let rows: Vec<Vec<String>> = Relation::BASE
-        .into_iter()
-        .enumerate()
-        .map(|(k, r)| {
-            vec![
-                r.name().to_string(),
-                format!("{:.3}", ev.svm.confusion[k].true_value().f1),
-                format!("{:.3}", ev.mln.confusion[k].true_value().f1),
-            ]
-        })
-        .collect();
-    let table = Html::table(&["relation", "SVM True-F1", "SVM+MLN True-F1"], &rows);
-    let mem = m.memory();
-    Ok(crate::cmd::demo::StageOutput {
-        key: "srtree",
-        summary: json!({
-            "scenes": {"train": ds.train.len(), "test": ds.test.len()},
-            "sim_seconds": sim_s,
-            "evaluation": ev.report(),
-            "scene": scene.index,
-            "cells": m.len(),
-            "bytes_per_cell": mem.bytes_per_cell,
-            "objects": objects.len(),
-            "edges": {"On": counts(Relation::On), "LeftOf": counts(Relation::LeftOf), "Behind": counts(Relation::Behind)},
-        }),
-        title: "srtree: semantic R-tree map and spatial relations (SVM + MLN)",
-        text_html: format!(
-            "{} simulated viewpoint scenes of the default city (5 % annotator noise); linear SVMs and the relation MLN \
-             trained on {}, scored on {} against the noise-free truth. Left: test scene {} as an SRTree map ({} cells of 0.1 m, \
-             {:.0} bytes per cell), top view coloured by the Dirichlet/majority cell class. Right: its objects' oriented boxes \
-             and the MAP relation graph from the viewpoint (black): LeftOf red, Behind blue (both as transitive reductions: \
-             chains without the implied pairs), On green. {} hard-rule violations \
-             in the SVM output, {} after the MLN.{table}",
-            ds.train.len() + ds.test.len(),
-            ds.train.len(),
-            ds.test.len(),
-            scene.index,
-            m.len(),
-            mem.bytes_per_cell,
-            ev.svm.violations,
-            ev.mln.violations,
-        ),
-        figures: vec![
-            Html::png_img(&png, &escape("labelled top view"), 600),
-            svg.finish(),
-        ],
-        files: vec![("relations-graph.dot", graph.to_dot().into_bytes())],
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn demo_stage_draws_the_map_and_graph() {
-        let out = std::env::temp_dir().join(format!("urbansem-srtree-demo-{}", std::process::id()));
-        let args = crate::cmd::demo::DemoArgs {
-            out: out.clone(),
-            seed: 1,
-        };
-        let stage = demo_stage(&args).unwrap();
-        assert_eq!(stage.key, "srtree");
-        assert!(stage.figures[1].contains("<polygon"));
-        assert_eq!(stage.summary["evaluation"]["violations"]["mln"], 0);
-        let _ = std::fs::remove_dir_all(out);
-    }
 
     #[test]
     fn bad_coordinates_are_errors() {

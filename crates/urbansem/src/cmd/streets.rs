@@ -2,7 +2,7 @@
 //! point cloud (issue 5, thesis ch. 4): evaluation, training, estimation, real-data
 //! classifier check on KITTI-360, and the SVM side of the libsvm comparison.
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::cloud::read_cloud;
 use geodata::osm::OsmMap;
@@ -10,7 +10,7 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use streets::dataset::StreetsDataset;
-use streets::eval::{evaluate, EvalOptions, Scores};
+use streets::eval::{evaluate, EvalOptions};
 use streets::model::{dataset_bins, ClassifierOptions, GeometryOptions, StreetModel, Target};
 use streets::real::{load_sequence, RealEvalReport, TruthOptions};
 use streets::svm::SvmOptions;
@@ -410,7 +410,7 @@ fn eval_real(
     write_segments(report.geometries.get("driving_area"))?;
     let r = RealEvalReport::new(&real, report, truth_options);
     if json {
-        super::mln::print_json(&r)?;
+        super::print_json(&r)?;
         eprintln!("{}", r.report.details_text());
     } else {
         let (c, t) = (&r.coverage, &r.truth);
@@ -519,178 +519,4 @@ fn kitti(
         }
     }
     Ok(())
-}
-
-/// The demo stage: a small simulated streets dataset on the embedded city, the evaluation
-/// and a Fig. 4.5-like figure (centre lines, buildings, estimated and true boundaries).
-pub(crate) fn demo_stage(
-    args: &crate::cmd::demo::DemoArgs,
-) -> anyhow::Result<crate::cmd::demo::StageOutput> {
-    use crate::report::{Html, Svg};
-    use geodata::sim::dataset::{write_streets, StreetsOptions};
-    use geodata::sim::sensor::SensorOptions;
-    use streets::corridor::SegmentFrame;
-    use streets::geojson::strip_ring;
-
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
-    let dir = args.out.join("streets-dataset");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let map_path = dir.join("city.osm");
-    let xml = geodata::city::generate_city(&geodata::city::CityOptions::default(), 1)
-        .context("writing the embedded city as OSM XML")?;
-    geodata::fsio::write_atomic(&map_path, xml)
-        .with_context(|| format!("writing {}", map_path.display()))?;
-    let defaults = StreetsOptions::default();
-    let options = StreetsOptions {
-        route_m: 700.0,
-        spacing_m: 20.0,
-        sensor: SensorOptions {
-            h_step_deg: 1.0,
-            v_step_deg: 1.0,
-            ..defaults.sensor.clone()
-        },
-        ..defaults
-    };
-    let t = Instant::now();
-    // The map is recorded relative to the dataset folder (see `sim dataset`).
-    write_streets(&map, "city.osm", &dir, &options, args.seed, &|_, _| {})
-        .context("simulating the streets dataset")?;
-    let sim_s = t.elapsed().as_secs_f64();
-    let ds = StreetsDataset::load(&dir).with_context(|| format!("loading {}", dir.display()))?;
-    let mut eval_options = EvalOptions {
-        classifier: ClassifierOptions {
-            max_train_bins: 1500,
-            calibration_bins: 1500,
-            seed: args.seed,
-            ..ClassifierOptions::default()
-        },
-        ..EvalOptions::default()
-    };
-    eval_options.mcmc.chains = 8;
-    eval_options.mcmc.iterations = 50_000;
-    eval_options.mcmc.seed = args.seed;
-    let report = evaluate(&ds, &eval_options).context("evaluating the demo streets dataset")?;
-
-    // Figure: the area of the evaluated segments.
-    let geoms = report
-        .geometries
-        .get("driving_area")
-        .cloned()
-        .unwrap_or_default();
-    let segs = &ds.map.streets.segments;
-    let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for g in &geoms {
-        if let Some(s) = segs.get(g.segment) {
-            for p in [s.a, s.b] {
-                for k in 0..2 {
-                    min[k] = min[k].min(p[k] - 25.0);
-                    max[k] = max[k].max(p[k] + 25.0);
-                }
-            }
-        }
-    }
-    if !min[0].is_finite() {
-        bail!("the demo evaluation returned no segments");
-    }
-    let mut svg = Svg::new(800.0, min, max);
-    for b in &ds.map.buildings {
-        svg.polygon(&b.outer, "fill:none;stroke:#2a9d3a;stroke-width:1");
-    }
-    for g in &geoms {
-        let Some(frame) = segs.get(g.segment).and_then(SegmentFrame::of) else {
-            continue;
-        };
-        svg.polygon(
-            &strip_ring(&frame, g.truth.0, g.truth.1),
-            "fill:#bbbbbb;fill-opacity:0.6;stroke:#888888;stroke-width:1",
-        );
-    }
-    for g in &geoms {
-        let Some(frame) = segs.get(g.segment).and_then(SegmentFrame::of) else {
-            continue;
-        };
-        svg.polygon(
-            &strip_ring(&frame, g.estimate.0, g.estimate.1),
-            "fill:none;stroke:#000000;stroke-width:1.5",
-        );
-        let s = &segs[g.segment];
-        svg.polyline(
-            &[s.a, s.b],
-            "stroke:#1f5fd0;stroke-width:1.5;stroke-dasharray:6,4;fill:none",
-        );
-    }
-    svg.scale_bar(50.0);
-    let figure = svg.finish();
-    let row = |name: &str, s: &Scores| {
-        vec![
-            name.to_string(),
-            format!("{:.3}", s.precision),
-            format!("{:.3}", s.recall),
-            format!("{:.3}", s.f1),
-            s.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
-        ]
-    };
-    let mut rows = Vec::new();
-    for (target, t) in [
-        ("driving area", &report.driving_area),
-        ("with sidewalk", &report.with_sidewalk),
-    ] {
-        rows.push(row(&format!("{target}: raw"), &t.raw));
-        rows.push(row(&format!("{target}: single segment"), &t.single_segment));
-        rows.push(row(&format!("{target}: full model"), &t.full_model));
-        rows.push(row(&format!("{target}: opt. on truth"), &t.opt_on_truth));
-        rows.push(row(&format!("{target}: true geometry"), &t.true_geometry));
-    }
-    let text_html = format!(
-        "<p>A {:.0} m route simulated on the embedded city ({} points, simulated in {:.1} s), {} evaluated segments, \
-         5-fold round robin over segments (Table 4.1 analogue). Figure: OSM centre lines dashed blue, \
-         buildings green, estimated driving area black, true driving area grey (cf. Fig. 4.5).</p>{}",
-        report.street_m,
-        ds.cloud.len(),
-        sim_s,
-        report.segments,
-        Html::table(&["method", "P", "R", "F1", "RMSE_w [m]"], &rows)
-    );
-    Ok(crate::cmd::demo::StageOutput {
-        key: "streets",
-        summary: json!({
-            "segments": report.segments,
-            "street_m": report.street_m,
-            "simulate_seconds": sim_s,
-            "eval": report,
-        }),
-        title: "streets: street width and offset per OSM segment",
-        text_html,
-        figures: vec![figure.clone()],
-        files: vec![("streets.svg", figure.into_bytes())],
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
-    use super::*;
-
-    #[test]
-    fn demo_stage_draws_the_figure_and_table() {
-        let out =
-            std::env::temp_dir().join(format!("urbansem-streets-demo-{}", std::process::id()));
-        let args = crate::cmd::demo::DemoArgs {
-            out: out.clone(),
-            seed: 1,
-        };
-        let t = Instant::now();
-        let stage = demo_stage(&args).unwrap();
-        eprintln!("demo stage: {:.1} s", t.elapsed().as_secs_f64());
-        assert_eq!(stage.key, "streets");
-        assert!(stage.figures[0].contains("<polygon"));
-        assert!(stage.text_html.contains("full model"));
-        assert!(
-            stage.summary["eval"]["driving_area"]["full_model"]["f1"]
-                .as_f64()
-                .unwrap()
-                > 0.5
-        );
-        let _ = std::fs::remove_dir_all(out);
-    }
 }
