@@ -9,7 +9,7 @@
 //!   When the query lists ground atoms of a predicate explicitly (the "canopy" of ER and
 //!   KB3), only those atoms are unknown and every other atom of it is false.
 //! - One ground formula is one factor with the formula's weight w: it contributes
-//!   −w·[F true] to the cost (eq. 3.1), with [F] = Π_clauses (1 − Π_{l∈C} l̄) in the literals
+//!   −w·[F true] to the cost (eq. 3.1), with \[F\] = Π_clauses (1 − Π_{l∈C} l̄) in the literals
 //!   of its CNF (thesis, after §3.2.3). Groundings with equal arguments are kept unless the
 //!   formula says `x != y`. Hard formulas get a weight larger than the sum of all soft
 //!   weights and are reported separately.
@@ -151,7 +151,7 @@ pub struct GroundProblem {
     pub atoms: Vec<GroundAtom>,
     /// Ground formulas still containing unknown atoms.
     pub factors: Vec<GroundFactor>,
-    /// The cost to minimise: Σ −w·[F] over `factors` (soft and hard).
+    /// The cost to minimise: Σ −w·\[F\] over `factors` (soft and hard).
     pub cost: Polynomial,
     /// The weight given to hard formulas.
     pub hard_weight: f64,
@@ -164,7 +164,7 @@ pub struct GroundProblem {
 /// Cost measures of an assignment (see the module documentation).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scores {
-    /// −Σ w·[F] over the soft factors with unknown atoms (hard ones excluded).
+    /// −Σ w·\[F\] over the soft factors with unknown atoms (hard ones excluded).
     pub cost: f64,
     /// Σ w over false positive-weight groundings plus Σ |w| over true negative-weight ones,
     /// all groundings (soft), evidence-decided ones included.

@@ -5,7 +5,7 @@
 //! w > 0 and false, or w < 0 and true. Each flip picks a random bad factor and, with
 //! probability `noise`, flips a random variable of it, else the variable whose flip lowers
 //! the total cost most. Ground formulas are factors (the `maxwalksat` method); so are the
-//! monomials of the cost polynomial, a·Π lᵢ being the factor (−a, [l₁] ∧ … ∧ [lₖ])
+//! monomials of the cost polynomial, a·Π lᵢ being the factor (−a, \[l₁\] ∧ … ∧ \[lₖ\])
 //! (`maxwalksat-monomials`, thesis §3.2.4). Chains run in parallel (rayon), each seeded
 //! from the base seed and its index; the best assignment wins (ties: lowest chain index).
 

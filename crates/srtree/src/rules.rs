@@ -12,7 +12,7 @@
 //! [`RuleOptions::beam`] best of them; the best rule seen wins, and its thresholds are
 //! then chosen again one at a time given all the other tests (RIPPER's optimisation).
 //! Before the search, 0/1 features with a value that (almost) no true positive has become
-//! preconditions ([`preconditions`]: both things in front, neither a ground surface), so
+//! preconditions (`preconditions`: both things in front, neither a ground surface), so
 //! the search spends its tests on what discriminates among the remaining pairs. Cost per
 //! step: O(B · F · n log n) for beam B, F features and n pairs.
 //!
@@ -65,7 +65,7 @@ pub struct RuleOptions {
     /// Rules kept per step.
     pub beam: usize,
     /// A 0/1 feature value holding at most this share of the true positives is excluded
-    /// before the search ([`preconditions`]).
+    /// before the search (`preconditions`).
     pub precondition_share: f64,
 }
 
