@@ -13,6 +13,7 @@
 //! factor × minimum (see [`search`]): every pose within the factor of the minimum survives,
 //! and the result equals exhaustive search ([`exhaustive_search`], checked in the tests).
 
+pub use crate::chamfer::Domain;
 use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
 use crate::feasible::FeasibleMask;
 use crate::{angle_diff, Pose2, Segment};
@@ -140,38 +141,6 @@ pub struct RawPose {
     pub i: i64,
     /// Cell y of the pose.
     pub j: i64,
-}
-
-/// A translation search domain in cells: `[i0, i1) × [j0, j1)`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Domain {
-    /// First cell x.
-    pub i0: i64,
-    /// First cell y.
-    pub j0: i64,
-    /// One past the last cell x.
-    pub i1: i64,
-    /// One past the last cell y.
-    pub j1: i64,
-}
-
-impl Domain {
-    /// The cells whose corner lies in `min..max` (metres).
-    pub fn from_box(dt: &DtTensor, min: [f64; 2], max: [f64; 2]) -> Domain {
-        let (i0, j0) = dt.cell_of(min);
-        let (i1, j1) = dt.cell_of(max);
-        Domain {
-            i0,
-            j0,
-            i1: i1 + 1,
-            j1: j1 + 1,
-        }
-    }
-
-    /// Number of cells.
-    pub fn cells(&self) -> u64 {
-        ((self.i1 - self.i0).max(0) * (self.j1 - self.j0).max(0)) as u64
-    }
 }
 
 /// Exact cost of a template at cell (i, j).

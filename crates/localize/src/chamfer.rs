@@ -745,6 +745,38 @@ impl BoundPyramid {
     }
 }
 
+/// A translation search domain in cells: `[i0, i1) × [j0, j1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Domain {
+    /// First cell x.
+    pub i0: i64,
+    /// First cell y.
+    pub j0: i64,
+    /// One past the last cell x.
+    pub i1: i64,
+    /// One past the last cell y.
+    pub j1: i64,
+}
+
+impl Domain {
+    /// The cells whose corner lies in `min..max` (metres).
+    pub fn from_box(dt: &DtTensor, min: [f64; 2], max: [f64; 2]) -> Domain {
+        let (i0, j0) = dt.cell_of(min);
+        let (i1, j1) = dt.cell_of(max);
+        Domain {
+            i0,
+            j0,
+            i1: i1 + 1,
+            j1: j1 + 1,
+        }
+    }
+
+    /// Number of cells.
+    pub fn cells(&self) -> u64 {
+        ((self.i1 - self.i0).max(0) * (self.j1 - self.j0).max(0)) as u64
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

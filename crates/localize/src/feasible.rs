@@ -13,8 +13,7 @@
 //! neighbourhood with the exact point–segment distance. Cost O(Σ building box cells +
 //! Σ street band cells + domain cells).
 
-use crate::candidates::Domain;
-use crate::chamfer::DtTensor;
+use crate::chamfer::{Domain, DtTensor};
 use crate::point_segment_distance;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;

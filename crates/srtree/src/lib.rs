@@ -11,6 +11,8 @@
 //! - [`scans`]: the real labelled scans of `../shared/data/lidar/`, registered with their poses.
 //! - [`label_eval`]: Dirichlet label choice against majority vote on the real scans.
 //! - [`objects`]: per object cells, centroid, class, oriented box (normal-histogram yaw).
+//! - [`boxes`]: annotated boxes, how a box looks from a viewpoint, the map's building outlines.
+//! - [`view`]: an object seen from a viewpoint (cells, azimuths, hulls, contact), occlusion.
 //! - [`amodal`]: class priors for what a scan does not show of an object (learnt on annotated boxes).
 //! - [`features`]: pairwise features of two objects in a viewpoint frame.
 //! - [`svm`]: linear SVM by dual coordinate descent (liblinear), cross-validation.
@@ -28,6 +30,7 @@
 //! ```
 
 pub mod amodal;
+pub mod boxes;
 pub mod consistency;
 pub mod dataset;
 pub mod dirichlet;
@@ -42,5 +45,6 @@ pub mod relations;
 pub mod rules;
 pub mod scans;
 pub mod svm;
+pub mod view;
 
 pub use error::{Result, SrtreeError};
