@@ -28,7 +28,9 @@ fn kitti360_bin_classifier_generalises_to_other_scans() {
         calibration_bins: 500,
         ..ClassifierOptions::default()
     };
-    for (target, min_f1) in [(Target::DrivingArea, 0.5), (Target::WithSidewalk, 0.75)] {
+    // Measured 2026-11-26 on this configuration (3 training scans, 2 test scans, 1 500
+    // training bins; seeded): F1 0.650 driving area, 0.886 with sidewalk. Pinned 0.05 below.
+    for (target, min_f1) in [(Target::DrivingArea, 0.60), (Target::WithSidewalk, 0.83)] {
         let r = train_and_test(&train, &test, target, &options).unwrap();
         eprintln!("{target:?}: {r:?}");
         assert!(r.f1 > min_f1, "{target:?}: {r:?}");

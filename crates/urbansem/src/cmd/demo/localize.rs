@@ -362,6 +362,13 @@ mod tests {
         let stage = stage(&args).unwrap();
         assert_eq!(stage.key, "localize");
         assert_eq!(stage.summary["scans"], 2);
+        // The README's demo claim: both simulated scans localized within 4 m / 0.2 rad
+        // (measured 2026-11-26: 0.54 m and 0.11 m); fails if either is lost.
+        assert_eq!(
+            stage.summary["top1_accurate_4m_0.2rad"], 2,
+            "{}",
+            stage.summary
+        );
         assert_eq!(stage.files.len(), 1);
         assert!(stage.figures[0].starts_with("<svg"));
     }
