@@ -8,6 +8,7 @@
 //! - [`mln`]: MLN MAP inference on the benchmark sets against Tuffy's answers.
 //! - [`srtree`]: map insertion and box queries against OctoMap and libspatialindex.
 //! - [`parsers`]: every reader on inputs of three sizes, and the OPB grid end to end.
+//! - [`sim`]: the scan simulator's rays per second (`urbansem sim bench`).
 //! - [`streets_svm`]: the street bin SVM beside libsvm (`urbansem streets bench-svm`).
 //! - [`metrics`]: CPU time and memory of this process.
 
@@ -15,6 +16,7 @@ pub mod metrics;
 pub mod mln;
 pub mod parsers;
 pub mod pbo;
+pub mod sim;
 pub mod srtree;
 pub mod streets_svm;
 

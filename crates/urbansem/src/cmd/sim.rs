@@ -8,8 +8,8 @@ use geodata::sim::dataset::{
     write_localization, write_relations, write_streets, DatasetSummary, LocalizationOptions,
     RelationsOptions, StreetsOptions,
 };
-use geodata::sim::scene::{MapErrorOptions, Scene, SceneOptions};
-use geodata::sim::sensor::{scan_with, ScanFrame, SensorOptions};
+use geodata::sim::scene::{MapErrorOptions, SceneOptions};
+use geodata::sim::sensor::SensorOptions;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -245,7 +245,7 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
             scans,
             seed,
             json,
-        } => bench(map.as_deref(), scans, seed, json),
+        } => urbansem_bench::sim::bench_sim(map.as_deref(), scans, seed, json),
     }
 }
 
@@ -270,85 +270,4 @@ fn load_or_default(map: Option<&Path>, out: &Path) -> anyhow::Result<(OsmMap, St
             ))
         }
     }
-}
-
-/// Result of the simulator benchmark.
-#[derive(serde::Serialize)]
-pub(crate) struct SimBench {
-    pub(crate) map: String,
-    pub(crate) scene_seconds: f64,
-    pub(crate) shapes: usize,
-    pub(crate) scans: usize,
-    pub(crate) rays: usize,
-    pub(crate) points: usize,
-    pub(crate) cast_seconds: f64,
-    pub(crate) rays_per_second: f64,
-    pub(crate) threads: usize,
-}
-
-/// Times scene building and `scans` default scans from sidewalk poses.
-pub(crate) fn measure(
-    map: &OsmMap,
-    name: &str,
-    scans: usize,
-    seed: u64,
-) -> anyhow::Result<SimBench> {
-    let t = Instant::now();
-    let scene = Scene::build(map, &SceneOptions::default(), seed).context("building the scene")?;
-    let scene_seconds = t.elapsed().as_secs_f64();
-    let poses = scene
-        .sample_sidewalk_poses(scans, seed)
-        .context("placing scanner poses")?;
-    let sensor = SensorOptions::default();
-    let t = Instant::now();
-    let (mut rays, mut points) = (0, 0);
-    for (i, pose) in poses.iter().enumerate() {
-        let (_, stats) = scan_with(&scene, pose, &sensor, seed + i as u64, ScanFrame::World)
-            .context("scanning")?;
-        rays += stats.rays;
-        points += stats.points;
-    }
-    let cast_seconds = t.elapsed().as_secs_f64();
-    Ok(SimBench {
-        map: name.to_string(),
-        scene_seconds,
-        shapes: scene.shape_count(),
-        scans: poses.len(),
-        rays,
-        points,
-        cast_seconds,
-        rays_per_second: rays as f64 / cast_seconds.max(1e-9),
-        threads: rayon::current_num_threads(),
-    })
-}
-
-fn bench(map: Option<&Path>, scans: usize, seed: u64, json: bool) -> anyhow::Result<()> {
-    let (map, name) = match map {
-        Some(path) => (
-            OsmMap::load(path).with_context(|| format!("loading the map {}", path.display()))?,
-            path.display().to_string(),
-        ),
-        None => (
-            geodata::city::default_city_map().context("generating the embedded default city")?,
-            "embedded default city".to_string(),
-        ),
-    };
-    let b = measure(&map, &name, scans, seed)?;
-    if json {
-        println!("{}", serde_json::to_string_pretty(&b)?);
-    } else {
-        println!(
-            "{}: scene with {} shapes built in {:.2} s; {} scans, {:.1} M rays, {} points in {:.2} s on {} threads: {:.2} M rays/s (target ≥ 1.0)",
-            b.map,
-            b.shapes,
-            b.scene_seconds,
-            b.scans,
-            b.rays as f64 / 1e6,
-            b.points,
-            b.cast_seconds,
-            b.threads,
-            b.rays_per_second / 1e6
-        );
-    }
-    Ok(())
 }
