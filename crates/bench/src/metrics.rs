@@ -31,18 +31,13 @@ pub fn cpu_seconds(clock: Clock) -> Option<f64> {
     }
 }
 
-/// Thread CPU seconds so far.
-pub fn thread_cpu_seconds() -> Option<f64> {
-    cpu_seconds(Clock::Thread)
-}
-
 /// Wall and thread CPU seconds of `f`.
 pub fn timed<R>(f: impl FnOnce() -> R) -> (R, f64, Option<f64>) {
-    let c0 = thread_cpu_seconds();
+    let c0 = cpu_seconds(Clock::Thread);
     let t0 = Instant::now();
     let r = f();
     let wall = t0.elapsed().as_secs_f64();
-    let cpu = thread_cpu_seconds().zip(c0).map(|(c1, c0)| c1 - c0);
+    let cpu = cpu_seconds(Clock::Thread).zip(c0).map(|(c1, c0)| c1 - c0);
     (r, wall, cpu)
 }
 

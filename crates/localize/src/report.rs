@@ -133,7 +133,6 @@ pub struct LocalizeReport {
 
 impl LocalizeReport {
     /// The report of `result`, its `top` best candidates listed.
-    #[allow(clippy::too_many_arguments)]
     pub fn new(
         localizer: &Localizer<'_>,
         map: &str,

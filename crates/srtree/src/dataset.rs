@@ -307,11 +307,7 @@ impl RelationsDataset {
             .iter()
             .find(|p| p.canonicalize().ok().as_ref() == Some(&test_canonical))
         {
-            return Err(SrtreeError::Dataset {
-                path: p.clone(),
-                message: "is the test dataset; a cross-dataset split trains on other datasets"
-                    .into(),
-            });
+            return Err(SrtreeError::TestAmongTraining { path: p.clone() });
         }
         let mut test = RelationsDataset::load(test_dir, map_options, objects)?;
         let mut train = Vec::new();

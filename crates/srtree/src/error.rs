@@ -120,6 +120,12 @@ pub enum SrtreeError {
         /// What is wrong and what was expected.
         message: String,
     },
+    /// A cross-dataset split whose test dataset is among its training datasets.
+    #[error("{path} is the test dataset; a cross-dataset split trains on other datasets")]
+    TestAmongTraining {
+        /// The training folder that is the test folder.
+        path: PathBuf,
+    },
     /// A point cloud could not be read.
     #[error(transparent)]
     Cloud(#[from] geodata::cloud::CloudError),

@@ -402,16 +402,18 @@ pub struct EvalReport {
     pub top10_within_2m_3deg_reverse: usize,
     /// Track-mode counts.
     pub track: Option<TrackCounts>,
-    /// Scans per sensor profile.
-    pub sensors: BTreeMap<String, usize>,
+    /// Scans per sensor profile, in the order first seen (a JSON object).
+    #[serde(serialize_with = "as_map")]
+    pub sensors: Vec<(String, usize)>,
     /// Median position error of accurate top-1 poses (reverse), metres.
     pub median_error_accurate_top1_reverse_m: f64,
     /// Seconds preparing the map.
     pub map_seconds: MapPrepSeconds,
     /// The distance-transform tensor.
     pub tensor: TensorInfo,
-    /// Seconds per scan and stage.
-    pub stage_seconds: BTreeMap<String, StageStats>,
+    /// Seconds per scan and stage, in pipeline order (a JSON object).
+    #[serde(serialize_with = "as_map")]
+    pub stage_seconds: Vec<(String, StageStats)>,
     /// Worker threads.
     pub threads: usize,
     /// One row per scan.
@@ -419,12 +421,6 @@ pub struct EvalReport {
     /// The methods evaluated, in table order.
     #[serde(skip)]
     pub methods: Vec<RankMethod>,
-    /// Sensor profiles in the order first seen, with their scans.
-    #[serde(skip)]
-    pub sensors_in_order: Vec<(String, usize)>,
-    /// Stage timings in table order.
-    #[serde(skip)]
-    pub stages_in_order: Vec<(String, StageStats)>,
     /// Position cells of the search domain.
     #[serde(skip)]
     pub domain_cells: u64,
@@ -434,6 +430,14 @@ pub struct EvalReport {
     /// Position cells the feasible-pose mask keeps.
     #[serde(skip)]
     pub feasible_cells: u64,
+}
+
+/// Serializes (key, value) pairs as a map.
+fn as_map<S: serde::Serializer, V: Serialize>(
+    pairs: &[(String, V)],
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    serializer.collect_map(pairs.iter().map(|(k, v)| (k, v)))
 }
 
 /// The median of the finite values (NaN if none).
@@ -506,7 +510,7 @@ impl EvalReport {
             .iter()
             .filter(|r| {
                 accurate_within(
-                    &r.ranked[2],
+                    r.ranked_by(RankMethod::Reverse),
                     &r.truth,
                     usize::MAX,
                     f64::INFINITY,
@@ -515,11 +519,11 @@ impl EvalReport {
             })
             .count();
         let strict = Accuracy::STRICT;
-        let strict_top1 = |k: usize| {
+        let strict_top1 = |m: RankMethod| {
             records
                 .iter()
                 .filter(|r| {
-                    r.ranked[k]
+                    r.ranked_by(m)
                         .first()
                         .is_some_and(|p| strict.accepts(p, &r.truth))
                 })
@@ -528,7 +532,7 @@ impl EvalReport {
         let top10_within_2m_3deg_reverse = records
             .iter()
             .filter(|r| {
-                r.ranked[2]
+                r.ranked_by(RankMethod::Reverse)
                     .iter()
                     .take(10)
                     .any(|p| strict.accepts(p, &r.truth))
@@ -554,18 +558,18 @@ impl EvalReport {
                 top10_within_2m_3deg: after.iter().filter(|r| within(r, 10)).count(),
             }
         });
-        let mut sensors_in_order: Vec<(String, usize)> = Vec::new();
+        let mut sensors: Vec<(String, usize)> = Vec::new();
         for r in records {
             let name = r.result.sensor.map_or("manual", |s| s.profile);
-            match sensors_in_order.iter_mut().find(|(p, _)| p == name) {
+            match sensors.iter_mut().find(|(p, _)| p == name) {
                 Some(e) => e.1 += 1,
-                None => sensors_in_order.push((name.to_owned(), 1)),
+                None => sensors.push((name.to_owned(), 1)),
             }
         }
         let accurate_top1_err: Vec<f64> = records
             .iter()
             .filter_map(|r| {
-                r.ranked[2]
+                r.ranked_by(RankMethod::Reverse)
                     .first()
                     .filter(|p| Accuracy::THESIS.accepts(p, &r.truth))
                     .map(|p| p.distance_to(&r.truth))
@@ -583,7 +587,7 @@ impl EvalReport {
             ("total", |r| r.result.seconds.total),
             ("hashing", |r| r.hashing_seconds),
         ];
-        let stages_in_order: Vec<(String, StageStats)> = stages
+        let stage_seconds: Vec<(String, StageStats)> = stages
             .iter()
             .map(|(name, f)| {
                 let v: Vec<f64> = records.iter().map(f).collect();
@@ -616,14 +620,14 @@ impl EvalReport {
             n_accurate,
             accurate_in_candidate_set,
             top1_within_2m_3deg: PerCost {
-                dcm: strict_top1(0),
-                forward: strict_top1(1),
-                reverse: strict_top1(2),
-                symmetric: strict_top1(3),
+                dcm: strict_top1(RankMethod::Dcm),
+                forward: strict_top1(RankMethod::Forward),
+                reverse: strict_top1(RankMethod::Reverse),
+                symmetric: strict_top1(RankMethod::Symmetric),
             },
             top10_within_2m_3deg_reverse,
             track,
-            sensors: sensors_in_order.iter().cloned().collect(),
+            sensors,
             median_error_accurate_top1_reverse_m: median(accurate_top1_err),
             map_seconds: MapPrepSeconds {
                 load_map: setup.load_map_seconds,
@@ -640,12 +644,10 @@ impl EvalReport {
                 grid_m,
                 bytes: localizer.dt.bytes(),
             },
-            stage_seconds: stages_in_order.iter().cloned().collect(),
+            stage_seconds,
             threads: rayon::current_num_threads(),
             per_scan: records.iter().map(ScanRow::new).collect(),
             methods: setup.methods,
-            sensors_in_order,
-            stages_in_order,
             domain_cells,
             yaws_per_cell: records
                 .first()

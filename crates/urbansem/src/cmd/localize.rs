@@ -1145,11 +1145,7 @@ fn print_eval(r: &EvalReport, mcd: bool) {
         r.top10_within_2m_3deg_reverse,
         r.median_error_accurate_top1_reverse_m
     );
-    let sensor_counts: Vec<String> = r
-        .sensors_in_order
-        .iter()
-        .map(|(p, c)| format!("{p} ×{c}"))
-        .collect();
+    let sensor_counts: Vec<String> = r.sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
     println!("sensor profiles: {}", sensor_counts.join(", "));
     if let Some(t) = &r.track {
         println!(
@@ -1184,7 +1180,7 @@ fn print_eval(r: &EvalReport, mcd: bool) {
         "{:<18} {:>9} {:>9} {:>9}",
         "stage (s/scan)", "mean", "median", "max"
     );
-    for (name, t) in &r.stages_in_order {
+    for (name, t) in &r.stage_seconds {
         println!(
             "{name:<18} {:>9.4} {:>9.4} {:>9.4}",
             t.mean, t.median, t.max

@@ -262,7 +262,7 @@ fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
 
 /// Generates a synthetic problem (default size: the thesis') into `out`; IE and KB3 read
 /// their facts from the data folder `data`.
-pub(crate) fn write_generated(
+fn write_generated(
     problem: Problem,
     size: Option<usize>,
     seed: u64,

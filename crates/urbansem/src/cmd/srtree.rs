@@ -12,6 +12,7 @@ use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
 use srtree::relations::{evaluate, relation_graph, train, RelationModel, TrainOptions};
+use srtree::SrtreeError;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -539,29 +540,25 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             seed,
         } => {
             let t = Instant::now();
-            let same = |p: &Path| {
-                p.canonicalize()
-                    .ok()
-                    .is_some_and(|c| Some(c) == dataset.canonicalize().ok())
-            };
-            if let Some(p) = train_dataset.iter().find(|p| same(p)) {
-                crate::cmd::usage!(
-                    "--train-dataset {} is the test dataset: its scenes would be tested after training on them; leave --train-dataset out to use its own train/test split",
-                    p.display()
-                );
-            }
             // Across datasets every scene of the test dataset is unseen: test on all of
             // them (a 14-scene test split holds as few as 7 Behind pairs).
             let (ds, train_scenes) = if train_dataset.is_empty() {
                 (load_dataset(&dataset)?, None)
             } else {
-                let split = RelationsDataset::load_across(
+                let split = match RelationsDataset::load_across(
                     &dataset,
                     &train_dataset,
                     &MapOptions::default(),
                     &ObjectOptions::default(),
-                )
-                .with_context(|| format!("loading the relations datasets {}", dataset.display()))?;
+                ) {
+                    Err(SrtreeError::TestAmongTraining { path }) => crate::cmd::usage!(
+                        "--train-dataset {} is the test dataset: its scenes would be tested after training on them; leave --train-dataset out to use its own train/test split",
+                        path.display()
+                    ),
+                    r => r.with_context(|| {
+                        format!("loading the relations datasets {}", dataset.display())
+                    })?,
+                };
                 (split.test, Some(split.train))
             };
             let load_s = t.elapsed().as_secs_f64();
