@@ -3,8 +3,8 @@
 
 use anyhow::Context;
 use geodata::osm::OsmMap;
-use geodata::sim::scene::{Scene, SceneOptions};
-use geodata::sim::sensor::{scan_with, ScanFrame, SensorOptions};
+use geosim::scene::{Scene, SceneOptions};
+use geosim::sensor::{scan_with, ScanFrame, SensorOptions};
 use std::path::Path;
 use std::time::Instant;
 
@@ -71,7 +71,7 @@ pub fn bench_sim(map: Option<&Path>, scans: usize, seed: u64, json: bool) -> any
             path.display().to_string(),
         ),
         None => (
-            geodata::city::default_city_map().context("generating the embedded default city")?,
+            geosim::city::default_city_map().context("generating the embedded default city")?,
             "embedded default city".to_string(),
         ),
     };

@@ -86,7 +86,7 @@ pub fn streets_truth(map: &geodata::osm::OsmMap) -> Vec<streets::dataset::Segmen
             sidewalk_m: 2.0,
             outer_offset_m: None,
             outer_observed: true,
-            drivable: geodata::sim::truth::is_drivable(&s.highway),
+            drivable: geodata::osm::tags::is_drivable(&s.highway),
             observed: true,
             points: 0,
         })
@@ -463,12 +463,12 @@ pub fn tiny_pbf(zlib: bool) -> Vec<u8> {
 
 fn osm_seeds(out: &mut Vec<Seed>) {
     out.push(seed("osm_xml", "streets", STREETS_MAP_XML));
-    let options = geodata::city::CityOptions {
+    let options = geosim::city::CityOptions {
         size_m: 260.0,
         block_m: 120.0,
-        ..geodata::city::CityOptions::default()
+        ..geosim::city::CityOptions::default()
     };
-    if let Ok(city) = geodata::city::generate_city(&options, 3) {
+    if let Ok(city) = geosim::city::generate_city(&options, 3) {
         out.push(seed("osm_xml", "city", city));
     }
     out.push(seed("osm_pbf", "tiny-raw", tiny_pbf(false)));

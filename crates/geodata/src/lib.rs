@@ -1,4 +1,4 @@
-//! Geographic ground truth for urbansem: OSM maps, point clouds, real scans, simulated scans.
+//! Geographic ground truth for urbansem: OSM maps, point clouds, real scans, dataset files.
 //!
 //! Where it sits in the pipeline: every map capability (`srtree`, `streets`, `localize`)
 //! reads its building outlines, street network and point clouds through this crate, all in
@@ -6,17 +6,16 @@
 //!
 //! - [`projection`]: WGS84 ↔ local transverse-Mercator frame (east, north in metres).
 //! - [`osm`]: `.osm` XML and `.osm.pbf` ingestion → buildings, street segments, intersections.
-//! - [`city`]: a seeded procedural city written as OSM XML (the embedded default map).
 //! - [`classes`]: urbansem's semantic classes and the mapping from dataset ids.
 //! - [`cloud`]: the column-wise [`cloud::PointCloud`] and its PLY/PCD/LAS/LAZ/KITTI IO.
 //! - [`georef`]: the frame of a user's registered cloud (local, UTM, ENU) into the map's frame.
 //! - [`mercator`]: scaled-Mercator georeferencing used by the KITTI and MCD datasets.
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
 //! - [`sensors`]: named LiDAR models (beam elevations, azimuth step, range, mount height).
+//! - [`simfiles`]: serde types of the simulated datasets' files (truth poses, map outlines).
+//! - [`svg`]: an SVG canvas in the local frame for pictures of maps and results.
 //! - [`fsio`]: atomic output files (written beside the target, renamed into place).
-//! - [`sim`]: the urban scan simulator (scene from a map, ray-cast scanner, datasets with truth).
 
-pub mod city;
 pub mod classes;
 pub mod cloud;
 pub mod datasets;
@@ -26,4 +25,5 @@ pub mod mercator;
 pub mod osm;
 pub mod projection;
 pub mod sensors;
-pub mod sim;
+pub mod simfiles;
+pub mod svg;

@@ -1,4 +1,4 @@
-//! Criterion bench of the candidate search on the embedded default city (`geodata::city`,
+//! Criterion bench of the candidate search on the embedded default city (`geosim::city`,
 //! seed 1) and a scan made of the map edges visible from a known pose on a street: the FDCM
 //! branch and bound against exhaustive search (on a 20 m × 20 m window of poses, where
 //! exhaustive search is affordable, and extrapolated per pose cell to the whole map) and
@@ -114,7 +114,7 @@ impl Fixture<'_> {
 }
 
 fn the_map() -> OsmMap {
-    geodata::city::default_city_map().expect("the embedded city")
+    geosim::city::default_city_map().expect("the embedded city")
 }
 
 fn bench_search(c: &mut Criterion) {

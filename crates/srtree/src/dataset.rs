@@ -15,7 +15,7 @@ use crate::features::ViewObject;
 use crate::graph::{Relation, Viewpoint};
 use crate::map::{MapOptions, SrMap};
 use crate::objects::{extract_objects, ObjectOptions};
-use geodata::sim::dataset::MapBuildings;
+use geodata::simfiles::MapBuildings;
 use rayon::prelude::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -163,7 +163,7 @@ fn annotated_box(o: &Value, path: &Path) -> Result<Option<AnnotatedBox>> {
     }))
 }
 
-/// Reads a dataset's map building outlines ([`geodata::sim::dataset::MapBuildings`]).
+/// Reads a dataset's map building outlines ([`geodata::simfiles::MapBuildings`]).
 pub fn read_map_buildings(path: &Path) -> Result<MapOutlines> {
     let text = std::fs::read_to_string(path).map_err(io_err(path))?;
     let file: MapBuildings = serde_json::from_str(&text)

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use geodata::osm::OsmMap;
-use geodata::sim::dataset::{write_relations, RelationsOptions};
+use geosim::dataset::{write_relations, RelationsOptions};
 use mln::infer::InferOptions;
 use srtree::dataset::RelationsDataset;
 use srtree::map::MapOptions;

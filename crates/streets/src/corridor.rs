@@ -297,7 +297,7 @@ pub fn map_corridors<T: Send>(
     let competitors: Vec<[[f64; 2]; 2]> = if options.mask_nearer_segments {
         segments
             .iter()
-            .filter(|s| geodata::sim::truth::is_drivable(&s.highway))
+            .filter(|s| geodata::osm::tags::is_drivable(&s.highway))
             .map(|s| [s.a, s.b])
             .collect()
     } else {

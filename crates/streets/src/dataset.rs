@@ -1,4 +1,4 @@
-//! The `streets` dataset format written by `geodata::sim` (`urbansem sim dataset --kind streets`).
+//! The `streets` dataset format written by `geosim` (`urbansem sim dataset --kind streets`).
 //!
 //! `DIR/dataset.json` (`{"kind": "streets", "map": "<path>", …}`), `DIR/cloud.ply` (labelled
 //! points in the map's local frame) and `DIR/segments.json` (one entry per segment of

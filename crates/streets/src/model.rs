@@ -611,7 +611,7 @@ impl StreetModel {
         }
         // Streets for cars only (footways have no driving area).
         let which: Vec<usize> = (0..segs.len())
-            .filter(|&s| geodata::sim::truth::is_drivable(&segs[s].highway))
+            .filter(|&s| geodata::osm::tags::is_drivable(&segs[s].highway))
             .collect();
         if which.is_empty() {
             return Err(StreetsError::NoStreets {

@@ -284,7 +284,7 @@ pub fn derive_truth(
         return (0..segs.len()).map(empty).collect();
     };
     let drivable: Vec<usize> = (0..segs.len())
-        .filter(|&s| geodata::sim::truth::is_drivable(&segs[s].highway))
+        .filter(|&s| geodata::osm::tags::is_drivable(&segs[s].highway))
         .collect();
     let observed = map_corridors(
         segs,
@@ -312,7 +312,7 @@ pub fn truths(map: &OsmMap, observations: &[SegmentObservation]) -> Vec<SegmentT
         .iter()
         .map(|o| {
             let drivable =
-                geodata::sim::truth::is_drivable(&map.streets.segments[o.segment].highway);
+                geodata::osm::tags::is_drivable(&map.streets.segments[o.segment].highway);
             match o.driving_area {
                 Some(d) => {
                     let outer = o.with_sidewalk.filter(|w| w.width_m >= d.width_m);
@@ -527,7 +527,7 @@ pub fn load_sequence(
     let observations = derive_truth(&map, &cloud, corridor, options);
     let segs = &map.streets.segments;
     let passed: Vec<usize> = (0..segs.len())
-        .filter(|&s| geodata::sim::truth::is_drivable(&segs[s].highway))
+        .filter(|&s| geodata::osm::tags::is_drivable(&segs[s].highway))
         .filter(|&s| drives_along(&trajectory, segs[s].a, segs[s].b))
         .collect();
     if passed.is_empty() {

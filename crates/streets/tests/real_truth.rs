@@ -3,8 +3,8 @@
 //! give clear errors.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
-use geodata::sim::dataset::{write_streets, StreetsOptions};
-use geodata::sim::sensor::SensorOptions;
+use geosim::dataset::{write_streets, StreetsOptions};
+use geosim::sensor::SensorOptions;
 use std::path::{Path, PathBuf};
 use streets::corridor::CorridorOptions;
 use streets::dataset::StreetsDataset;
@@ -26,9 +26,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[test]
 fn derived_truth_gives_a_simulated_streets_geometry_back() {
     let dir = temp_dir("sim");
-    let xml = geodata::city::generate_city(&geodata::city::CityOptions::default(), 1).unwrap();
+    let xml = geosim::city::generate_city(&geosim::city::CityOptions::default(), 1).unwrap();
     std::fs::write(dir.join("city.osm"), xml).unwrap();
-    let map = geodata::city::default_city_map().unwrap();
+    let map = geosim::city::default_city_map().unwrap();
     let defaults = StreetsOptions::default();
     let options = StreetsOptions {
         route_m: 900.0,

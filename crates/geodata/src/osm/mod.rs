@@ -46,6 +46,7 @@ pub mod model;
 pub mod network;
 mod pbf;
 mod rings;
+pub mod tags;
 mod xml;
 
 pub use error::OsmError;

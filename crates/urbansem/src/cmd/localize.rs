@@ -11,10 +11,10 @@
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
 //! knobs of [`ExtractArgs`] (issue 15).
 
-use crate::report::Svg;
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::osm::OsmMap;
+use geodata::svg::Svg;
 use localize::distractors::{embed_among_distractors, DistractorOptions};
 use localize::eval::report::{
     radius_name, DistractorsReport, EvalReport, EvalSetup, RankMethod, ScanOutcome, TrackSetup, KS,

@@ -2,14 +2,14 @@
 
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
-use geodata::city::{generate_city, generate_city_with_stats, CityOptions};
 use geodata::osm::OsmMap;
-use geodata::sim::dataset::{
+use geosim::city::{generate_city, generate_city_with_stats, CityOptions};
+use geosim::dataset::{
     write_localization, write_relations, write_streets, DatasetSummary, LocalizationOptions,
     RelationsOptions, StreetsOptions,
 };
-use geodata::sim::scene::{MapErrorOptions, SceneOptions};
-use geodata::sim::sensor::SensorOptions;
+use geosim::scene::{MapErrorOptions, SceneOptions};
+use geosim::sensor::SensorOptions;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -1,14 +1,14 @@
 //! Demo stage: the embedded default city.
 
 use super::{DemoArgs, StageOutput};
-use crate::report::Svg;
 use anyhow::Context;
+use geodata::svg::Svg;
 use serde_json::json;
 use std::time::Instant;
 
 pub(super) fn stage(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let t = Instant::now();
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let generate_s = t.elapsed().as_secs_f64();
     let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     let points = map

@@ -2,9 +2,9 @@
 
 use super::{DemoArgs, StageOutput};
 use crate::cmd::localize::figure;
-use crate::report::Svg;
 use anyhow::Context;
 use geodata::osm::OsmMap;
+use geodata::svg::Svg;
 use localize::eval::{Accuracy, SimDataset};
 use localize::pipeline::{Localization, LocalizeOptions, Localizer};
 use localize::Pose2;
@@ -32,10 +32,10 @@ fn rows_table(rows: &[Value], columns: &[(&str, &str, usize)]) -> String {
 /// The demo stage: simulated scans of the embedded default city (with the OSM map-error
 /// model) localized on its map without a prior.
 pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
-    use geodata::sim::scene::{MapErrorOptions, Scene, SceneOptions};
-    use geodata::sim::sensor::{scan_with, ScanFrame, SensorOptions};
+    use geosim::scene::{MapErrorOptions, Scene, SceneOptions};
+    use geosim::sensor::{scan_with, ScanFrame, SensorOptions};
 
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let scene = Scene::build(
         &map,
         &SceneOptions {
@@ -147,12 +147,12 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
 /// (OSM map-error model on), localized in track mode with odometry that drifts 2 % and
 /// 1° per 50 m, drawn over the map with the truth.
 pub(super) fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
-    use geodata::sim::dataset::{write_localization, LocalizationOptions};
+    use geosim::dataset::{write_localization, LocalizationOptions};
 
     const SCANS: usize = 12;
     const WINDOW: usize = 5;
     let strict = Accuracy::STRICT;
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     // The scans are written as a dataset (as `sim dataset --sensor hdl64` writes them), read
     // back, and removed: the demo's folder keeps only the figure and the summary.
     let dir = args.out.join(".track-hdl64");

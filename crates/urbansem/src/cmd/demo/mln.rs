@@ -114,7 +114,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
                         }
                     }
                 }
-                let (p1, p2) = (image_png(side, &observed), image_png(side, &map_on));
+                let (p1, p2) = (image_png(side, &observed)?, image_png(side, &map_on)?);
                 figures.push(Html::png_img(&p1, "ID: observed random image", 270));
                 figures.push(Html::png_img(&p2, "ID: MAP state of On(p)", 270));
                 files.push(("mln-id-observed.png", p1));

@@ -38,7 +38,7 @@ pub(super) fn synthetic_image(side: usize, noise: f64, seed: u64) -> (Vec<bool>,
     (clean, noisy)
 }
 
-pub(super) fn image_png(side: usize, pixels: &[bool]) -> Vec<u8> {
+pub(super) fn image_png(side: usize, pixels: &[bool]) -> anyhow::Result<Vec<u8>> {
     let rgb: Vec<u8> = pixels
         .iter()
         .flat_map(|&p| if p { [30, 30, 40] } else { [240, 236, 226] })
@@ -84,9 +84,9 @@ pub(super) fn denoise_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let errors_before = clean.iter().zip(&noisy).filter(|(a, b)| a != b).count();
     let errors_after = clean.iter().zip(&labels).filter(|(a, b)| a != b).count();
     let pngs = [
-        ("denoise-clean.png", image_png(side, &clean)),
-        ("denoise-noisy.png", image_png(side, &noisy)),
-        ("denoise-qpbo.png", image_png(side, &labels)),
+        ("denoise-clean.png", image_png(side, &clean)?),
+        ("denoise-noisy.png", image_png(side, &noisy)?),
+        ("denoise-qpbo.png", image_png(side, &labels)?),
     ];
     let figures = pngs
         .iter()

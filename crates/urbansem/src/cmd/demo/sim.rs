@@ -2,17 +2,18 @@
 
 use super::{DemoArgs, StageOutput};
 use anyhow::Context;
-use geodata::sim::scene::{MapErrorOptions, Scene, SceneOptions};
-use geodata::sim::sensor::{scan_with, ScanFrame, SensorOptions};
+use geosim::scene::{MapErrorOptions, Scene, SceneOptions};
+use geosim::sensor::{scan_with, ScanFrame, SensorOptions};
 use std::time::Instant;
 
 /// The demo's simulator stage: scans on the embedded default city, a map and a scan top view.
 pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
-    use crate::report::{encode_png_rgb, Html, Svg};
+    use crate::report::{encode_png_rgb, Html};
     use geodata::classes::Class;
+    use geodata::svg::Svg;
     use serde_json::json;
 
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let options = SceneOptions {
         map_error: MapErrorOptions::osm_like(),
         ..SceneOptions::default()
@@ -68,7 +69,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         if !t.on_ground {
             continue;
         }
-        let line = geodata::sim::truth::offset_centre_line(seg, t);
+        let line = geosim::truth::offset_centre_line(seg, t);
         let sidewalk_px = (t.width_m + 2.0 * if t.drivable { t.sidewalk_m } else { 0.0 }) * ppm;
         svg.polyline(
             &line,
@@ -77,7 +78,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     }
     for (seg, t) in scene.segments.iter().zip(&scene.truth) {
         if t.on_ground && t.drivable {
-            let line = geodata::sim::truth::offset_centre_line(seg, t);
+            let line = geosim::truth::offset_centre_line(seg, t);
             svg.polyline(
                 &line,
                 &format!(
@@ -148,7 +149,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             rgb[3 * i..3 * i + 3].copy_from_slice(&c);
         }
     }
-    let png = encode_png_rgb(side as u32, side as u32, &rgb);
+    let png = encode_png_rgb(side as u32, side as u32, &rgb)?;
     let legend: String = Class::ALL[1..]
         .iter()
         .map(|c| {

@@ -15,11 +15,12 @@ use std::time::Instant;
 /// The demo stage: a small simulated relations dataset, a model trained on it, and one test
 /// scene's labelled map (top view) with its relation graph.
 pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
-    use crate::report::{encode_png_rgb, escape, Html, Svg};
-    use geodata::sim::dataset::{write_relations, RelationsOptions};
-    use geodata::sim::sensor::SensorOptions;
+    use crate::report::{encode_png_rgb, escape, Html};
+    use geodata::svg::Svg;
+    use geosim::dataset::{write_relations, RelationsOptions};
+    use geosim::sensor::SensorOptions;
 
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let dir = args.out.join("relations-dataset");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let defaults = RelationsOptions::default();
@@ -107,7 +108,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             rgb[3 * i..3 * i + 3].copy_from_slice(&c.class().color_rgb());
         }
     }
-    let png = encode_png_rgb(side as u32, side as u32, &rgb);
+    let png = encode_png_rgb(side as u32, side as u32, &rgb)?;
     let mut svg = Svg::new(
         600.0,
         [vp.position[0] - half, vp.position[1] - half],

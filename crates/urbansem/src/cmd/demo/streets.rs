@@ -11,17 +11,18 @@ use streets::model::ClassifierOptions;
 /// The demo stage: a small simulated streets dataset on the embedded city, the evaluation
 /// and a Fig. 4.5-like figure (centre lines, buildings, estimated and true boundaries).
 pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
-    use crate::report::{Html, Svg};
-    use geodata::sim::dataset::{write_streets, StreetsOptions};
-    use geodata::sim::sensor::SensorOptions;
+    use crate::report::Html;
+    use geodata::svg::Svg;
+    use geosim::dataset::{write_streets, StreetsOptions};
+    use geosim::sensor::SensorOptions;
     use streets::corridor::SegmentFrame;
     use streets::geojson::strip_ring;
 
-    let map = geodata::city::default_city_map().context("generating the embedded default city")?;
+    let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let dir = args.out.join("streets-dataset");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let map_path = dir.join("city.osm");
-    let xml = geodata::city::generate_city(&geodata::city::CityOptions::default(), 1)
+    let xml = geosim::city::generate_city(&geosim::city::CityOptions::default(), 1)
         .context("writing the embedded city as OSM XML")?;
     geodata::fsio::write_atomic(&map_path, xml)
         .with_context(|| format!("writing {}", map_path.display()))?;

@@ -31,13 +31,13 @@ use super::ground::{GroundModel, GroundOptions, Look};
 use super::raycast::{Caster, Shape};
 use super::truth::{offset_centre_line, street_truth, StreetTruth, TruthOptions};
 use super::{mix64, normal, purpose, stream_rng, SimError};
-use crate::classes::Class;
-use crate::osm::geometry::{
+use geodata::classes::Class;
+use geodata::osm::geometry::{
     point_in_polygon, point_in_ring, point_segment_distance, ring_bounds, signed_area,
 };
-use crate::osm::model::StreetSegment;
-use crate::osm::OsmMap;
-use crate::projection::LocalFrame;
+use geodata::osm::model::StreetSegment;
+use geodata::osm::OsmMap;
+use geodata::projection::LocalFrame;
 use rand::Rng;
 use rstar::primitives::{GeomWithData, Rectangle};
 use rstar::{RTree, AABB};

@@ -8,7 +8,7 @@
 //! O(cells crossed + shapes in them). The ground itself is analytic and handled by
 //! [`super::scene::Scene::cast`].
 
-use crate::osm::geometry::segment_intersects_box;
+use geodata::osm::geometry::segment_intersects_box;
 
 /// Smallest ray parameter accepted as a hit (metres), to leave the surface a ray starts on.
 const T_MIN: f64 = 1e-9;

@@ -1,10 +1,16 @@
-//! The urban scan simulator: a labelled 3-D world built from an OSM map, a terrestrial
-//! laser scanner ray-cast into it, and datasets with exact ground truth.
+//! The urban scan simulator: a procedural city, a labelled 3-D world built from an OSM map,
+//! a LiDAR ray-cast into it, and datasets with exact ground truth.
+//!
+//! Where it sits in the pipeline: beside the real data, below nothing but `geodata` (maps,
+//! clouds, the dataset file types of `geodata::simfiles`). The estimators (`srtree`,
+//! `streets`, `localize`) never depend on it; their tests and benches, the binary's `sim`
+//! command and the demo do.
 //!
 //! The thesis' Munich and Bremen scans are not available, so every accuracy number of
 //! `streets`, `localize` and `srtree` on simulated data comes from here. Modules, in
 //! data-flow order:
 //!
+//! - [`city`]: a seeded procedural city written as OSM XML (the embedded default map).
 //! - [`truth`]: the true street geometry per OSM segment (offset dₛ, width wₛ, sidewalk
 //!   width), tagged where OSM says so, else seeded and smoothly varying along each way.
 //! - [`scene`]: the world: extruded buildings (with an optional OSM map-error model),
@@ -14,16 +20,16 @@
 //! - [`raycast`]: ray casting against the scene with a uniform 2-D grid (Amanatides–Woo
 //!   traversal) and an analytic ground.
 //! - [`sensor`]: a panoramic terrestrial scanner (angular steps, range limit, range noise,
-//!   dropouts) returning a labelled [`crate::cloud::PointCloud`].
+//!   dropouts) returning a labelled [`geodata::cloud::PointCloud`].
 //! - [`dataset`]: `localization`, `streets` and `relations` datasets written as PLY + JSON.
 //!
 //! Every random step takes a seed and draws from its own stream ([`stream_rng`]), so a
 //! result does not depend on thread scheduling: same seed, byte-identical output.
 //!
 //! ```
-//! use geodata::city::{generate_city, CityOptions};
+//! use geosim::city::{generate_city, CityOptions};
 //! use geodata::osm::OsmMap;
-//! use geodata::sim::{scene::{Scene, SceneOptions}, sensor::{scan, Pose, SensorOptions}};
+//! use geosim::{scene::{Scene, SceneOptions}, sensor::{scan, Pose, SensorOptions}};
 //! let xml = generate_city(&CityOptions { size_m: 300.0, ..CityOptions::default() }, 2).unwrap();
 //! let map = OsmMap::from_xml_str(&xml).unwrap();
 //! let scene = Scene::build(&map, &SceneOptions::default(), 7).unwrap();
@@ -33,6 +39,7 @@
 //! assert!(cloud.len() > 1000);
 //! ```
 
+pub mod city;
 pub mod dataset;
 pub mod ground;
 pub mod raycast;
@@ -96,7 +103,7 @@ pub enum SimError {
     },
     /// Writing a point cloud failed.
     #[error(transparent)]
-    Cloud(#[from] crate::cloud::CloudError),
+    Cloud(#[from] geodata::cloud::CloudError),
     /// Serialising JSON failed.
     #[error("serialising {path}: {source}")]
     Json {

@@ -13,8 +13,8 @@ use super::ground::{class_look, speckled_rgb};
 pub use super::scene::Pose;
 use super::scene::{Scene, SceneHit};
 use super::{normal, purpose, stream_rng, SimError};
-use crate::classes::Class;
-use crate::cloud::{Columns, PointCloud, PointRecord, Precision};
+use geodata::classes::Class;
+use geodata::cloud::{Columns, PointCloud, PointRecord, Precision};
 use rand::Rng;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -86,14 +86,14 @@ impl SensorOptions {
 
     /// The scanner of a named model (its beams, azimuth step and range; noise and dropout
     /// as the default).
-    pub fn of_kind(kind: crate::sensors::SensorKind) -> SensorOptions {
+    pub fn of_kind(kind: geodata::sensors::SensorKind) -> SensorOptions {
         let elevations = kind.elevations_deg();
         SensorOptions {
             h_step_deg: kind.azimuth_step_deg(),
             v_min_deg: elevations[0],
             v_max_deg: elevations[elevations.len() - 1],
             range_max_m: kind.range_max_m(),
-            elevations_deg: if kind == crate::sensors::SensorKind::Terrestrial {
+            elevations_deg: if kind == geodata::sensors::SensorKind::Terrestrial {
                 Vec::new()
             } else {
                 elevations
@@ -306,11 +306,11 @@ pub fn scan_with(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::scene::SceneOptions;
-    use crate::sim::truth::segment_coordinates;
+    use crate::scene::SceneOptions;
+    use crate::truth::segment_coordinates;
 
     fn scene(seed: u64) -> Scene {
-        let map = crate::sim::scene::tests::small_map(seed);
+        let map = crate::scene::tests::small_map(seed);
         Scene::build(&map, &SceneOptions::default(), seed).unwrap()
     }
 
@@ -358,8 +358,8 @@ mod tests {
                             if !t.drivable {
                                 return false;
                             }
-                            let [a, b] = crate::sim::truth::offset_centre_line(seg, t);
-                            crate::osm::geometry::point_segment_distance([p[0], p[1]], a, b)
+                            let [a, b] = crate::truth::offset_centre_line(seg, t);
+                            geodata::osm::geometry::point_segment_distance([p[0], p[1]], a, b)
                                 <= t.width_m / 2.0 + 1e-6
                         });
                         assert!(inside, "street point {p:?} outside every driving area");
@@ -375,7 +375,7 @@ mod tests {
                                     .map(move |i| (b.outer[i], b.outer[(i + 1) % b.outer.len()]))
                             })
                             .map(|(a, c)| {
-                                crate::osm::geometry::point_segment_distance([p[0], p[1]], a, c)
+                                geodata::osm::geometry::point_segment_distance([p[0], p[1]], a, c)
                             })
                             .fold(f64::INFINITY, f64::min);
                         let d_inner = s
@@ -384,7 +384,7 @@ mod tests {
                             .flat_map(|b| b.inners.iter())
                             .flat_map(|r| (0..r.len()).map(move |i| (r[i], r[(i + 1) % r.len()])))
                             .map(|(a, c)| {
-                                crate::osm::geometry::point_segment_distance([p[0], p[1]], a, c)
+                                geodata::osm::geometry::point_segment_distance([p[0], p[1]], a, c)
                             })
                             .fold(f64::INFINITY, f64::min);
                         assert!(

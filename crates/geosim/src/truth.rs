@@ -17,8 +17,9 @@
 //! labelled as other paved ground, not as this road's sidewalk; see [`super::scene`]).
 
 use super::{normal, purpose, stream_rng, SimError};
-use crate::osm::model::StreetSegment;
-use crate::osm::OsmMap;
+use geodata::osm::model::StreetSegment;
+use geodata::osm::tags::is_drivable;
+use geodata::osm::OsmMap;
 use rand::Rng;
 use serde::Serialize;
 
@@ -61,24 +62,6 @@ impl Default for TruthOptions {
             ar_coefficient: 0.85,
         }
     }
-}
-
-/// Whether cars drive on a `highway=*` value.
-pub fn is_drivable(highway: &str) -> bool {
-    matches!(
-        highway.trim_end_matches("_link"),
-        "motorway"
-            | "trunk"
-            | "primary"
-            | "secondary"
-            | "tertiary"
-            | "unclassified"
-            | "residential"
-            | "living_street"
-            | "service"
-            | "road"
-            | "busway"
-    )
 }
 
 /// (min, max) width in metres of an untagged way of this type, and its sidewalk range.
@@ -224,7 +207,7 @@ mod tests {
     use super::*;
 
     fn small_map() -> OsmMap {
-        crate::sim::scene::tests::small_map(3)
+        crate::scene::tests::small_map(3)
     }
 
     #[test]

@@ -26,8 +26,8 @@
 
 use super::truth::{segment_coordinates, StreetTruth};
 use super::{mix64, stream_rng, SimError};
-use crate::classes::Class;
-use crate::osm::model::StreetSegment;
+use geodata::classes::Class;
+use geodata::osm::model::StreetSegment;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -414,11 +414,11 @@ pub fn speckled_rgb(look: &Look, rng: &mut impl Rng) -> [u8; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::osm::OsmMap;
-    use crate::sim::truth::{street_truth, TruthOptions};
+    use crate::truth::{street_truth, TruthOptions};
+    use geodata::osm::OsmMap;
 
     fn map() -> OsmMap {
-        crate::sim::scene::tests::small_map(3)
+        crate::scene::tests::small_map(3)
     }
 
     #[test]

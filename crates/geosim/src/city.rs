@@ -13,17 +13,17 @@
 //! and S street segments.
 //!
 //! ```
-//! use geodata::city::{generate_city, CityOptions};
+//! use geosim::city::{generate_city, CityOptions};
 //! let xml = generate_city(&CityOptions { size_m: 400.0, ..CityOptions::default() }, 7).unwrap();
 //! let map = geodata::osm::OsmMap::from_xml_str(&xml).unwrap();
 //! assert!(map.buildings.len() > 10);
 //! ```
 
-use crate::osm::geometry::{
+use geodata::osm::geometry::{
     point_in_ring, point_segment_distance, rings_overlap, segments_intersect, signed_area,
 };
-use crate::osm::{OsmError, OsmMap};
-use crate::projection::{LocalFrame, ProjectionError};
+use geodata::osm::{OsmError, OsmMap};
+use geodata::projection::{LocalFrame, ProjectionError};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::fmt::Write as _;
@@ -676,7 +676,7 @@ pub fn default_city_map() -> Result<OsmMap, CityError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::osm::geometry::segments_intersect;
+    use geodata::osm::geometry::segments_intersect;
 
     #[test]
     fn same_seed_same_bytes_other_seed_other_city() {

@@ -40,13 +40,14 @@ use super::scene::SceneObject;
 use super::scene::{MapErrorOptions, Pose, Scene, SceneOptions};
 use super::sensor::{scan_with, ScanFrame, SensorOptions};
 use super::{mix64, purpose, stream_rng, SimError};
-use crate::classes::Class;
-use crate::cloud::{write_cloud, PointCloud};
-use crate::osm::geometry::{longest_edge_box, point_ring_distance, ring_bounds};
-use crate::osm::OsmMap;
-use crate::sensors::SensorKind;
+use geodata::classes::Class;
+use geodata::cloud::{write_cloud, PointCloud};
+use geodata::osm::geometry::{longest_edge_box, point_ring_distance, ring_bounds};
+use geodata::osm::OsmMap;
+use geodata::sensors::SensorKind;
+pub use geodata::simfiles::{MapBuilding, MapBuildings, TruthPose, MAP_BUILDINGS_FILE};
 use rand::Rng;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -229,34 +230,6 @@ fn route_poses(scene: &Scene, route: &[(usize, bool)], spacing_m: f64, height_m:
     poses
 }
 
-/// The true pose of one localization scan as written to `truth.json`: in the map's frame
-/// (through the map-error field), and in the world.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct TruthPose {
-    /// Sensor origin east, metres in the local frame.
-    pub x: f64,
-    /// Sensor origin north, metres in the local frame.
-    pub y: f64,
-    /// Sensor origin height above the street surface, metres.
-    pub z: f64,
-    /// Heading counter-clockwise from geographic east, radians.
-    pub yaw: f64,
-    /// WGS84 latitude, degrees.
-    pub lat: f64,
-    /// WGS84 longitude, degrees.
-    pub lon: f64,
-    /// Heading counter-clockwise from the local frame's x axis, radians.
-    pub yaw_grid: f64,
-    /// Sensor origin east in the simulated world (before the map error), metres.
-    pub world_x: f64,
-    /// Sensor origin north in the simulated world, metres.
-    pub world_y: f64,
-    /// Heading in the world, counter-clockwise from geographic east, radians.
-    pub world_yaw: f64,
-    /// Heading in the world, counter-clockwise from the local frame's x axis, radians.
-    pub world_yaw_grid: f64,
-}
-
 /// What a dataset writer produced.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct DatasetSummary {
@@ -284,7 +257,7 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SimError> {
         path: path.to_path_buf(),
         source,
     })?;
-    crate::fsio::write_atomic(path, text + "\n").map_err(io_err(path))
+    geodata::fsio::write_atomic(path, text + "\n").map_err(io_err(path))
 }
 
 fn scan_seed(seed: u64, index: usize) -> u64 {
@@ -808,29 +781,6 @@ fn scene_objects(
 /// How much farther than the scenes' range [`MAP_BUILDINGS_FILE`] reaches, metres.
 pub const MAP_BUILDINGS_MARGIN_M: f64 = 10.0;
 
-/// File of a relations dataset holding the map's building outlines near its scenes.
-pub const MAP_BUILDINGS_FILE: &str = "map_buildings.json";
-
-/// The map's building outlines near a dataset's scenes, in the scenes' local frame: what a
-/// robot that knows its OSM map knows about the buildings it sees (with map error on, the
-/// map's outlines, not the simulated world's).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MapBuildings {
-    /// Frame of the outlines: `local`, the frame of the scenes' viewpoints and clouds.
-    pub frame: String,
-    /// The buildings within reach of a scene.
-    pub buildings: Vec<MapBuilding>,
-}
-
-/// One map building of [`MapBuildings`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MapBuilding {
-    /// Id of the OSM way or relation.
-    pub osm_id: i64,
-    /// Outer ring, counter-clockwise, last vertex not repeated, metres.
-    pub outer: Vec<[f64; 2]>,
-}
-
 /// The map's buildings whose outline comes within `reach_m` of a pose (top view).
 fn map_buildings_near(map: &OsmMap, poses: &[Pose], reach_m: f64) -> MapBuildings {
     let near = |outer: &[[f64; 2]]| {
@@ -961,7 +911,7 @@ mod tests {
     use super::*;
 
     fn map() -> OsmMap {
-        crate::sim::scene::tests::small_map(8)
+        crate::scene::tests::small_map(8)
     }
 
     fn fast_sensor() -> SensorOptions {
@@ -1009,7 +959,7 @@ mod tests {
         let shift = (pose["x"].as_f64().unwrap() - pose["world_x"].as_f64().unwrap())
             .hypot(pose["y"].as_f64().unwrap() - pose["world_y"].as_f64().unwrap());
         assert!(shift > 1e-3 && shift < 10.0, "shift {shift}");
-        let cloud = crate::cloud::read_cloud(a.join("scan_000.ply")).unwrap();
+        let cloud = geodata::cloud::read_cloud(a.join("scan_000.ply")).unwrap();
         assert!(cloud.len() > 500);
         std::fs::remove_dir_all(&dir).ok();
     }
@@ -1058,7 +1008,7 @@ mod tests {
             meta["sensor"]["elevations_deg"].as_array().unwrap().len(),
             64
         );
-        let cloud = crate::cloud::read_cloud(dir.join("scan_000.ply")).unwrap();
+        let cloud = geodata::cloud::read_cloud(dir.join("scan_000.ply")).unwrap();
         // Beams reach +2° at most (plus range noise).
         let top = cloud
             .positions
@@ -1089,7 +1039,7 @@ mod tests {
             serde_json::from_slice(&std::fs::read(dir.join("segments.json")).unwrap()).unwrap();
         assert_eq!(segments.len(), map.streets.segments.len());
         assert!(segments.iter().any(|s| s["observed"] == json!(true)));
-        let cloud = crate::cloud::read_cloud(dir.join("cloud.ply")).unwrap();
+        let cloud = geodata::cloud::read_cloud(dir.join("cloud.ply")).unwrap();
         let labels = cloud.label.as_ref().unwrap();
         let objects = cloud.object.as_ref().unwrap();
         let scene = Scene::build(&map, &options.scene, 5).unwrap();
