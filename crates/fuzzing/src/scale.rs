@@ -350,12 +350,12 @@ fn gen_srt(bytes: u64, path: &Path) -> Result<(), String> {
     let mut map =
         srtree::map::SrMap::new(srtree::map::MapOptions::default()).map_err(|e| e.to_string())?;
     map.insert_cloud(&cloud, None).map_err(|e| e.to_string())?;
-    srtree::io::write_map(path, &map).map_err(|e| e.to_string())
+    srtree::io::write_map(path, &srtree::semantic::SemanticMap::new(map)).map_err(|e| e.to_string())
 }
 
 fn read_srt(path: &Path) -> Result<u64, String> {
     let map = srtree::io::read_map(path).map_err(|e| e.to_string())?;
-    Ok(map.len() as u64)
+    Ok(map.cells.len() as u64)
 }
 
 #[cfg(test)]

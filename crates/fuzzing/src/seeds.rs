@@ -532,6 +532,7 @@ fn srt_seeds(out: &mut Vec<Seed>) {
         if map.insert_cloud(cloud, Some([0.0, 0.0, 1.5])).is_err() {
             continue;
         }
+        let mut map = srtree::semantic::SemanticMap::new(map);
         map.relations.edges.push(srtree::graph::RelationEdge {
             a: 1,
             b: 2,

@@ -1,4 +1,5 @@
-//! The `.srt` map file: a little-endian binary format with a checksum.
+//! The `.srt` file of a [`SemanticMap`] (cells and relation graph): a little-endian binary
+//! format with a checksum.
 //!
 //! | offset | size | field |
 //! |---|---|---|
@@ -36,6 +37,7 @@ use crate::graph::RelationGraph;
 use crate::map::{
     histogram_ref_valid, morton, Cell, ColourSum, Histogram, MapOptions, SrMap, KEY_LIMIT,
 };
+use crate::semantic::SemanticMap;
 use geodata::classes::Class;
 use rustc_hash::FxHashSet;
 use std::path::Path;
@@ -65,10 +67,11 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     h
 }
 
-/// The map as file bytes.
-pub fn encode_map(map: &SrMap) -> Vec<u8> {
-    let o = map.options();
-    let mut out = Vec::with_capacity(64 + map.len() * CELL_BYTES);
+/// The semantic map as file bytes.
+pub fn encode_map(map: &SemanticMap) -> Vec<u8> {
+    let cells = &map.cells;
+    let o = cells.options();
+    let mut out = Vec::with_capacity(64 + cells.len() * CELL_BYTES);
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&o.resolution_m.to_le_bytes());
@@ -82,8 +85,8 @@ pub fn encode_map(map: &SrMap) -> Vec<u8> {
         out.extend_from_slice(&v.to_le_bytes());
     }
     out.extend_from_slice(&o.max_ray_m.to_le_bytes());
-    out.extend_from_slice(&(map.len() as u64).to_le_bytes());
-    for c in map.cells() {
+    out.extend_from_slice(&(cells.len() as u64).to_le_bytes());
+    for c in cells.cells() {
         for k in c.key {
             out.extend_from_slice(&k.to_le_bytes());
         }
@@ -94,14 +97,14 @@ pub fn encode_map(map: &SrMap) -> Vec<u8> {
         out.extend_from_slice(&c.object_votes.to_le_bytes());
         out.extend_from_slice(&[c.label, 0]);
     }
-    let table = map.histogram_table();
+    let table = cells.histogram_table();
     out.extend_from_slice(&(table.len() as u64).to_le_bytes());
     for h in table {
         for v in h {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
-    let colours = map.colour_sums();
+    let colours = cells.colour_sums();
     out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
     for c in colours {
         for v in c.sum {
@@ -109,7 +112,7 @@ pub fn encode_map(map: &SrMap) -> Vec<u8> {
         }
         out.extend_from_slice(&c.count.to_le_bytes());
     }
-    match map.dirichlet() {
+    match cells.dirichlet() {
         None => out.extend_from_slice(&0u32.to_le_bytes()),
         Some(m) => {
             out.extend_from_slice(&(m.classes.len() as u32).to_le_bytes());
@@ -137,7 +140,7 @@ pub fn encode_map(map: &SrMap) -> Vec<u8> {
 }
 
 /// Writes a map file.
-pub fn write_map(path: impl AsRef<Path>, map: &SrMap) -> Result<()> {
+pub fn write_map(path: impl AsRef<Path>, map: &SemanticMap) -> Result<()> {
     let path = path.as_ref();
     geodata::fsio::write_atomic(path, encode_map(map)).map_err(io_err(path))
 }
@@ -212,7 +215,7 @@ impl<'a> Reader<'a> {
 }
 
 /// Parses map file bytes (`path` only names the source in errors).
-pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
+pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SemanticMap> {
     let mut r = Reader {
         path,
         bytes,
@@ -462,11 +465,14 @@ pub fn decode_map(bytes: &[u8], path: &Path) -> Result<SrMap> {
             ),
         ));
     }
-    SrMap::from_parts(options, cells, table, colours, dirichlet, relations)
+    Ok(SemanticMap {
+        cells: SrMap::from_parts(options, cells, table, colours, dirichlet)?,
+        relations,
+    })
 }
 
 /// Reads a map file.
-pub fn read_map(path: impl AsRef<Path>) -> Result<SrMap> {
+pub fn read_map(path: impl AsRef<Path>) -> Result<SemanticMap> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(io_err(path))?;
     decode_map(&bytes, path)
@@ -476,10 +482,12 @@ pub fn read_map(path: impl AsRef<Path>) -> Result<SrMap> {
 mod tests {
     use super::*;
     use crate::dirichlet::FitOptions;
-    use crate::graph::{Relation, RelationEdge};
+    use crate::graph::{ObjectNode, Relation, RelationEdge, Viewpoint};
+    use crate::map::test_util::random_cloud;
+    use crate::objects::OrientedBox;
 
-    fn sample_map() -> SrMap {
-        let cloud = crate::map::tests::random_cloud(2000, 5.0, 9);
+    fn sample_map() -> SemanticMap {
+        let cloud = random_cloud(2000, 5.0, 9);
         let mut map = SrMap::new(MapOptions {
             resolution_m: 0.3,
             ..MapOptions::default()
@@ -503,6 +511,7 @@ mod tests {
         )
         .unwrap();
         map.set_dirichlet(Some(model));
+        let mut map = SemanticMap::new(map);
         map.relations.edges.push(RelationEdge {
             a: 1,
             b: 2,
@@ -516,14 +525,15 @@ mod tests {
         let map = sample_map();
         let bytes = encode_map(&map);
         let back = decode_map(&bytes, Path::new("x.srt")).unwrap();
+        assert_eq!(encode_map(&back), bytes);
+        assert_eq!(back.relations, map.relations);
+        let (map, back) = (map.cells, back.cells);
         assert_eq!(back.cells(), map.cells());
         assert_eq!(back.histogram_table(), map.histogram_table());
         assert_eq!(back.colour_sums(), map.colour_sums());
         assert!(!map.histogram_table().is_empty() && !map.colour_sums().is_empty());
         assert_eq!(back.dirichlet(), map.dirichlet());
-        assert_eq!(back.relations, map.relations);
         assert_eq!(back.options(), map.options());
-        assert_eq!(encode_map(&back), bytes);
         let q = ([-1.0, -1.0, 0.0], [1.0, 1.0, 1.0]);
         let (mut a, mut b) = (map.cells_in_box(q.0, q.1), back.cells_in_box(q.0, q.1));
         a.sort_unstable();
@@ -609,8 +619,8 @@ mod tests {
         let (c0, c1): (Vec<u8>, Vec<u8>) = (bytes[53..85].to_vec(), bytes[85..117].to_vec());
         swapped[53..85].copy_from_slice(&c1);
         swapped[85..117].copy_from_slice(&c0);
-        let a = decode_map(&bytes, p).unwrap();
-        let b = decode_map(&resum(swapped), p).unwrap();
+        let a = decode_map(&bytes, p).unwrap().cells;
+        let b = decode_map(&resum(swapped), p).unwrap().cells;
         assert_eq!(a.len(), b.len());
         let keys = |m: &SrMap| {
             let mut k: Vec<[i32; 3]> = m.cells().iter().map(|c| c.key).collect();
@@ -637,6 +647,63 @@ mod tests {
             read_map("/nonexistent/map.srt"),
             Err(SrtreeError::Io { .. })
         ));
+    }
+
+    /// Issue 21: moving the relation graph out of `SrMap` into `SemanticMap` left the file
+    /// bytes alone. A fixed map (single-class and pooled histograms, colours, a hand-set
+    /// Dirichlet model, objects, an edge and a viewpoint) encodes to the length and checksum
+    /// the writer gave before the move.
+    #[test]
+    fn file_bytes_are_those_written_before_the_semantic_map() {
+        let mut cells = SrMap::new(MapOptions {
+            resolution_m: 0.3,
+            ..MapOptions::default()
+        })
+        .unwrap();
+        cells
+            .insert_cloud(&random_cloud(2000, 5.0, 9), None)
+            .unwrap();
+        let alpha = |k: usize| {
+            (0..Class::COUNT)
+                .map(|j| if j == k { 4.0 } else { 0.5 + j as f64 / 8.0 })
+                .collect()
+        };
+        let classes = (0..Class::COUNT)
+            .map(|k| (k % 3 != 1).then(|| Dirichlet::new(alpha(k))))
+            .collect();
+        cells.set_dirichlet(Some(DirichletModel {
+            smoothing: 0.5,
+            classes,
+        }));
+        let mut map = SemanticMap::new(cells);
+        map.relations.viewpoint = Some(Viewpoint {
+            position: [0.5, -1.0, 1.8],
+            yaw_rad: 0.25,
+        });
+        for id in [1u32, 2] {
+            let centre = [f64::from(id), 0.5, 0.25];
+            map.relations.objects.push(ObjectNode {
+                id,
+                class: Class::ALL[id as usize],
+                cells: 3 * id as usize,
+                centroid: centre,
+                bbox: OrientedBox {
+                    centre,
+                    half_extents: [0.5, 0.25, 1.0],
+                    yaw_rad: 0.125,
+                },
+            });
+        }
+        map.relations.edges.push(RelationEdge {
+            a: 1,
+            b: 2,
+            bits: Relation::On.bit() | Relation::LeftOf.bit(),
+        });
+        let bytes = encode_map(&map);
+        assert_eq!(
+            (bytes.len(), checksum(&bytes)),
+            (85_157, 0x0535_cdb7_91c3_8ceb)
+        );
     }
 
     /// Issue 16 (found by the `srt` fuzz target): a cell key of `i32::MIN` overflowed

@@ -7,7 +7,6 @@
 //!
 //! - [`dirichlet`]: per-class Dirichlet over cell class histograms, moment matching, label choice.
 //! - [`map`]: occupancy cells kept where occupied, R-tree index, queries, ray casting.
-//! - [`io`]: the documented binary `.srt` map file.
 //! - [`scans`]: the real labelled scans of `../shared/data/lidar/`, registered with their poses.
 //! - [`label_eval`]: Dirichlet label choice against majority vote on the real scans.
 //! - [`objects`]: per object cells, centroid, class, oriented box (normal-histogram yaw).
@@ -21,6 +20,8 @@
 //! - [`relations`]: training, inference, relation graph and Table 3.6 evaluation.
 //! - [`dataset`]: reader of simulated `relations` datasets.
 //! - [`graph`]: the spatial relation graph and its queries.
+//! - [`semantic`]: the semantic map: the cells of [`map`] and the relation graph over their objects.
+//! - [`io`]: the documented binary `.srt` file of a semantic map.
 //!
 //! ```
 //! use srtree::map::{MapOptions, SrMap};
@@ -44,6 +45,7 @@ pub mod objects;
 pub mod relations;
 pub mod rules;
 pub mod scans;
+pub mod semantic;
 pub mod svm;
 pub mod view;
 

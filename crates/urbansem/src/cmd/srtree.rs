@@ -12,6 +12,7 @@ use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
 use srtree::relations::{evaluate, relation_graph, train, RelationModel, TrainOptions};
+use srtree::semantic::SemanticMap;
 use srtree::SrtreeError;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -212,8 +213,10 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
                 .with_context(|| format!("inserting {}", cloud.display()))?;
             let insert_s = t.elapsed().as_secs_f64();
             let objects = extract_objects(&map, &ObjectOptions::default());
-            map.relations.objects = objects.iter().map(|o| o.node()).collect();
-            write_map(&out, &map).with_context(|| format!("writing {}", out.display()))?;
+            let mut semantic = SemanticMap::new(map);
+            semantic.relations.objects = objects.iter().map(|o| o.node()).collect();
+            write_map(&out, &semantic).with_context(|| format!("writing {}", out.display()))?;
+            let map = semantic.cells;
             let mem = map.memory();
             let summary = json!({
                 "points": stats.points,
@@ -255,7 +258,9 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             object,
             json,
         } => {
-            let m = read_map(&map).with_context(|| format!("reading {}", map.display()))?;
+            let m = read_map(&map)
+                .with_context(|| format!("reading {}", map.display()))?
+                .cells;
             let t = Instant::now();
             let cells: Vec<u32> = match (box_, near, class, object) {
                 (Some(b), None, None, None) => {
@@ -492,10 +497,10 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 position: [v[0], v[1], 1.8],
                 yaw_rad: v[2],
             };
-            let objects = extract_objects(&m, &ObjectOptions::default());
+            let objects = extract_objects(&m.cells, &ObjectOptions::default());
             let view: Vec<ViewObject> = objects
                 .iter()
-                .map(|o| ViewObject::from_map_object_with_outlines(&m, o, &vp, &outlines))
+                .map(|o| ViewObject::from_map_object_with_outlines(&m.cells, o, &vp, &outlines))
                 .collect();
             let mut infer = mln::infer::InferOptions::default();
             infer.walksat.seed = seed;

@@ -10,6 +10,7 @@ use srtree::io::write_map;
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
 use srtree::relations::{evaluate, relation_graph, train};
+use srtree::semantic::SemanticMap;
 use std::time::Instant;
 
 /// The demo stage: a small simulated relations dataset, a model trained on it, and one test
@@ -84,9 +85,16 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         .context("inferring the demo scene")?;
     let nodes: Vec<_> = objects.iter().map(|o| o.node()).collect();
     let graph = relation_graph(&nodes, &out.mln, vp);
-    m.relations = graph.clone();
+    let semantic = SemanticMap {
+        cells: m,
+        relations: graph,
+    };
     let map_path = args.out.join("relations-scene.srt");
-    write_map(&map_path, &m).with_context(|| format!("writing {}", map_path.display()))?;
+    write_map(&map_path, &semantic).with_context(|| format!("writing {}", map_path.display()))?;
+    let SemanticMap {
+        cells: m,
+        relations: graph,
+    } = semantic;
 
     // Top view raster, 0.2 m per pixel, 60 m around the viewpoint; the highest cell wins.
     let (half, px_m) = (30.0, 0.2);
