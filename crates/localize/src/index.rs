@@ -29,7 +29,7 @@
 use crate::candidates::{Domain, SearchOptions};
 use crate::chamfer::{map_edges, BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
-use crate::{LocalizeError, Result, Segment};
+use crate::{LocalizeError, Result, Segment, WithContext};
 use geodata::osm::OsmMap;
 use std::io::{BufReader, Read, Write};
 use std::path::{Path, PathBuf};
@@ -390,6 +390,18 @@ impl MapSource {
         }
         Ok(OsmMap::load(&found)?)
     }
+}
+
+/// The map of a `--map` argument: an OSM file, or an index (`.uloc`) with the map it was
+/// built from.
+pub fn load_map_or_index(path: &Path) -> Result<(OsmMap, Option<PreparedMap>)> {
+    if is_index(path) {
+        let (prepared, source) = PreparedMap::read(path)?;
+        let map = source.load(path)?;
+        return Ok((map, Some(prepared)));
+    }
+    let map = OsmMap::load(path).context_with(|| format!("loading the map {}", path.display()))?;
+    Ok((map, None))
 }
 
 /// True when a `--map` path names an index rather than a map.

@@ -36,6 +36,7 @@ pub mod distractors;
 pub mod eval;
 pub mod extract_eval;
 pub mod feasible;
+pub mod figure;
 pub mod hashing;
 pub mod index;
 pub mod pipeline;
@@ -247,6 +248,33 @@ pub enum LocalizeError {
         /// The differing options.
         differences: String,
     },
+    /// `--distractors` was combined with a map index: distractors change the map, so they
+    /// need the OSM map itself.
+    #[error("--distractors changes the map, so it needs the OSM map, not the index {path}")]
+    DistractorsNeedOsmMap {
+        /// The index given as the map.
+        path: PathBuf,
+    },
+    /// Reading or writing a file failed.
+    #[error("{action} {path}")]
+    Io {
+        /// What was being done (`writing`, `creating`, `listing`).
+        action: &'static str,
+        /// The file or folder.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A step failed; `context` says which step and on what.
+    #[error("{context}")]
+    Context {
+        /// The step, e.g. `loading the map M`.
+        context: String,
+        /// The cause.
+        #[source]
+        source: Box<LocalizeError>,
+    },
     /// Reading a point cloud failed.
     #[error(transparent)]
     Cloud(#[from] geodata::cloud::CloudError),
@@ -260,6 +288,21 @@ pub enum LocalizeError {
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, LocalizeError>;
+
+/// Adds the step that failed to an error, as the command line reports it (`step: cause`).
+pub trait WithContext<T> {
+    /// Wraps the error of `self` in [`LocalizeError::Context`] with the message `context()`.
+    fn context_with(self, context: impl FnOnce() -> String) -> Result<T>;
+}
+
+impl<T, E: Into<LocalizeError>> WithContext<T> for std::result::Result<T, E> {
+    fn context_with(self, context: impl FnOnce() -> String) -> Result<T> {
+        self.map_err(|e| LocalizeError::Context {
+            context: context(),
+            source: Box::new(e.into()),
+        })
+    }
+}
 
 #[cfg(test)]
 mod tests {

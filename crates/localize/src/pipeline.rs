@@ -24,7 +24,7 @@ use crate::segments::{extract_segments, SegmentOptions};
 use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::visibility::{visible_segments, EdgeGrid, VisibilityOptions};
-use crate::{LocalizeError, Pose2, Result, Segment};
+use crate::{LocalizeError, Pose2, Result, Segment, WithContext};
 use geodata::osm::index::MapIndex;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;
@@ -221,6 +221,22 @@ impl<'m> Localizer<'m> {
     pub fn new(map: &'m OsmMap, options: LocalizeOptions) -> Result<Localizer<'m>> {
         let prepared = PreparedMap::build(map, &options.chamfer, &options.search)?;
         Localizer::with_prepared(map, options, prepared)
+    }
+
+    /// A localizer on the map of `path` ([`crate::index::load_map_or_index`]): taken from its
+    /// index when one was read, prepared now otherwise.
+    pub fn prepared_or_new(
+        map: &'m OsmMap,
+        prepared: Option<PreparedMap>,
+        options: LocalizeOptions,
+        path: &std::path::Path,
+    ) -> Result<Localizer<'m>> {
+        match prepared {
+            Some(p) => Localizer::with_prepared(map, options, p)
+                .context_with(|| format!("using the map index {}", path.display())),
+            None => Localizer::new(map, options)
+                .context_with(|| format!("preparing the map {}", path.display())),
+        }
     }
 
     /// A localizer on a map prepared before (e.g. read from an index, [`PreparedMap::read`]);

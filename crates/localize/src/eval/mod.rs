@@ -1,9 +1,10 @@
 //! Evaluation inputs and measures: simulated `localization` datasets (`dataset.json`,
 //! `truth.json`, `scan_NNN.ply`), the real MCD `kth_day_06` scans levelled into the sensor
 //! frame with their documented poses, and N_accurate of thesis §5.4.3; [`report`] tabulates
-//! a dataset's outcomes.
+//! a dataset's outcomes; [`run`] is the whole `localize eval` job.
 
 pub mod report;
+pub mod run;
 pub use report::{EvalReport, EvalSetup, RankMethod, ScanOutcome};
 
 use crate::{LocalizeError, Pose2, Result};

@@ -764,6 +764,150 @@ impl EvalReport {
     }
 }
 
+impl ScanOutcome {
+    /// The one-line summary of a scan printed while an evaluation runs.
+    pub fn line_text(&self) -> String {
+        let r = self;
+        let mut line = format!(
+            "{:<14} segs {:>3} cands {:>5}",
+            r.name,
+            r.result.segments.len(),
+            r.result.candidates.len()
+        );
+        for (m, name) in RankMethod::ALL
+            .iter()
+            .zip(["dcm", "fwd", "rev", "sym", "hash"])
+        {
+            let e = r.top1_error(*m);
+            line += &format!(" | {name} {:>7.2} m {:>6.2}°", e.error_m, e.error_deg);
+        }
+        line += &format!(
+            " | conf {:.2} | {:.2} s",
+            r.result.confidence, r.result.seconds.total
+        );
+        if let Some(msg) = &r.result.message {
+            line += &format!(" | {msg}");
+        }
+        line
+    }
+}
+
+impl EvalReport {
+    /// The evaluation as the command line prints it (`real_mcd`: the scans are real MCD scans).
+    pub fn table_text(&self, real_mcd: bool) -> String {
+        let (r, mcd) = (self, real_mcd);
+        let mut out = String::new();
+        let n = r.scans;
+        let _ = writeln!(out);
+        let _ = writeln!(
+            out,
+            "{} scans of {} on {} ({})",
+            n,
+            r.dataset,
+            r.map,
+            if mcd { "real MCD scans" } else { "simulated" }
+        );
+        if let Some(d) = &r.distractors {
+            let s = &d.summary;
+            let _ = writeln!(
+                out,
+            "embedded among distractors from {} (seed {}, ring {} m, gap {} m, tiles {} m): {} target buildings, {} distractor buildings ({} dropped at tile seams), {} distractor street segments in {} tiles; building box {:.2} km² → {:.2} km²",
+            d.map,
+            d.seed,
+            d.ring_m,
+            d.gap_m,
+            d.tile_m,
+            s.target_buildings,
+            s.distractor_buildings,
+            s.dropped_overlapping,
+            s.distractor_street_segments,
+            s.tiles.len(),
+            s.target_area_km2,
+            s.outer_area_km2
+        );
+        }
+        let _ = writeln!(
+            out,
+            "search area {:.2} km² ({} cells × {} yaws)",
+            r.search_area_km2, r.domain_cells, r.yaws_per_cell
+        );
+        let _ = writeln!(out, "N_accurate (thresholds 4 m / 0.2 rad; hashing 5 m / π/6), k best candidates within radius w (m) of the truth:");
+        let mut header = format!("{:<10} {:>3}", "method", "k");
+        for w in RADII_M {
+            header += &format!(" {:>6}", radius_name(w));
+        }
+        let _ = writeln!(out, "{header}");
+        for &m in &r.methods {
+            for k in KS {
+                let mut line = format!("{:<10} {k:>3}", m.name());
+                for w in RADII_M {
+                    line += &format!(" {:>6}", r.n_accurate_at(m, k, w));
+                }
+                let _ = writeln!(out, "{line}");
+            }
+        }
+        let t1 = &r.top1_within_2m_3deg;
+        let _ = writeln!(
+                out,
+        "accurate candidate in the candidate set: {}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; top 10 (reverse) within 2 m and 3°: {}/{n}; median error of accurate top-1 (reverse, refined) {:.2} m",
+        r.accurate_in_candidate_set,
+        t1.dcm,
+        t1.forward,
+        t1.reverse,
+        t1.symmetric,
+        r.top10_within_2m_3deg_reverse,
+        r.median_error_accurate_top1_reverse_m
+    );
+        let sensor_counts: Vec<String> =
+            r.sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
+        let _ = writeln!(out, "sensor profiles: {}", sensor_counts.join(", "));
+        if let Some(t) = &r.track {
+            let _ = writeln!(
+                out,
+            "track mode (window {}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 (reverse) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
+            t.window,
+            100.0 * t.odometry_drift,
+            t.odometry_yaw_drift_deg_per_50m,
+            t.top1_within_2m_3deg,
+            t.scans_after_first_window,
+            t.top10_within_2m_3deg,
+            t.scans_after_first_window
+        );
+        }
+        let (s, dt) = (&r.map_seconds, &r.tensor);
+        let _ = writeln!(
+                out,
+        "map: load {:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, feasible-pose mask {:.3} s ({} of {} cells), hashing index {:.3} s ({} threads)",
+        s.load_map,
+        s.map_edges,
+        dt.width,
+        dt.height,
+        dt.channels,
+        dt.grid_m,
+        s.distance_transform,
+        s.pyramid,
+        s.feasible_mask,
+        r.feasible_cells,
+        r.domain_cells,
+        s.hashing_index,
+        r.threads
+    );
+        let _ = writeln!(
+            out,
+            "{:<18} {:>9} {:>9} {:>9}",
+            "stage (s/scan)", "mean", "median", "max"
+        );
+        for (name, t) in &r.stage_seconds {
+            let _ = writeln!(
+                out,
+                "{name:<18} {:>9.4} {:>9.4} {:>9.4}",
+                t.mean, t.median, t.max
+            );
+        }
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,23 +14,19 @@
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::osm::OsmMap;
-use geodata::svg::Svg;
-use localize::distractors::{embed_among_distractors, DistractorOptions};
-use localize::eval::report::{
-    radius_name, DistractorsReport, EvalReport, EvalSetup, RankMethod, ScanOutcome, TrackSetup, KS,
-    RADII_M,
-};
-use localize::eval::{is_mcd, mcd_scans, EvalScan, SimDataset};
+use localize::distractors::DistractorOptions;
+use localize::eval::is_mcd;
+use localize::eval::report::{RankMethod, TrackSetup};
+use localize::eval::run::{run_eval, EvalJob};
 use localize::extract_eval::{evaluate, labelled_scans};
-use localize::hashing::{CornerIndex, HashingOptions};
-use localize::index::{is_index, PreparedMap};
-use localize::pipeline::{Localization, LocalizeOptions, Localizer};
+use localize::index::{is_index, load_map_or_index, PreparedMap};
+use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::rank::CostKind;
 use localize::report::{LocalizeReport, TrackReport, TrackRow, TrackSeconds};
 use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
-use localize::{Pose2, Segment};
+use localize::LocalizeError;
 use serde_json::json;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `urbansem localize`.
@@ -422,32 +418,6 @@ fn options(
     Ok(o)
 }
 
-/// The map of `--map`: an OSM file, or an index (`.uloc`) with the map it was built from.
-fn load_map_or_index(path: &Path) -> anyhow::Result<(OsmMap, Option<PreparedMap>)> {
-    if is_index(path) {
-        let (prepared, source) = PreparedMap::read(path)?;
-        let map = source.load(path)?;
-        return Ok((map, Some(prepared)));
-    }
-    let map = OsmMap::load(path).with_context(|| format!("loading the map {}", path.display()))?;
-    Ok((map, None))
-}
-
-/// A localizer on the map, prepared now or taken from its index.
-fn prepare<'m>(
-    map: &'m OsmMap,
-    prepared: Option<PreparedMap>,
-    options: LocalizeOptions,
-    path: &Path,
-) -> anyhow::Result<Localizer<'m>> {
-    match prepared {
-        Some(p) => Localizer::with_prepared(map, options, p)
-            .with_context(|| format!("using the map index {}", path.display())),
-        None => Localizer::new(map, options)
-            .with_context(|| format!("preparing the map {}", path.display())),
-    }
-}
-
 fn index(args: IndexArgs) -> anyhow::Result<()> {
     if is_index(&args.map) {
         super::usage!(
@@ -525,7 +495,7 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
     let t = Instant::now();
     let (map, prepared) = load_map_or_index(map_path)?;
     let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = prepare(
+    let localizer = Localizer::prepared_or_new(
         &map,
         prepared,
         options(
@@ -544,7 +514,7 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         .localize_points(&cloud.positions)
         .with_context(|| format!("localizing {}", scan_path.display()))?;
     if let Some(svg_path) = &args.svg {
-        let svg = figure(&localizer, &result, None, 100.0);
+        let svg = localize::figure::result_svg(&localizer, &result, None, 100.0);
         geodata::fsio::write_atomic(svg_path, svg)
             .with_context(|| format!("writing {}", svg_path.display()))?;
     }
@@ -631,7 +601,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
         super::usage!("--window 0: expected at least 1 scan per window");
     }
     let (map, prepared) = load_map_or_index(&args.map)?;
-    let localizer = prepare(
+    let localizer = Localizer::prepared_or_new(
         &map,
         prepared,
         options(
@@ -799,66 +769,6 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A figure of one result: map outlines (grey), edges visible from the chosen pose (black),
-/// scan segments at the chosen pose (red), candidates (blue; the best larger), truth (green).
-pub(crate) fn figure(
-    localizer: &Localizer<'_>,
-    result: &Localization,
-    truth: Option<Pose2>,
-    half_m: f64,
-) -> String {
-    let centre = result
-        .candidates
-        .first()
-        .map(|c| [c.pose.x, c.pose.y])
-        .or(truth.map(|t| [t.x, t.y]))
-        .unwrap_or([0.0, 0.0]);
-    let (min, max) = (
-        [centre[0] - half_m, centre[1] - half_m],
-        [centre[0] + half_m, centre[1] + half_m],
-    );
-    let mut svg = Svg::new(600.0, min, max);
-    for b in &localizer.map.buildings {
-        if b.outer
-            .iter()
-            .any(|p| p[0] > min[0] && p[0] < max[0] && p[1] > min[1] && p[1] < max[1])
-        {
-            svg.polygon(&b.outer, "fill:#e6e0d4;stroke:#9a9a9a;stroke-width:1");
-        }
-    }
-    for s in &localizer.map.streets.segments {
-        svg.polyline(&[s.a, s.b], "stroke:#ffffff;stroke-width:2");
-    }
-    if let Some(best) = result.candidates.first() {
-        for v in localizer.visible_from([best.pose.x, best.pose.y]) {
-            svg.polyline(&[v.a, v.b], "stroke:#222;stroke-width:2");
-        }
-        for s in &result.segments {
-            let m: Segment = s.transformed(&best.pose);
-            svg.polyline(
-                &[m.a, m.b],
-                "stroke:#d62728;stroke-width:2.5;stroke-opacity:0.85",
-            );
-        }
-    }
-    for c in result.candidates.iter().skip(1).take(200) {
-        svg.circle([c.pose.x, c.pose.y], 3.0, "fill:#6baed6;fill-opacity:0.7");
-    }
-    if let Some(t) = truth {
-        svg.circle([t.x, t.y], 6.0, "fill:none;stroke:#2ca02c;stroke-width:2.5");
-    }
-    if let Some(best) = result.candidates.first() {
-        svg.circle([best.pose.x, best.pose.y], 5.0, "fill:#1f4e9c");
-        let tip = best.pose.apply([8.0, 0.0]);
-        svg.polyline(
-            &[[best.pose.x, best.pose.y], tip],
-            "stroke:#1f4e9c;stroke-width:2",
-        );
-    }
-    svg.scale_bar(20.0);
-    svg.finish()
-}
-
 impl Method {
     /// The library's ranking method (`None` for `all`).
     fn rank_method(self) -> Option<RankMethod> {
@@ -880,312 +790,55 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         args.method.iter().filter_map(|m| m.rank_method()).collect()
     };
     let mcd = is_mcd(&args.dataset);
-    let (map_path, sim) = if mcd {
-        let Some(m) = args.map.clone() else {
-            super::usage!(
-                "{} is an MCD sequence; give the map with --map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)",
-                args.dataset.display()
-            );
-        };
-        (m, None)
-    } else {
-        let d = SimDataset::open(&args.dataset)
-            .with_context(|| format!("opening the dataset {}", args.dataset.display()))?;
-        (
-            args.map.clone().unwrap_or_else(|| d.map_path.clone()),
-            Some(d),
-        )
-    };
-    let t = Instant::now();
-    let (map, prepared) = load_map_or_index(&map_path)?;
-    if prepared.is_some() && args.distractors.is_some() {
+    if mcd && args.map.is_none() {
         super::usage!(
-            "--distractors changes the map, so it needs the OSM map, not the index {}",
-            map_path.display()
+            "{} is an MCD sequence; give the map with --map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)",
+            args.dataset.display()
         );
     }
-    let (map, distractors) = match &args.distractors {
-        Some(other_path) => {
-            let other = OsmMap::load(other_path)
-                .with_context(|| format!("loading the distractor map {}", other_path.display()))?;
-            let options = DistractorOptions {
-                ring_m: args.distractor_ring_m,
-                seed: args.distractor_seed,
-                ..DistractorOptions::default()
-            };
-            let (composed, summary) = embed_among_distractors(&map, &other, &options)
-                .with_context(|| {
-                    format!(
-                        "embedding {} among distractors from {}",
-                        map_path.display(),
-                        other_path.display()
-                    )
-                })?;
-            let report =
-                DistractorsReport::new(&other_path.display().to_string(), &options, summary);
-            (composed, Some(report))
-        }
-        None => (map, None),
-    };
-    let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = prepare(
-        &map,
-        prepared,
-        options(
+    if args.track == Some(0) {
+        super::usage!("--track 0: expected a window of at least 1 scan");
+    }
+    let job = EvalJob {
+        dataset: args.dataset.clone(),
+        map: args.map.clone(),
+        methods,
+        options: options(
             CostKind::Reverse,
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
         )?,
-        &map_path,
-    )?;
-    let t = Instant::now();
-    let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
-    let hashing_index_s = t.elapsed().as_secs_f64();
-    let mut scans: Vec<EvalScan> = Vec::new();
-    let count = match &sim {
-        Some(d) => d.truth.len(),
-        None => {
-            scans = mcd_scans(&args.dataset, &map, 1)
-                .with_context(|| format!("reading the MCD scans in {}", args.dataset.display()))?;
-            scans.len()
-        }
-    };
-    let count = args.limit.map_or(count, |l| l.min(count));
-    if let Some(dir) = &args.figures {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let load = |i: usize| -> anyhow::Result<EvalScan> {
-        Ok(match &sim {
-            Some(d) => d
-                .load(i)
-                .with_context(|| format!("loading scan {i} of {}", args.dataset.display()))?,
-            None => scans
-                .get(i)
-                .cloned()
-                .with_context(|| format!("MCD scan {i} missing"))?,
-        })
-    };
-    // Track mode: every scan's walls first, then each window searched as one.
-    let track_results: Option<Vec<Localization>> = match args.track {
-        Some(0) => super::usage!("--track 0: expected a window of at least 1 scan"),
-        Some(k) => {
-            let mut truths = Vec::with_capacity(count);
-            let mut extracted = Vec::with_capacity(count);
-            for i in 0..count {
-                let scan = load(i)?;
-                truths.push(scan.truth);
-                extracted.push(
-                    localizer
-                        .scan_segments(&scan.points)
-                        .with_context(|| format!("extracting walls from {}", scan.name))?,
-                );
-            }
-            let odometry = localize::track::drifted_odometry(
-                &truths,
-                args.odometry_drift,
-                args.odometry_yaw_drift_deg.to_radians() / 50.0,
-            );
-            let track_options = localize::track::TrackOptions {
-                window: k,
-                ..Default::default()
+        distractors: args.distractors.clone().map(|path| {
+            let options = DistractorOptions {
+                ring_m: args.distractor_ring_m,
+                seed: args.distractor_seed,
+                ..DistractorOptions::default()
             };
-            Some(localizer.localize_track(&extracted, &odometry, &track_options)?)
-        }
-        None => None,
+            (path, options)
+        }),
+        limit: args.limit,
+        track: args.track.map(|window| TrackSetup {
+            window,
+            odometry_drift: args.odometry_drift,
+            odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
+        }),
+        figures: args.figures.clone(),
     };
-    let mut records: Vec<ScanOutcome> = Vec::new();
-    for i in 0..count {
-        let scan = match &sim {
-            Some(d) => d
-                .load(i)
-                .with_context(|| format!("loading scan {i} of {}", args.dataset.display()))?,
-            None => scans
-                .get(i)
-                .cloned()
-                .with_context(|| format!("MCD scan {i} missing"))?,
-        };
-        let result = match &track_results {
-            Some(results) => results[i].clone(),
-            None => localizer
-                .localize_points(&scan.points)
-                .with_context(|| format!("localizing {}", scan.name))?,
-        };
-        let t = Instant::now();
-        let hashing: Vec<Pose2> = if methods.contains(&RankMethod::Hashing) {
-            hashing_index
-                .localize(&result.segments)
-                .into_iter()
-                .map(|(p, _)| p)
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let hashing_s = t.elapsed().as_secs_f64();
-        if let Some(dir) = &args.figures {
-            let path = dir.join(format!("{}.svg", scan.name.trim_end_matches(".ply")));
-            geodata::fsio::write_atomic(&path, figure(&localizer, &result, Some(scan.truth), 90.0))
-                .with_context(|| format!("writing {}", path.display()))?;
+    let json = args.json;
+    let report = match run_eval(&job, &mut |scan| {
+        if !json {
+            println!("{}", scan.line_text());
         }
-        let rec = ScanOutcome::new(scan.name.clone(), scan.truth, result, hashing, hashing_s);
-        if !args.json {
-            print_scan_line(&rec);
-        }
-        records.push(rec);
-    }
-    let report = EvalReport::new(
-        EvalSetup {
-            dataset: args.dataset.display().to_string(),
-            map: map_path.display().to_string(),
-            methods,
-            localizer: &localizer,
-            load_map_seconds: load_map_s,
-            hashing_index_seconds: hashing_index_s,
-            distractors,
-            track: args.track.map(|window| TrackSetup {
-                window,
-                odometry_drift: args.odometry_drift,
-                odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
-            }),
-        },
-        &records,
-    );
-    if let Some(dir) = &args.figures {
-        let path = dir.join("curves.svg");
-        geodata::fsio::write_atomic(&path, report.curves_svg())
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
+    }) {
+        Err(e @ LocalizeError::DistractorsNeedOsmMap { .. }) => super::usage!("{e}"),
+        r => r?,
+    };
     if args.json {
         return super::print_json(&report);
     }
-    print_eval(&report, mcd);
+    print!("{}", report.table_text(mcd));
     Ok(())
-}
-
-fn print_scan_line(r: &ScanOutcome) {
-    let mut line = format!(
-        "{:<14} segs {:>3} cands {:>5}",
-        r.name,
-        r.result.segments.len(),
-        r.result.candidates.len()
-    );
-    for (m, name) in RankMethod::ALL
-        .iter()
-        .zip(["dcm", "fwd", "rev", "sym", "hash"])
-    {
-        let e = r.top1_error(*m);
-        line += &format!(" | {name} {:>7.2} m {:>6.2}°", e.error_m, e.error_deg);
-    }
-    line += &format!(
-        " | conf {:.2} | {:.2} s",
-        r.result.confidence, r.result.seconds.total
-    );
-    if let Some(msg) = &r.result.message {
-        line += &format!(" | {msg}");
-    }
-    println!("{line}");
-}
-
-/// Prints the evaluation as tables.
-fn print_eval(r: &EvalReport, mcd: bool) {
-    let n = r.scans;
-    println!();
-    println!(
-        "{} scans of {} on {} ({})",
-        n,
-        r.dataset,
-        r.map,
-        if mcd { "real MCD scans" } else { "simulated" }
-    );
-    if let Some(d) = &r.distractors {
-        let s = &d.summary;
-        println!(
-            "embedded among distractors from {} (seed {}, ring {} m, gap {} m, tiles {} m): {} target buildings, {} distractor buildings ({} dropped at tile seams), {} distractor street segments in {} tiles; building box {:.2} km² → {:.2} km²",
-            d.map,
-            d.seed,
-            d.ring_m,
-            d.gap_m,
-            d.tile_m,
-            s.target_buildings,
-            s.distractor_buildings,
-            s.dropped_overlapping,
-            s.distractor_street_segments,
-            s.tiles.len(),
-            s.target_area_km2,
-            s.outer_area_km2
-        );
-    }
-    println!(
-        "search area {:.2} km² ({} cells × {} yaws)",
-        r.search_area_km2, r.domain_cells, r.yaws_per_cell
-    );
-    println!("N_accurate (thresholds 4 m / 0.2 rad; hashing 5 m / π/6), k best candidates within radius w (m) of the truth:");
-    let mut header = format!("{:<10} {:>3}", "method", "k");
-    for w in RADII_M {
-        header += &format!(" {:>6}", radius_name(w));
-    }
-    println!("{header}");
-    for &m in &r.methods {
-        for k in KS {
-            let mut line = format!("{:<10} {k:>3}", m.name());
-            for w in RADII_M {
-                line += &format!(" {:>6}", r.n_accurate_at(m, k, w));
-            }
-            println!("{line}");
-        }
-    }
-    let t1 = &r.top1_within_2m_3deg;
-    println!(
-        "accurate candidate in the candidate set: {}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; top 10 (reverse) within 2 m and 3°: {}/{n}; median error of accurate top-1 (reverse, refined) {:.2} m",
-        r.accurate_in_candidate_set,
-        t1.dcm,
-        t1.forward,
-        t1.reverse,
-        t1.symmetric,
-        r.top10_within_2m_3deg_reverse,
-        r.median_error_accurate_top1_reverse_m
-    );
-    let sensor_counts: Vec<String> = r.sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
-    println!("sensor profiles: {}", sensor_counts.join(", "));
-    if let Some(t) = &r.track {
-        println!(
-            "track mode (window {}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 (reverse) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
-            t.window,
-            100.0 * t.odometry_drift,
-            t.odometry_yaw_drift_deg_per_50m,
-            t.top1_within_2m_3deg,
-            t.scans_after_first_window,
-            t.top10_within_2m_3deg,
-            t.scans_after_first_window
-        );
-    }
-    let (s, dt) = (&r.map_seconds, &r.tensor);
-    println!(
-        "map: load {:.2} s, edges {:.3} s, DT tensor {}×{}×{} at {} m {:.3} s, pyramid {:.3} s, feasible-pose mask {:.3} s ({} of {} cells), hashing index {:.3} s ({} threads)",
-        s.load_map,
-        s.map_edges,
-        dt.width,
-        dt.height,
-        dt.channels,
-        dt.grid_m,
-        s.distance_transform,
-        s.pyramid,
-        s.feasible_mask,
-        r.feasible_cells,
-        r.domain_cells,
-        s.hashing_index,
-        r.threads
-    );
-    println!(
-        "{:<18} {:>9} {:>9} {:>9}",
-        "stage (s/scan)", "mean", "median", "max"
-    );
-    for (name, t) in &r.stage_seconds {
-        println!(
-            "{name:<18} {:>9.4} {:>9.4} {:>9.4}",
-            t.mean, t.median, t.max
-        );
-    }
 }
 
 #[cfg(test)]

@@ -1,12 +1,9 @@
 //! Demo stages of localize: one scan on the map, and a car-LiDAR drive along its track.
 
 use super::{DemoArgs, StageOutput};
-use crate::cmd::localize::figure;
 use anyhow::Context;
-use geodata::osm::OsmMap;
-use geodata::svg::Svg;
 use localize::eval::{Accuracy, SimDataset};
-use localize::pipeline::{Localization, LocalizeOptions, Localizer};
+use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::Pose2;
 use serde_json::{json, Value};
 use std::time::Instant;
@@ -106,7 +103,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             "seconds": result.seconds.total,
         }));
         if i == 0 {
-            let svg = figure(&localizer, &result, Some(truth), 90.0);
+            let svg = localize::figure::result_svg(&localizer, &result, Some(truth), 90.0);
             files.push(("localize.svg", svg.clone().into_bytes()));
             figures.push(svg);
         }
@@ -235,7 +232,7 @@ pub(super) fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             "top1_within_2m_3deg": ok1,
         }));
     }
-    let svg = track_figure(&map, &truths, &results, &strict, WINDOW);
+    let svg = localize::figure::track_svg(&map, &truths, &results, &strict, WINDOW);
     let table = rows_table(
         &rows,
         &[
@@ -272,76 +269,6 @@ pub(super) fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         figures: vec![svg.clone()],
         files: vec![("localize_track.svg", svg.into_bytes())],
     })
-}
-
-/// The track figure: the map around the drive, the true track, every scan's candidates and
-/// chosen pose.
-fn track_figure(
-    map: &OsmMap,
-    truths: &[Pose2],
-    results: &[Localization],
-    accuracy: &Accuracy,
-    window: usize,
-) -> String {
-    let mut min = [f64::INFINITY; 2];
-    let mut max = [f64::NEG_INFINITY; 2];
-    for t in truths {
-        for k in 0..2 {
-            let v = [t.x, t.y][k];
-            min[k] = min[k].min(v);
-            max[k] = max[k].max(v);
-        }
-    }
-    let half = ((max[0] - min[0]).max(max[1] - min[1]) / 2.0 + 60.0).max(80.0);
-    let centre = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
-    let (min, max) = (
-        [centre[0] - half, centre[1] - half],
-        [centre[0] + half, centre[1] + half],
-    );
-    let inside = |p: &[f64; 2]| p[0] > min[0] && p[0] < max[0] && p[1] > min[1] && p[1] < max[1];
-    let mut svg = Svg::new(640.0, min, max);
-    for b in &map.buildings {
-        if b.outer.iter().any(inside) {
-            svg.polygon(&b.outer, "fill:#e6e0d4;stroke:#9a9a9a;stroke-width:1");
-        }
-    }
-    for s in &map.streets.segments {
-        if inside(&s.a) || inside(&s.b) {
-            svg.polyline(&[s.a, s.b], "stroke:#bbbbbb;stroke-width:1.5");
-        }
-    }
-    let track: Vec<[f64; 2]> = truths.iter().map(|t| [t.x, t.y]).collect();
-    svg.polyline(
-        &track,
-        "fill:none;stroke:#2ca02c;stroke-width:3;stroke-opacity:0.8",
-    );
-    for r in results {
-        for c in r.candidates.iter().skip(1).take(9) {
-            svg.circle([c.pose.x, c.pose.y], 2.5, "fill:#6baed6;fill-opacity:0.7");
-        }
-    }
-    for (i, (r, t)) in results.iter().zip(truths).enumerate() {
-        let Some(best) = r.candidates.first() else {
-            continue;
-        };
-        let p = [best.pose.x, best.pose.y];
-        svg.polyline(&[p, [t.x, t.y]], "stroke:#555;stroke-width:0.8");
-        let colour = if accuracy.accepts(&best.pose, t) {
-            "#1f4e9c"
-        } else {
-            "#d62728"
-        };
-        svg.circle(p, 4.0, &format!("fill:{colour}"));
-        svg.polyline(
-            &[p, best.pose.apply([8.0, 0.0])],
-            &format!("stroke:{colour};stroke-width:2"),
-        );
-        if i + 1 < window {
-            svg.circle(p, 7.0, &format!("fill:none;stroke:{colour};stroke-width:1"));
-        }
-    }
-    svg.scale_bar(50.0);
-    svg.finish()
 }
 
 #[cfg(test)]

@@ -1,0 +1,214 @@
+//! The `localize eval` job: every scan of a simulated `localization` dataset or of a real MCD
+//! sequence localized on its map (optionally among distractors, optionally in track mode),
+//! ranked by each requested method, with figures, summed up in an [`EvalReport`].
+
+use super::report::{
+    DistractorsReport, EvalReport, EvalSetup, RankMethod, ScanOutcome, TrackSetup,
+};
+use super::{is_mcd, mcd_scans, EvalScan, SimDataset};
+use crate::distractors::{embed_among_distractors, DistractorOptions};
+use crate::figure::result_svg;
+use crate::hashing::{CornerIndex, HashingOptions};
+use crate::index::load_map_or_index;
+use crate::pipeline::{Localization, LocalizeOptions, Localizer};
+use crate::track::{drifted_odometry, TrackOptions};
+use crate::{LocalizeError, Pose2, Result, WithContext};
+use geodata::osm::OsmMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to evaluate and how.
+#[derive(Debug, Clone)]
+pub struct EvalJob {
+    /// A simulated `localization` dataset folder or an MCD sequence folder.
+    pub dataset: PathBuf,
+    /// The map (OSM file or `.uloc` index); a simulated dataset's own map when `None`.
+    pub map: Option<PathBuf>,
+    /// The ranking methods to report.
+    pub methods: Vec<RankMethod>,
+    /// The localizer's options.
+    pub options: LocalizeOptions,
+    /// Embed the map among distractor buildings of this other map.
+    pub distractors: Option<(PathBuf, DistractorOptions)>,
+    /// Evaluate only the first scans.
+    pub limit: Option<usize>,
+    /// Track mode: windows of scans tied by drifted odometry.
+    pub track: Option<TrackSetup>,
+    /// Write one SVG per scan and `curves.svg` here.
+    pub figures: Option<PathBuf>,
+}
+
+/// The map a job runs on: the job's, or the simulated dataset's own.
+fn job_map(job: &EvalJob, sim: Option<&SimDataset>) -> Result<PathBuf> {
+    match (&job.map, sim) {
+        (Some(m), _) => Ok(m.clone()),
+        (None, Some(d)) => Ok(d.map_path.clone()),
+        (None, None) => Err(LocalizeError::Dataset {
+            path: job.dataset.clone(),
+            message:
+                "an MCD sequence; give the map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)"
+                    .into(),
+        }),
+    }
+}
+
+/// The map, embedded among distractors when the job asks for them.
+fn composed_map(
+    job: &EvalJob,
+    map: OsmMap,
+    map_path: &Path,
+) -> Result<(OsmMap, Option<DistractorsReport>)> {
+    let Some((other_path, options)) = &job.distractors else {
+        return Ok((map, None));
+    };
+    let other = OsmMap::load(other_path)
+        .context_with(|| format!("loading the distractor map {}", other_path.display()))?;
+    let (composed, summary) =
+        embed_among_distractors(&map, &other, options).context_with(|| {
+            format!(
+                "embedding {} among distractors from {}",
+                map_path.display(),
+                other_path.display()
+            )
+        })?;
+    let report = DistractorsReport::new(&other_path.display().to_string(), options, summary);
+    Ok((composed, Some(report)))
+}
+
+/// Runs the evaluation; `on_scan` sees each scan's outcome as soon as it is known.
+pub fn run_eval(job: &EvalJob, on_scan: &mut dyn FnMut(&ScanOutcome)) -> Result<EvalReport> {
+    let sim = if is_mcd(&job.dataset) {
+        None
+    } else {
+        Some(
+            SimDataset::open(&job.dataset)
+                .context_with(|| format!("opening the dataset {}", job.dataset.display()))?,
+        )
+    };
+    let map_path = job_map(job, sim.as_ref())?;
+    let t = Instant::now();
+    let (map, prepared) = load_map_or_index(&map_path)?;
+    if prepared.is_some() && job.distractors.is_some() {
+        return Err(LocalizeError::DistractorsNeedOsmMap { path: map_path });
+    }
+    let (map, distractors) = composed_map(job, map, &map_path)?;
+    let load_map_s = t.elapsed().as_secs_f64();
+    let localizer = Localizer::prepared_or_new(&map, prepared, job.options.clone(), &map_path)?;
+    let t = Instant::now();
+    let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
+    let hashing_index_s = t.elapsed().as_secs_f64();
+    let mcd: Vec<EvalScan> = match &sim {
+        Some(_) => Vec::new(),
+        None => mcd_scans(&job.dataset, &map, 1)
+            .context_with(|| format!("reading the MCD scans in {}", job.dataset.display()))?,
+    };
+    let count = sim.as_ref().map_or(mcd.len(), |d| d.truth.len());
+    let count = job.limit.map_or(count, |l| l.min(count));
+    if let Some(dir) = &job.figures {
+        std::fs::create_dir_all(dir).map_err(|source| LocalizeError::Io {
+            action: "creating",
+            path: dir.clone(),
+            source,
+        })?;
+    }
+    let load = |i: usize| -> Result<EvalScan> {
+        match &sim {
+            Some(d) => d
+                .load(i)
+                .context_with(|| format!("loading scan {i} of {}", job.dataset.display())),
+            None => mcd.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
+                path: job.dataset.clone(),
+                message: format!("MCD scan {i} missing"),
+            }),
+        }
+    };
+    let track_results = match &job.track {
+        Some(setup) => Some(track_results(&localizer, setup, count, &load)?),
+        None => None,
+    };
+    let mut records: Vec<ScanOutcome> = Vec::new();
+    for i in 0..count {
+        let scan = load(i)?;
+        let result = match &track_results {
+            Some(results) => results[i].clone(),
+            None => localizer
+                .localize_points(&scan.points)
+                .context_with(|| format!("localizing {}", scan.name))?,
+        };
+        let t = Instant::now();
+        let hashing: Vec<Pose2> = if job.methods.contains(&RankMethod::Hashing) {
+            hashing_index
+                .localize(&result.segments)
+                .into_iter()
+                .map(|(p, _)| p)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let hashing_s = t.elapsed().as_secs_f64();
+        if let Some(dir) = &job.figures {
+            let path = dir.join(format!("{}.svg", scan.name.trim_end_matches(".ply")));
+            let svg = result_svg(&localizer, &result, Some(scan.truth), 90.0);
+            write_file(&path, svg)?;
+        }
+        let rec = ScanOutcome::new(scan.name.clone(), scan.truth, result, hashing, hashing_s);
+        on_scan(&rec);
+        records.push(rec);
+    }
+    let report = EvalReport::new(
+        EvalSetup {
+            dataset: job.dataset.display().to_string(),
+            map: map_path.display().to_string(),
+            methods: job.methods.clone(),
+            localizer: &localizer,
+            load_map_seconds: load_map_s,
+            hashing_index_seconds: hashing_index_s,
+            distractors,
+            track: job.track,
+        },
+        &records,
+    );
+    if let Some(dir) = &job.figures {
+        write_file(&dir.join("curves.svg"), report.curves_svg())?;
+    }
+    Ok(report)
+}
+
+/// Track mode: every scan's walls first, then each window searched as one.
+fn track_results(
+    localizer: &Localizer<'_>,
+    setup: &TrackSetup,
+    count: usize,
+    load: &dyn Fn(usize) -> Result<EvalScan>,
+) -> Result<Vec<Localization>> {
+    let mut truths = Vec::with_capacity(count);
+    let mut extracted = Vec::with_capacity(count);
+    for i in 0..count {
+        let scan = load(i)?;
+        truths.push(scan.truth);
+        extracted.push(
+            localizer
+                .scan_segments(&scan.points)
+                .context_with(|| format!("extracting walls from {}", scan.name))?,
+        );
+    }
+    let odometry = drifted_odometry(
+        &truths,
+        setup.odometry_drift,
+        setup.odometry_yaw_drift_deg.to_radians() / 50.0,
+    );
+    let options = TrackOptions {
+        window: setup.window,
+        ..Default::default()
+    };
+    localizer.localize_track(&extracted, &odometry, &options)
+}
+
+/// Writes a figure atomically.
+fn write_file(path: &Path, text: String) -> Result<()> {
+    geodata::fsio::write_atomic(path, text).map_err(|source| LocalizeError::Io {
+        action: "writing",
+        path: path.to_path_buf(),
+        source,
+    })
+}
