@@ -28,7 +28,9 @@
 //!   track), odometry files and simulated drift.
 //! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables;
 //!   [`extract_eval`]: extraction precision/recall on labelled real scans; [`report`]: the
-//!   answers in WGS84 as the command line prints them.
+//!   answers in WGS84 as the command line prints them; [`figure`]: pictures of results;
+//!   [`jobs`]: the command-line jobs (index, one scan file, a track folder, extraction
+//!   scores) as library calls.
 
 pub mod candidates;
 pub mod chamfer;
@@ -39,6 +41,7 @@ pub mod feasible;
 pub mod figure;
 pub mod hashing;
 pub mod index;
+pub mod jobs;
 pub mod pipeline;
 pub mod rank;
 pub mod refine;

@@ -10,6 +10,7 @@ use crate::distractors::{embed_among_distractors, DistractorOptions};
 use crate::figure::result_svg;
 use crate::hashing::{CornerIndex, HashingOptions};
 use crate::index::load_map_or_index;
+use crate::jobs::write_file;
 use crate::pipeline::{Localization, LocalizeOptions, Localizer};
 use crate::track::{drifted_odometry, TrackOptions};
 use crate::{LocalizeError, Pose2, Result, WithContext};
@@ -202,13 +203,4 @@ fn track_results(
         ..Default::default()
     };
     localizer.localize_track(&extracted, &odometry, &options)
-}
-
-/// Writes a figure atomically.
-fn write_file(path: &Path, text: String) -> Result<()> {
-    geodata::fsio::write_atomic(path, text).map_err(|source| LocalizeError::Io {
-        action: "writing",
-        path: path.to_path_buf(),
-        source,
-    })
 }

@@ -11,23 +11,18 @@
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
 //! knobs of [`ExtractArgs`] (issue 15).
 
-use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
-use geodata::osm::OsmMap;
 use localize::distractors::DistractorOptions;
 use localize::eval::is_mcd;
 use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
-use localize::extract_eval::{evaluate, labelled_scans};
-use localize::index::{is_index, load_map_or_index, PreparedMap};
-use localize::pipeline::{LocalizeOptions, Localizer};
+use localize::index::is_index;
+use localize::jobs::{build_index, extract_eval_sequence, localize_file, track_folder, TrackJob};
+use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
-use localize::report::{LocalizeReport, TrackReport, TrackRow, TrackSeconds};
 use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
 use localize::LocalizeError;
-use serde_json::json;
 use std::path::PathBuf;
-use std::time::Instant;
 
 /// Arguments of `urbansem localize`.
 #[derive(Args)]
@@ -431,58 +426,11 @@ fn index(args: IndexArgs) -> anyhow::Result<()> {
             args.out.display()
         );
     }
-    let t = Instant::now();
-    let map = OsmMap::load(&args.map)
-        .with_context(|| format!("loading the map {}", args.map.display()))?;
-    let load_s = t.elapsed().as_secs_f64();
-    let mut o = LocalizeOptions::default();
-    o.chamfer.grid_m = args.grid_m;
-    let prepared = PreparedMap::build(&map, &o.chamfer, &o.search)
-        .with_context(|| format!("preparing the map {}", args.map.display()))?;
-    let t = Instant::now();
-    prepared.write(&args.out, &args.map)?;
-    let write_s = t.elapsed().as_secs_f64();
-    let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
-    let t = Instant::now();
-    let (_, source) = PreparedMap::read(&args.out)?;
-    source.load(&args.out)?;
-    let load_index_s = t.elapsed().as_secs_f64();
-    let dt = &prepared.dt;
+    let report = build_index(&args.map, &args.out, args.grid_m)?;
     if args.json {
-        let v = json!({
-            "index": args.out,
-            "map": args.map,
-            "bytes": bytes,
-            "edges": prepared.edges.len(),
-            "tensor": [dt.width, dt.height, dt.channels],
-            "grid_m": dt.grid_m,
-            "seconds": {
-                "load_map": load_s,
-                "prepare": prepared.seconds,
-                "write": write_s,
-                "load_index": load_index_s,
-            },
-        });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-    } else {
-        let s = &prepared.seconds;
-        println!(
-            "{}: {:.1} MB ({} edges, tensor {}×{}×{} at {} m); prepared in {:.2} s (tensor {:.2}, pyramid {:.2}, feasible {:.2}), written in {:.2} s; loading it back (index and map) takes {:.3} s",
-            args.out.display(),
-            bytes as f64 / 1e6,
-            prepared.edges.len(),
-            dt.width,
-            dt.height,
-            dt.channels,
-            dt.grid_m,
-            s.edges + s.distance_transform + s.pyramid + s.feasible,
-            s.distance_transform,
-            s.pyramid,
-            s.feasible,
-            write_s,
-            load_index_s
-        );
+        return super::print_json(&report);
     }
+    print!("{}", report.text());
     Ok(())
 }
 
@@ -492,107 +440,17 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
             "urbansem localize needs --map MAP and --scan SCAN (or the `eval` subcommand)"
         );
     };
-    let t = Instant::now();
-    let (map, prepared) = load_map_or_index(map_path)?;
-    let load_map_s = t.elapsed().as_secs_f64();
-    let localizer = Localizer::prepared_or_new(
-        &map,
-        prepared,
-        options(
-            args.cost.kind(),
-            args.grid_m,
-            args.yaw_step_deg,
-            &args.extract,
-        )?,
-        map_path,
+    let options = options(
+        args.cost.kind(),
+        args.grid_m,
+        args.yaw_step_deg,
+        &args.extract,
     )?;
-    let t = Instant::now();
-    let cloud = geodata::cloud::read_cloud(scan_path)
-        .with_context(|| format!("reading the scan {}", scan_path.display()))?;
-    let read_scan_s = t.elapsed().as_secs_f64();
-    let result = localizer
-        .localize_points(&cloud.positions)
-        .with_context(|| format!("localizing {}", scan_path.display()))?;
-    if let Some(svg_path) = &args.svg {
-        let svg = localize::figure::result_svg(&localizer, &result, None, 100.0);
-        geodata::fsio::write_atomic(svg_path, svg)
-            .with_context(|| format!("writing {}", svg_path.display()))?;
-    }
-    let report = LocalizeReport::new(
-        &localizer,
-        &map_path.display().to_string(),
-        &scan_path.display().to_string(),
-        &result,
-        args.top,
-        load_map_s,
-        read_scan_s,
-    );
+    let done = localize_file(map_path, scan_path, options, args.top, args.svg.as_deref())?;
     if args.json {
-        return super::print_json(&report);
+        return super::print_json(&done.report);
     }
-    let (s, stages) = (&report.seconds, &report.seconds.scan);
-    println!(
-        "{}: {} points, {} vertical cells, {} segments; {} raw poses → {} after suppression → {} candidates (ranked by {})",
-        scan_path.display(),
-        cloud.len(),
-        result.vertical_cells,
-        result.segments.len(),
-        result.raw_poses,
-        result.after_suppression,
-        result.candidates.len(),
-        result.rank_by.name()
-    );
-    if let Some(r) = &result.sensor {
-        println!(
-            "sensor {} ({}): mount {:.2} m, vertical field of view {:.1}° … {:.1}°, {} beams; wall clearance {:.2} m",
-            r.profile,
-            if r.detected { "detected" } else { "named" },
-            r.geometry.mount_height_m,
-            r.geometry.vfov_deg[0],
-            r.geometry.vfov_deg[1],
-            r.geometry.beams,
-            result.clearance_m
-        );
-    }
-    if let Some(m) = &result.message {
-        println!("note: {m}");
-    }
-    println!(
-        "{:>4} {:>10} {:>10} {:>11} {:>11} {:>8} {:>7} {:>7} {:>7} {:>7}",
-        "rank", "x", "y", "lat", "lon", "yaw°", "dcm", "fwd", "rev", "sym"
-    );
-    for c in &report.candidates {
-        println!(
-            "{:>4} {:>10.2} {:>10.2} {:>11.6} {:>11.6} {:>8.2} {:>7.3} {:>7.3} {:>7.3} {:>7.3}",
-            c.rank,
-            c.x,
-            c.y,
-            c.lat,
-            c.lon,
-            c.yaw.to_degrees(),
-            c.dcm,
-            c.forward,
-            c.reverse,
-            c.symmetric
-        );
-    }
-    println!("confidence {:.3}", result.confidence);
-    println!(
-        "seconds: map load {:.2}, edges {:.3}, DT tensor {:.3}, pyramid {:.3}, scan read {:.3}, surfaces {:.3}, segments {:.3}, templates {:.3}, search {:.3}, filter {:.3}, visibility+costs {:.3}, refine {:.3}, total {:.3}",
-        s.load_map,
-        s.map_edges,
-        s.distance_transform,
-        s.pyramid,
-        s.read_scan,
-        stages.surfaces,
-        stages.segments,
-        stages.templates,
-        stages.search,
-        stages.filter,
-        stages.visibility_costs,
-        stages.refine,
-        stages.total
-    );
+    print!("{}", done.text());
     Ok(())
 }
 
@@ -600,98 +458,24 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     if args.window == 0 {
         super::usage!("--window 0: expected at least 1 scan per window");
     }
-    let (map, prepared) = load_map_or_index(&args.map)?;
-    let localizer = Localizer::prepared_or_new(
-        &map,
-        prepared,
-        options(
+    let job = TrackJob {
+        map: args.map.clone(),
+        scans: args.scans.clone(),
+        odometry: args.odometry.clone(),
+        window: args.window,
+        options: options(
             args.cost.kind(),
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
         )?,
-        &args.map,
-    )?;
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&args.scans)
-        .with_context(|| format!("listing {}", args.scans.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| geodata::cloud::Format::from_path(p).is_ok())
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        anyhow::bail!(
-            "{}: no scan files (PLY, PCD, LAS/LAZ, KITTI .bin)",
-            args.scans.display()
-        );
-    }
-    let names: Vec<String> = files
-        .iter()
-        .map(|p| {
-            p.file_name()
-                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
-        })
-        .collect();
-    let odometry = localize::track::read_odometry(&args.odometry, &names)?;
-    let t = Instant::now();
-    let mut extracted = Vec::with_capacity(files.len());
-    for f in &files {
-        let cloud = geodata::cloud::read_cloud(f)
-            .with_context(|| format!("reading the scan {}", f.display()))?;
-        extracted.push(
-            localizer
-                .scan_segments(&cloud.positions)
-                .with_context(|| format!("extracting walls from {}", f.display()))?,
-        );
-    }
-    let track_options = localize::track::TrackOptions {
-        window: args.window,
-        ..Default::default()
+        top: args.top,
     };
-    let results = localizer.localize_track(&extracted, &odometry, &track_options)?;
-    let seconds = t.elapsed().as_secs_f64();
-    let report = TrackReport {
-        map: args.map.display().to_string(),
-        scans_dir: args.scans.display().to_string(),
-        odometry: args.odometry.display().to_string(),
-        window: args.window,
-        cost: results.first().map_or("reverse", |r| r.rank_by.name()),
-        scans: names
-            .iter()
-            .zip(&results)
-            .zip(&extracted)
-            .map(|((name, r), e)| TrackRow::new(&map, name, r, e, args.top))
-            .collect(),
-        seconds: TrackSeconds {
-            total: seconds,
-            per_scan: seconds / files.len() as f64,
-        },
-    };
+    let report = track_folder(&job)?;
     if args.json {
         return super::print_json(&report);
     }
-    println!(
-        "{}: {} scans, window {}, {:.2} s per scan",
-        args.scans.display(),
-        files.len(),
-        args.window,
-        seconds / files.len() as f64
-    );
-    println!(
-        "{:>24} {:>5} {:>11} {:>11} {:>8} {:>6}",
-        "scan", "segs", "lat", "lon", "yaw°", "conf"
-    );
-    for row in &report.scans {
-        let g = |v: Option<f64>| v.unwrap_or(f64::NAN);
-        println!(
-            "{:>24} {:>5} {:>11.6} {:>11.6} {:>8.2} {:>6.3}",
-            row.scan,
-            row.segments,
-            g(row.lat),
-            g(row.lon),
-            g(row.yaw).to_degrees(),
-            row.confidence
-        );
-    }
+    print!("{}", report.text());
     Ok(())
 }
 
@@ -700,72 +484,16 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
         super::usage!("--stride 0: expected a stride of at least 1");
     }
     let overrides = args.extract.overrides()?;
-    let t = Instant::now();
-    let (kind, scans) = labelled_scans(&args.dataset, args.stride)
-        .with_context(|| format!("reading {}", args.dataset.display()))?;
-    if scans.is_empty() {
-        anyhow::bail!("{}: no scans", args.dataset.display());
-    }
-    let read_s = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let result = evaluate(kind, &scans, args.extract.sensor.kind(), &|s, seg| {
-        overrides.apply(s, seg)
-    })?;
-    let eval_s = t.elapsed().as_secs_f64();
+    let report = extract_eval_sequence(
+        &args.dataset,
+        args.stride,
+        args.extract.sensor.kind(),
+        &overrides,
+    )?;
     if args.json {
-        let mut v = serde_json::to_value(&result)?;
-        v["dataset"] = json!(args.dataset.display().to_string());
-        v["sensor"] = json!(args.extract.sensor.kind().map_or("auto", SensorKind::name));
-        v["seconds"] = json!({"read": read_s, "extract_and_score": eval_s});
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        return super::print_json(&report);
     }
-    println!(
-        "{} ({}, {} scans): precision {:.3} ({:.3} counting the {:.0} % amid unlabelled points as wrong), recall {:.3}, {:.1} segments per scan",
-        args.dataset.display(),
-        result.kind,
-        result.scans,
-        result.precision,
-        result.precision_all,
-        100.0 * result.unjudged,
-        result.recall,
-        result.segments_per_scan
-    );
-    let profiles: Vec<String> = result
-        .profiles
-        .iter()
-        .map(|(p, n)| format!("{p} ×{n}"))
-        .collect();
-    println!("sensor: {}", profiles.join(", "));
-    let off: Vec<String> = result
-        .off_building_m
-        .iter()
-        .map(|(c, m)| format!("{c} {m:.0} m"))
-        .collect();
-    println!(
-        "segment length off buildings, by the class around it: {}",
-        off.join(", ")
-    );
-    println!(
-        "{:>12} {:>9} {:>7} {:>6} {:>7} {:>5} {:>9} {:>9} {:>6} {:>6}",
-        "scan", "profile", "mount", "top°", "clear", "segs", "seg m", "on bldg", "facade", "cover"
-    );
-    for s in &result.per_scan {
-        println!(
-            "{:>12} {:>9} {:>7.2} {:>6.1} {:>7.2} {:>5} {:>9.1} {:>9.1} {:>6} {:>6}",
-            s.scan,
-            s.sensor.profile,
-            s.sensor.geometry.mount_height_m,
-            s.sensor.geometry.vfov_deg[1],
-            s.clearance_m,
-            s.segments,
-            s.segment_m,
-            s.on_building_m,
-            s.facade_cells,
-            s.covered_cells
-        );
-    }
-    println!("seconds: read {read_s:.2}, extract and score {eval_s:.2}");
+    print!("{}", report.text());
     Ok(())
 }
 

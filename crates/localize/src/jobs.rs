@@ -1,0 +1,481 @@
+//! The command-line jobs as library calls, each returning the typed report the CLI prints
+//! (and the Python package and shard runner return): build a map index, localize one scan
+//! file, localize a folder of scans along a track, score wall extraction on a labelled
+//! sequence. `eval::run` is the dataset evaluation.
+
+use crate::extract_eval::{evaluate, labelled_scans, ExtractEval};
+use crate::figure::result_svg;
+use crate::index::{load_map_or_index, PreparedMap};
+use crate::pipeline::{LocalizeOptions, Localizer};
+use crate::report::{LocalizeReport, TrackReport, TrackRow, TrackSeconds};
+use crate::sensor::{ExtractOverrides, SensorKind};
+use crate::track::{read_odometry, TrackOptions};
+use crate::{LocalizeError, Result, WithContext};
+use geodata::osm::OsmMap;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Seconds of `localize index`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct IndexSeconds {
+    /// Reading the OSM map.
+    pub load_map: f64,
+    /// Preparing edges, tensor, pyramid and feasible mask.
+    pub prepare: crate::index::MapSeconds,
+    /// Writing the index.
+    pub write: f64,
+    /// Reading the index and its map back.
+    pub load_index: f64,
+}
+
+/// What `localize index` wrote.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct IndexReport {
+    /// The index file.
+    pub index: PathBuf,
+    /// The OSM map it indexes.
+    pub map: PathBuf,
+    /// Size of the index file.
+    pub bytes: u64,
+    /// Building outline edges.
+    pub edges: usize,
+    /// Distance-transform tensor width, height, orientation channels.
+    pub tensor: [usize; 3],
+    /// Tensor cell size, metres.
+    pub grid_m: f64,
+    /// Seconds per step.
+    pub seconds: IndexSeconds,
+}
+
+/// Prepares the map of `map_path` at `grid_m` and writes its index to `out` (`.uloc`).
+pub fn build_index(map_path: &Path, out: &Path, grid_m: f64) -> Result<IndexReport> {
+    let t = Instant::now();
+    let map = OsmMap::load(map_path)
+        .context_with(|| format!("loading the map {}", map_path.display()))?;
+    let load_s = t.elapsed().as_secs_f64();
+    let mut o = LocalizeOptions::default();
+    o.chamfer.grid_m = grid_m;
+    let prepared = PreparedMap::build(&map, &o.chamfer, &o.search)
+        .context_with(|| format!("preparing the map {}", map_path.display()))?;
+    let t = Instant::now();
+    prepared.write(out, map_path)?;
+    let write_s = t.elapsed().as_secs_f64();
+    let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    let t = Instant::now();
+    let (_, source) = PreparedMap::read(out)?;
+    source.load(out)?;
+    let load_index_s = t.elapsed().as_secs_f64();
+    let dt = &prepared.dt;
+    Ok(IndexReport {
+        index: out.to_path_buf(),
+        map: map_path.to_path_buf(),
+        bytes,
+        edges: prepared.edges.len(),
+        tensor: [dt.width, dt.height, dt.channels],
+        grid_m: dt.grid_m,
+        seconds: IndexSeconds {
+            load_map: load_s,
+            prepare: prepared.seconds,
+            write: write_s,
+            load_index: load_index_s,
+        },
+    })
+}
+
+impl IndexReport {
+    /// The one-line summary the command line prints.
+    pub fn text(&self) -> String {
+        let s = &self.seconds.prepare;
+        format!(
+            "{}: {:.1} MB ({} edges, tensor {}×{}×{} at {} m); prepared in {:.2} s (tensor {:.2}, pyramid {:.2}, feasible {:.2}), written in {:.2} s; loading it back (index and map) takes {:.3} s\n",
+            self.index.display(),
+            self.bytes as f64 / 1e6,
+            self.edges,
+            self.tensor[0],
+            self.tensor[1],
+            self.tensor[2],
+            self.grid_m,
+            s.edges + s.distance_transform + s.pyramid + s.feasible,
+            s.distance_transform,
+            s.pyramid,
+            s.feasible,
+            self.seconds.write,
+            self.seconds.load_index
+        )
+    }
+}
+
+/// One scan file localized on a map file ([`localize_file`]).
+#[derive(Debug, Clone)]
+pub struct FileLocalization {
+    /// The report, its best candidates listed.
+    pub report: LocalizeReport,
+    /// Points in the scan file.
+    pub points: usize,
+}
+
+/// Localizes the scan file `scan_path` on the map (or index) `map_path`, listing the `top`
+/// best candidates; draws the result to `svg` when given.
+pub fn localize_file(
+    map_path: &Path,
+    scan_path: &Path,
+    options: LocalizeOptions,
+    top: usize,
+    svg: Option<&Path>,
+) -> Result<FileLocalization> {
+    let t = Instant::now();
+    let (map, prepared) = load_map_or_index(map_path)?;
+    let load_map_s = t.elapsed().as_secs_f64();
+    let localizer = Localizer::prepared_or_new(&map, prepared, options, map_path)?;
+    let t = Instant::now();
+    let cloud = geodata::cloud::read_cloud(scan_path)
+        .context_with(|| format!("reading the scan {}", scan_path.display()))?;
+    let read_scan_s = t.elapsed().as_secs_f64();
+    let result = localizer
+        .localize_points(&cloud.positions)
+        .context_with(|| format!("localizing {}", scan_path.display()))?;
+    if let Some(svg_path) = svg {
+        write_file(svg_path, result_svg(&localizer, &result, None, 100.0))?;
+    }
+    let report = LocalizeReport::new(
+        &localizer,
+        &map_path.display().to_string(),
+        &scan_path.display().to_string(),
+        &result,
+        top,
+        load_map_s,
+        read_scan_s,
+    );
+    Ok(FileLocalization {
+        report,
+        points: cloud.len(),
+    })
+}
+
+/// A folder of scans localized along a track ([`track_folder`]).
+#[derive(Debug, Clone)]
+pub struct TrackJob {
+    /// The map (OSM file or `.uloc` index).
+    pub map: PathBuf,
+    /// The folder of gravity-levelled scans, taken in file-name order.
+    pub scans: PathBuf,
+    /// The odometry file (one relative pose per scan).
+    pub odometry: PathBuf,
+    /// Scans per window.
+    pub window: usize,
+    /// The localizer's options.
+    pub options: LocalizeOptions,
+    /// Candidates listed per scan.
+    pub top: usize,
+}
+
+/// Localizes every scan of a folder with the window of scans ending at it, tied by odometry.
+pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
+    let (map, prepared) = load_map_or_index(&job.map)?;
+    let localizer = Localizer::prepared_or_new(&map, prepared, job.options.clone(), &job.map)?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&job.scans)
+        .map_err(|source| LocalizeError::Io {
+            action: "listing",
+            path: job.scans.clone(),
+            source,
+        })?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| geodata::cloud::Format::from_path(p).is_ok())
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(LocalizeError::Dataset {
+            path: job.scans.clone(),
+            message: "no scan files (PLY, PCD, LAS/LAZ, KITTI .bin)".into(),
+        });
+    }
+    let names: Vec<String> = files
+        .iter()
+        .map(|p| {
+            p.file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        })
+        .collect();
+    let odometry = read_odometry(&job.odometry, &names)?;
+    let t = Instant::now();
+    let mut extracted = Vec::with_capacity(files.len());
+    for f in &files {
+        let cloud = geodata::cloud::read_cloud(f)
+            .context_with(|| format!("reading the scan {}", f.display()))?;
+        extracted.push(
+            localizer
+                .scan_segments(&cloud.positions)
+                .context_with(|| format!("extracting walls from {}", f.display()))?,
+        );
+    }
+    let options = TrackOptions {
+        window: job.window,
+        ..Default::default()
+    };
+    let results = localizer.localize_track(&extracted, &odometry, &options)?;
+    let seconds = t.elapsed().as_secs_f64();
+    Ok(TrackReport {
+        map: job.map.display().to_string(),
+        scans_dir: job.scans.display().to_string(),
+        odometry: job.odometry.display().to_string(),
+        window: job.window,
+        cost: results.first().map_or("reverse", |r| r.rank_by.name()),
+        scans: names
+            .iter()
+            .zip(&results)
+            .zip(&extracted)
+            .map(|((name, r), e)| TrackRow::new(&map, name, r, e, job.top))
+            .collect(),
+        seconds: TrackSeconds {
+            total: seconds,
+            per_scan: seconds / files.len() as f64,
+        },
+    })
+}
+
+/// Seconds of `localize extract-eval`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ExtractEvalSeconds {
+    /// Reading the scans.
+    pub read: f64,
+    /// Extracting walls and scoring them.
+    pub extract_and_score: f64,
+}
+
+/// Wall-extraction quality on a labelled sequence, as `localize extract-eval` prints it.
+#[derive(Debug, Clone, Serialize)]
+pub struct ExtractEvalReport {
+    /// The scores.
+    #[serde(flatten)]
+    pub eval: ExtractEval,
+    /// The sequence folder.
+    pub dataset: String,
+    /// The sensor profile asked for (`auto`: detected per scan).
+    pub sensor: &'static str,
+    /// Seconds per step.
+    pub seconds: ExtractEvalSeconds,
+}
+
+/// Scores wall extraction on every `stride`-th scan of a labelled KITTI-360 or MCD sequence.
+pub fn extract_eval_sequence(
+    dataset: &Path,
+    stride: usize,
+    sensor: Option<SensorKind>,
+    overrides: &ExtractOverrides,
+) -> Result<ExtractEvalReport> {
+    let t = Instant::now();
+    let (kind, scans) = labelled_scans(dataset, stride)
+        .context_with(|| format!("reading {}", dataset.display()))?;
+    if scans.is_empty() {
+        return Err(LocalizeError::Dataset {
+            path: dataset.to_path_buf(),
+            message: "no scans".into(),
+        });
+    }
+    let read_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let eval = evaluate(kind, &scans, sensor, &|s, seg| overrides.apply(s, seg))?;
+    Ok(ExtractEvalReport {
+        eval,
+        dataset: dataset.display().to_string(),
+        sensor: sensor.map_or("auto", SensorKind::name),
+        seconds: ExtractEvalSeconds {
+            read: read_s,
+            extract_and_score: t.elapsed().as_secs_f64(),
+        },
+    })
+}
+
+/// Writes a figure atomically.
+pub(crate) fn write_file(path: &Path, text: String) -> Result<()> {
+    geodata::fsio::write_atomic(path, text).map_err(|source| LocalizeError::Io {
+        action: "writing",
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+impl FileLocalization {
+    /// The result as the command line prints it: counts, sensor, candidates, seconds.
+    pub fn text(&self) -> String {
+        let r = &self.report;
+        let (s, stages) = (&r.seconds, &r.seconds.scan);
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{}: {} points, {} vertical cells, {} segments; {} raw poses → {} after suppression → {} candidates (ranked by {})",
+            r.scan,
+            self.points,
+            r.vertical_cells,
+            r.segments,
+            r.raw_poses,
+            r.after_suppression,
+            r.candidate_count,
+            r.cost
+        );
+        if let Some(sensor) = &r.sensor {
+            let _ = writeln!(
+                out,
+                "sensor {} ({}): mount {:.2} m, vertical field of view {:.1}° … {:.1}°, {} beams; wall clearance {:.2} m",
+                sensor.profile,
+                if sensor.detected { "detected" } else { "named" },
+                sensor.geometry.mount_height_m,
+                sensor.geometry.vfov_deg[0],
+                sensor.geometry.vfov_deg[1],
+                sensor.geometry.beams,
+                r.clearance_m
+            );
+        }
+        if let Some(m) = &r.message {
+            let _ = writeln!(out, "note: {m}");
+        }
+        let _ = writeln!(
+            out,
+            "{:>4} {:>10} {:>10} {:>11} {:>11} {:>8} {:>7} {:>7} {:>7} {:>7}",
+            "rank", "x", "y", "lat", "lon", "yaw°", "dcm", "fwd", "rev", "sym"
+        );
+        for c in &r.candidates {
+            let _ = writeln!(
+                out,
+                "{:>4} {:>10.2} {:>10.2} {:>11.6} {:>11.6} {:>8.2} {:>7.3} {:>7.3} {:>7.3} {:>7.3}",
+                c.rank,
+                c.x,
+                c.y,
+                c.lat,
+                c.lon,
+                c.yaw.to_degrees(),
+                c.dcm,
+                c.forward,
+                c.reverse,
+                c.symmetric
+            );
+        }
+        let _ = writeln!(out, "confidence {:.3}", r.confidence);
+        let _ = writeln!(
+            out,
+            "seconds: map load {:.2}, edges {:.3}, DT tensor {:.3}, pyramid {:.3}, scan read {:.3}, surfaces {:.3}, segments {:.3}, templates {:.3}, search {:.3}, filter {:.3}, visibility+costs {:.3}, refine {:.3}, total {:.3}",
+            s.load_map,
+            s.map_edges,
+            s.distance_transform,
+            s.pyramid,
+            s.read_scan,
+            stages.surfaces,
+            stages.segments,
+            stages.templates,
+            stages.search,
+            stages.filter,
+            stages.visibility_costs,
+            stages.refine,
+            stages.total
+        );
+        out
+    }
+}
+
+impl TrackReport {
+    /// The track as the command line prints it: one row per scan.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{}: {} scans, window {}, {:.2} s per scan",
+            self.scans_dir,
+            self.scans.len(),
+            self.window,
+            self.seconds.per_scan
+        );
+        let _ = writeln!(
+            out,
+            "{:>24} {:>5} {:>11} {:>11} {:>8} {:>6}",
+            "scan", "segs", "lat", "lon", "yaw°", "conf"
+        );
+        for row in &self.scans {
+            let g = |v: Option<f64>| v.unwrap_or(f64::NAN);
+            let _ = writeln!(
+                out,
+                "{:>24} {:>5} {:>11.6} {:>11.6} {:>8.2} {:>6.3}",
+                row.scan,
+                row.segments,
+                g(row.lat),
+                g(row.lon),
+                g(row.yaw).to_degrees(),
+                row.confidence
+            );
+        }
+        out
+    }
+}
+
+impl ExtractEvalReport {
+    /// The scores as the command line prints them: totals, sensors, one row per scan.
+    pub fn text(&self) -> String {
+        let r = &self.eval;
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{} ({}, {} scans): precision {:.3} ({:.3} counting the {:.0} % amid unlabelled points as wrong), recall {:.3}, {:.1} segments per scan",
+            self.dataset,
+            r.kind,
+            r.scans,
+            r.precision,
+            r.precision_all,
+            100.0 * r.unjudged,
+            r.recall,
+            r.segments_per_scan
+        );
+        let profiles: Vec<String> = r
+            .profiles
+            .iter()
+            .map(|(p, n)| format!("{p} ×{n}"))
+            .collect();
+        let _ = writeln!(out, "sensor: {}", profiles.join(", "));
+        let off: Vec<String> = r
+            .off_building_m
+            .iter()
+            .map(|(c, m)| format!("{c} {m:.0} m"))
+            .collect();
+        let _ = writeln!(
+            out,
+            "segment length off buildings, by the class around it: {}",
+            off.join(", ")
+        );
+        let _ = writeln!(
+            out,
+            "{:>12} {:>9} {:>7} {:>6} {:>7} {:>5} {:>9} {:>9} {:>6} {:>6}",
+            "scan",
+            "profile",
+            "mount",
+            "top°",
+            "clear",
+            "segs",
+            "seg m",
+            "on bldg",
+            "facade",
+            "cover"
+        );
+        for s in &r.per_scan {
+            let _ = writeln!(
+                out,
+                "{:>12} {:>9} {:>7.2} {:>6.1} {:>7.2} {:>5} {:>9.1} {:>9.1} {:>6} {:>6}",
+                s.scan,
+                s.sensor.profile,
+                s.sensor.geometry.mount_height_m,
+                s.sensor.geometry.vfov_deg[1],
+                s.clearance_m,
+                s.segments,
+                s.segment_m,
+                s.on_building_m,
+                s.facade_cells,
+                s.covered_cells
+            );
+        }
+        let _ = writeln!(
+            out,
+            "seconds: read {:.2}, extract and score {:.2}",
+            self.seconds.read, self.seconds.extract_and_score
+        );
+        out
+    }
+}
