@@ -13,6 +13,7 @@
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
 //! - [`sensors`]: named LiDAR models (beam elevations, azimuth step, range, mount height).
 //! - [`simfiles`]: serde types of the simulated datasets' files (truth poses, map outlines).
+//! - [`topview`]: a top-view raster of coloured points (highest point per pixel).
 //! - [`svg`]: an SVG canvas in the local frame for pictures of maps and results.
 //! - [`fsio`]: atomic output files (written beside the target, renamed into place).
 
@@ -27,3 +28,4 @@ pub mod projection;
 pub mod sensors;
 pub mod simfiles;
 pub mod svg;
+pub mod topview;

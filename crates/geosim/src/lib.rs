@@ -21,6 +21,7 @@
 //!   traversal) and an analytic ground.
 //! - [`sensor`]: a panoramic terrestrial scanner (angular steps, range limit, range noise,
 //!   dropouts) returning a labelled [`geodata::cloud::PointCloud`].
+//! - [`figure`]: a picture of the world around a point (streets, buildings vs map, clutter).
 //! - [`dataset`]: `localization`, `streets` and `relations` datasets written as PLY + JSON.
 //!
 //! Every random step takes a seed and draws from its own stream ([`stream_rng`]), so a
@@ -41,6 +42,7 @@
 
 pub mod city;
 pub mod dataset;
+pub mod figure;
 pub mod ground;
 pub mod raycast;
 pub mod scene;

@@ -10,7 +10,7 @@ use std::time::Instant;
 pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use crate::report::{encode_png_rgb, Html};
     use geodata::classes::Class;
-    use geodata::svg::Svg;
+    use geodata::topview::TopView;
     use serde_json::json;
 
     let map = geosim::city::default_city_map().context("generating the embedded default city")?;
@@ -58,98 +58,20 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         .unwrap_or(0);
     // Map around that pose: true streets and sidewalks, world buildings, map outlines.
     let centre = [poses[shown].position[0], poses[shown].position[1]];
-    let half = 110.0;
-    let (min, max) = (
-        [centre[0] - half, centre[1] - half],
-        [centre[0] + half, centre[1] + half],
-    );
-    let mut svg = Svg::new(700.0, min, max);
-    let ppm = svg.pixels_per_metre();
-    for (seg, t) in scene.segments.iter().zip(&scene.truth) {
-        if !t.on_ground {
-            continue;
-        }
-        let line = geosim::truth::offset_centre_line(seg, t);
-        let sidewalk_px = (t.width_m + 2.0 * if t.drivable { t.sidewalk_m } else { 0.0 }) * ppm;
-        svg.polyline(
-            &line,
-            &format!("stroke:#c8c6c2;stroke-width:{sidewalk_px:.1};stroke-linecap:round"),
-        );
-    }
-    for (seg, t) in scene.segments.iter().zip(&scene.truth) {
-        if t.on_ground && t.drivable {
-            let line = geosim::truth::offset_centre_line(seg, t);
-            svg.polyline(
-                &line,
-                &format!(
-                    "stroke:#5a5a62;stroke-width:{:.1};stroke-linecap:round",
-                    t.width_m * ppm
-                ),
-            );
-        }
-    }
-    for b in &scene.buildings {
-        svg.polygon(&b.outer, "fill:#c98c3c;fill-opacity:0.85;stroke:none");
-    }
-    for b in &map.buildings {
-        svg.polygon(
-            &b.outer,
-            "fill:none;stroke:#d02020;stroke-width:0.8;stroke-dasharray:3,2",
-        );
-    }
-    for o in &scene.objects {
-        let [r, g, b] = o.class.color_rgb();
-        let (sn, cs) = o.yaw_rad.sin_cos();
-        let [hx, hy, _] = o.half_extents;
-        let corners: Vec<[f64; 2]> = [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]]
-            .iter()
-            .map(|q| {
-                [
-                    o.centre[0] + cs * q[0] - sn * q[1],
-                    o.centre[1] + sn * q[0] + cs * q[1],
-                ]
-            })
-            .collect();
-        svg.polygon(
-            &corners,
-            &format!("fill:rgb({r},{g},{b});fill-opacity:0.8;stroke:none"),
-        );
-    }
-    for p in &poses {
-        let (s, c) = p.yaw_rad.sin_cos();
-        svg.polyline(
-            &[
-                [p.position[0], p.position[1]],
-                [p.position[0] + 8.0 * c, p.position[1] + 8.0 * s],
-            ],
-            "stroke:#1040c0;stroke-width:2",
-        );
-        svg.circle([p.position[0], p.position[1]], 4.0, "fill:#1040c0");
-    }
-    svg.scale_bar(50.0);
-    let map_svg = svg.finish();
+    let map_svg = geosim::figure::scene_svg(&scene, &map, &poses, centre, 110.0);
 
     // Top view of the first scan, coloured by class (the highest point per pixel wins).
     let side = 640usize;
-    let metres_per_px = 80.0 / side as f64;
-    let mut top = vec![f64::NEG_INFINITY; side * side];
-    let mut rgb = vec![255u8; side * side * 3];
+    let mut view = TopView::new(centre, 80.0 / side as f64, side, [255; 3]);
     let cloud = &clouds[shown];
     let labels = cloud.label.as_deref().unwrap_or(&[]);
     for (p, &l) in cloud.positions.iter().zip(labels) {
-        let x = ((p[0] - centre[0]) / metres_per_px + side as f64 / 2.0).floor();
-        let y = (side as f64 / 2.0 - (p[1] - centre[1]) / metres_per_px).floor();
-        if x < 0.0 || y < 0.0 || x >= side as f64 || y >= side as f64 {
-            continue;
-        }
-        let i = y as usize * side + x as usize;
-        if p[2] > top[i] {
-            top[i] = p[2];
-            let c = Class::from_id(l).unwrap_or(Class::Unlabelled).color_rgb();
-            rgb[3 * i..3 * i + 3].copy_from_slice(&c);
-        }
+        view.plot(
+            *p,
+            Class::from_id(l).unwrap_or(Class::Unlabelled).color_rgb(),
+        );
     }
-    let png = encode_png_rgb(side as u32, side as u32, &rgb)?;
+    let png = encode_png_rgb(side as u32, side as u32, view.rgb())?;
     let legend: String = Class::ALL[1..]
         .iter()
         .map(|c| {

@@ -18,6 +18,7 @@ use std::time::Instant;
 pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use crate::report::{encode_png_rgb, escape, Html};
     use geodata::svg::Svg;
+    use geodata::topview::TopView;
     use geosim::dataset::{write_relations, RelationsOptions};
     use geosim::sensor::SensorOptions;
 
@@ -99,24 +100,12 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     // Top view raster, 0.2 m per pixel, 60 m around the viewpoint; the highest cell wins.
     let (half, px_m) = (30.0, 0.2);
     let side = (2.0 * half / px_m) as usize;
-    let mut rgb = vec![244u8; side * side * 3];
-    let mut top = vec![f64::NEG_INFINITY; side * side];
+    let centre = [vp.position[0], vp.position[1]];
+    let mut view = TopView::new(centre, px_m, side, [244; 3]);
     for c in m.cells() {
-        let p = m.centre(c.key);
-        let (u, v) = (
-            ((p[0] - vp.position[0] + half) / px_m).floor(),
-            ((vp.position[1] + half - p[1]) / px_m).floor(),
-        );
-        if u < 0.0 || v < 0.0 || u >= side as f64 || v >= side as f64 {
-            continue;
-        }
-        let i = v as usize * side + u as usize;
-        if p[2] > top[i] {
-            top[i] = p[2];
-            rgb[3 * i..3 * i + 3].copy_from_slice(&c.class().color_rgb());
-        }
+        view.plot(m.centre(c.key), c.class().color_rgb());
     }
-    let png = encode_png_rgb(side as u32, side as u32, &rgb)?;
+    let png = encode_png_rgb(side as u32, side as u32, view.rgb())?;
     let mut svg = Svg::new(
         600.0,
         [vp.position[0] - half, vp.position[1] - half],
