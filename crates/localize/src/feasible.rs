@@ -14,7 +14,7 @@
 //! Σ street band cells + domain cells).
 
 use crate::chamfer::{Domain, DtTensor};
-use crate::point_segment_distance;
+use geodata::osm::geometry::point_segment_distance;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;
 

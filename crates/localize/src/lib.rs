@@ -52,6 +52,7 @@ pub mod surfaces;
 pub mod track;
 pub mod visibility;
 
+use geodata::osm::geometry::point_segment_distance;
 use serde::Serialize;
 use std::path::PathBuf;
 use thiserror::Error;
@@ -164,18 +165,6 @@ pub fn wrap_pi(a: f64) -> f64 {
     } else {
         w
     }
-}
-
-/// Euclidean distance from `p` to the segment `a`–`b`.
-pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
 /// Why localization could not run.

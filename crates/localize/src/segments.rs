@@ -453,8 +453,9 @@ mod tests {
     fn matches(found: &[Segment], planted: &Segment, tol: f64) -> bool {
         found.iter().any(|f| {
             let ends = |x: &Segment, y: &Segment| {
-                crate::point_segment_distance(x.a, y.a, y.b)
-                    .max(crate::point_segment_distance(x.b, y.a, y.b))
+                geodata::osm::geometry::point_segment_distance(x.a, y.a, y.b).max(
+                    geodata::osm::geometry::point_segment_distance(x.b, y.a, y.b),
+                )
             };
             ends(f, planted) < tol
                 && ends(planted, f) < tol

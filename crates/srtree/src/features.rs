@@ -46,6 +46,7 @@ pub use crate::view::{
 };
 use crate::SrtreeError;
 use geodata::classes::Class;
+use geodata::osm::geometry::point_segment_distance;
 
 /// Names of the features, in vector order.
 pub const FEATURE_NAMES: [&str; 48] = [
@@ -116,24 +117,13 @@ pub fn in_convex(hull: &[[f64; 2]], p: [f64; 2], tol: f64) -> bool {
     match hull.len() {
         0 => false,
         1 => (p[0] - hull[0][0]).hypot(p[1] - hull[0][1]) <= tol,
-        2 => segment_distance(hull[0], hull[1], p) <= tol,
+        2 => point_segment_distance(p, hull[0], hull[1]) <= tol,
         n => (0..n).all(|i| {
             let (a, b) = (hull[i], hull[(i + 1) % n]);
             let len = (b[0] - a[0]).hypot(b[1] - a[1]).max(1e-12);
             ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])) / len >= -tol
         }),
     }
-}
-
-fn segment_distance(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> f64 {
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let len2 = d[0] * d[0] + d[1] * d[1];
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
 }
 
 /// Overlap of two intervals as a fraction of the narrower one (a point interval: 1 inside
