@@ -8,7 +8,7 @@ use geodata::cloud::kitti::KITTI_POINT_BYTES;
 use geodata::datasets::kitti360::Kitti360Sequence;
 use geodata::datasets::kitti_raw::KittiRawDrive;
 use geodata::datasets::mcd::McdSequence;
-use geodata::datasets::Scan;
+use geodata::datasets::{open_sequence, LidarSequence, Scan, SequenceKind};
 use geodata::projection::LocalFrame;
 use nalgebra::{Point3, Vector3};
 use std::path::PathBuf;
@@ -193,4 +193,108 @@ fn a_missing_file_names_its_path() {
     let seq = mcd_kth_day_06();
     let e = seq.load_scan(12).unwrap_err();
     assert!(e.to_string().contains("0000000012.bin"), "{e}");
+}
+
+/// What a sequence yields, frame by frame: (frame, points, first point, world_from_sensor,
+/// raw label histogram).
+type Yield = Vec<(
+    u64,
+    usize,
+    Option<[f64; 3]>,
+    nalgebra::Isometry3<f64>,
+    Vec<(u32, usize)>,
+)>;
+
+fn yields(seq: &dyn LidarSequence) -> Yield {
+    seq.frames()
+        .unwrap()
+        .into_iter()
+        .map(|f| {
+            let scan = seq.load_scan(f).unwrap();
+            assert_eq!(scan.frame, f);
+            assert_eq!(scan.world_from_sensor, seq.world_from_sensor(f).unwrap());
+            let mut hist = std::collections::BTreeMap::new();
+            for &r in scan.cloud.raw_label.iter().flatten() {
+                *hist.entry(r).or_insert(0usize) += 1;
+            }
+            let labels = scan.cloud.label.as_ref().map(Vec::len);
+            assert!(labels.is_none() || labels == Some(scan.cloud.len()));
+            (
+                f,
+                scan.cloud.len(),
+                scan.cloud.positions.first().copied(),
+                scan.world_from_sensor,
+                hist.into_iter().collect(),
+            )
+        })
+        .collect()
+}
+
+/// The trait object yields what the concrete reader does, scan by scan.
+fn same_as_concrete(rel: &str, kind: SequenceKind, concrete: &dyn LidarSequence) -> Yield {
+    let dir = data_dir(rel);
+    assert_eq!(SequenceKind::of(&dir), Some(kind));
+    let seq = open_sequence(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    assert_eq!(seq.kind(), Some(kind));
+    assert_eq!(seq.name(), kind.name());
+    assert_eq!(seq.dir(), dir.as_path());
+    assert_eq!(seq.georeference(), concrete.georeference());
+    assert_eq!(seq.pose_frames().unwrap(), concrete.pose_frames().unwrap());
+    let got = yields(seq.as_ref());
+    assert_eq!(got, yields(concrete));
+    got
+}
+
+#[test]
+fn open_sequence_yields_the_concrete_readers_scans() {
+    let mcd = mcd_kth_day_06();
+    let got = same_as_concrete("lidar/mcd_kth_day_06", SequenceKind::Mcd, &mcd);
+    assert_eq!(got.len(), 30);
+    let (frame, points, _, pose, hist) = &got[0];
+    assert_eq!((*frame, *points), (11, 65_536));
+    assert_eq!(*pose, mcd.world_from_lidar(11).unwrap());
+    assert_eq!(
+        hist.iter().map(|(_, n)| n).sum::<usize>(),
+        65_536,
+        "every MCD point is labelled"
+    );
+    let mcd_poses = mcd.pose_frames().collect::<Vec<_>>();
+    assert_eq!(mcd_poses.len(), 8897);
+
+    let kitti = kitti360_drive_0009();
+    let got = same_as_concrete(
+        "lidar/kitti360_2013_05_28_drive_0009",
+        SequenceKind::Kitti360,
+        &kitti,
+    );
+    assert_eq!(got.len(), 25);
+    let (frame, points, _, pose, hist) = &got[0];
+    assert_eq!(*pose, kitti.world_from_velodyne(*frame).unwrap());
+    assert_eq!(hist.iter().map(|(_, n)| n).sum::<usize>(), *points);
+    assert!(
+        hist.iter().any(|&(raw, n)| raw == 7 && n > 1000),
+        "road points"
+    );
+
+    let raw = kitti_raw_drive_0005();
+    let got = same_as_concrete(
+        "lidar/kitti_raw_2011_09_26_drive_0005_frame0",
+        SequenceKind::KittiRaw,
+        &raw,
+    );
+    assert_eq!(got.len(), 1);
+    let (frame, points, _, pose, hist) = &got[0];
+    assert_eq!((*frame, *points), (0, 123_397));
+    assert_eq!(*pose, raw.load_scan(0).unwrap().world_from_sensor);
+    assert!(hist.is_empty(), "KITTI raw has no labels");
+    assert!(!LidarSequence::labelled(&raw));
+}
+
+#[test]
+fn an_unknown_layout_names_its_folder() {
+    let dir = data_dir("lidar");
+    assert_eq!(SequenceKind::of(&dir), None);
+    let e = open_sequence(&dir).err().unwrap();
+    assert!(e.to_string().contains(&*dir.to_string_lossy()), "{e}");
+    assert!(e.to_string().contains("not a LiDAR sequence"), "{e}");
 }

@@ -23,8 +23,6 @@ use crate::sensor::{extraction_options, resolve, SensorKind, SensorReport};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::{LocalizeError, Result, Segment};
 use geodata::classes::Class;
-use geodata::datasets::kitti360::Kitti360Sequence;
-use geodata::datasets::mcd::McdSequence;
 use geodata::datasets::Scan;
 use nalgebra::{Rotation3, Vector3};
 use rayon::prelude::*;
@@ -32,35 +30,7 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use serde::Serialize;
 use std::path::Path;
 
-/// The layout of a real labelled sequence folder.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub enum SequenceKind {
-    /// KITTI-360 (`velodyne_points/`, `velodyne_poses*.txt`, `gt_labels/`).
-    Kitti360,
-    /// MCD (`lidar_bin/`, `pose_inW.csv`, `hhs_calib.yaml`, `gt_labels/`).
-    Mcd,
-}
-
-impl SequenceKind {
-    /// Short name (`kitti360`, `mcd`).
-    pub fn name(self) -> &'static str {
-        match self {
-            SequenceKind::Kitti360 => "kitti360",
-            SequenceKind::Mcd => "mcd",
-        }
-    }
-
-    /// The layout of `dir`, if it is one of the known ones.
-    pub fn of(dir: &Path) -> Option<SequenceKind> {
-        if dir.join("pose_inW.csv").exists() {
-            Some(SequenceKind::Mcd)
-        } else if dir.join("velodyne_points").is_dir() {
-            Some(SequenceKind::Kitti360)
-        } else {
-            None
-        }
-    }
-}
+pub use geodata::datasets::SequenceKind;
 
 /// One levelled real scan with a class per point.
 #[derive(Debug, Clone)]
@@ -89,31 +59,23 @@ pub fn levelled(scan: &Scan) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Loads one frame of a sequence.
-type ScanLoader = dyn Fn(u64) -> Result<Scan> + Sync;
-
-/// Every `stride`-th scan of a KITTI-360 or MCD sequence, levelled, with classes.
+/// Every `stride`-th scan of a labelled sequence (KITTI-360 or MCD), levelled, with classes.
 pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<LabelledScan>)> {
-    let kind = SequenceKind::of(dir).ok_or_else(|| LocalizeError::Dataset {
+    let not_labelled = || LocalizeError::Dataset {
         path: dir.to_path_buf(),
         message: "neither a KITTI-360 sequence (velodyne_points/) nor an MCD one (pose_inW.csv)"
             .into(),
-    })?;
-    let (frames, load): (Vec<u64>, Box<ScanLoader>) = match kind {
-        SequenceKind::Kitti360 => {
-            let seq = Kitti360Sequence::open(dir)?;
-            (seq.frames()?, Box::new(move |f| Ok(seq.load_scan(f)?)))
-        }
-        SequenceKind::Mcd => {
-            let seq = McdSequence::open(dir)?;
-            (seq.frames()?, Box::new(move |f| Ok(seq.load_scan(f)?)))
-        }
     };
-    let frames: Vec<u64> = frames.into_iter().step_by(stride.max(1)).collect();
+    let kind = SequenceKind::of(dir).ok_or_else(not_labelled)?;
+    let seq = kind.open(dir)?;
+    if !seq.labelled() {
+        return Err(not_labelled());
+    }
+    let frames: Vec<u64> = seq.frames()?.into_iter().step_by(stride.max(1)).collect();
     let scans = frames
         .par_iter()
         .map(|&f| {
-            let scan = load(f)?;
+            let scan = seq.load_scan(f)?;
             let classes = (0..scan.cloud.len()).map(|i| scan.cloud.class(i)).collect();
             Ok(LabelledScan {
                 name: format!("{f:010}"),

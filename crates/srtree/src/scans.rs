@@ -11,9 +11,7 @@
 
 use crate::error::{Result, SrtreeError};
 use geodata::cloud::{Columns, PointCloud, Precision};
-use geodata::datasets::kitti360::Kitti360Sequence;
-use geodata::datasets::mcd::McdSequence;
-use geodata::datasets::Scan;
+use geodata::datasets::{Scan, SequenceKind};
 use nalgebra::{Isometry3, Translation3};
 use std::path::{Path, PathBuf};
 
@@ -105,22 +103,20 @@ pub fn load_sequences(lidar_dir: &Path, max_scans: Option<usize>) -> Result<Vec<
             _ => frames,
         }
     };
-    let kitti_dir: PathBuf = lidar_dir.join(KITTI360_DIR);
-    let kitti = Kitti360Sequence::open(&kitti_dir).map_err(|e| dataset_error(&kitti_dir, e))?;
-    let frames = pick(kitti.frames().map_err(|e| dataset_error(&kitti_dir, e))?);
-    let scans = frames
-        .iter()
-        .map(|&f| kitti.load_scan(f).map_err(|e| dataset_error(&kitti_dir, e)))
-        .collect::<Result<Vec<_>>>()?;
-    let mut out = vec![register("kitti360", scans)];
-    let mcd_dir: PathBuf = lidar_dir.join(MCD_DIR);
-    let mcd = McdSequence::open(&mcd_dir).map_err(|e| dataset_error(&mcd_dir, e))?;
-    let frames = pick(mcd.frames().map_err(|e| dataset_error(&mcd_dir, e))?);
-    let scans = frames
-        .iter()
-        .map(|&f| mcd.load_scan(f).map_err(|e| dataset_error(&mcd_dir, e)))
-        .collect::<Result<Vec<_>>>()?;
-    out.push(register("mcd", scans));
+    let mut out = Vec::new();
+    for (kind, sub) in [
+        (SequenceKind::Kitti360, KITTI360_DIR),
+        (SequenceKind::Mcd, MCD_DIR),
+    ] {
+        let dir: PathBuf = lidar_dir.join(sub);
+        let err = |e| dataset_error(&dir, e);
+        let seq = kind.open(&dir).map_err(err)?;
+        let scans = pick(seq.frames().map_err(err)?)
+            .iter()
+            .map(|&f| seq.load_scan(f).map_err(err))
+            .collect::<Result<Vec<_>>>()?;
+        out.push(register(seq.name(), scans));
+    }
     for s in &out {
         if s.scans.is_empty() {
             return Err(SrtreeError::Dataset {

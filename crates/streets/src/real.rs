@@ -32,9 +32,6 @@ use crate::model::Target;
 use crate::{Result, StreetsError};
 use geodata::classes::Class;
 use geodata::cloud::PointCloud;
-use geodata::datasets::kitti360::Kitti360Sequence;
-use geodata::datasets::mcd::McdSequence;
-use geodata::datasets::Scan;
 use geodata::osm::OsmMap;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -344,32 +341,16 @@ pub fn truths(map: &OsmMap, observations: &[SegmentObservation]) -> Vec<SegmentT
         .collect()
 }
 
-/// Which dataset layout a folder holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SequenceKind {
-    /// KITTI-360 (`velodyne_points/`, `gt_labels/`, `velodyne_poses*.txt`).
-    Kitti360,
-    /// MCD (`lidar_bin/`, `gt_labels/`, `pose_inW.csv`).
-    Mcd,
-}
+pub use geodata::datasets::SequenceKind;
 
-impl SequenceKind {
-    /// Detects the layout of `dir`.
-    pub fn detect(dir: &Path) -> Result<SequenceKind> {
-        if dir.join("velodyne_points").is_dir() {
-            Ok(SequenceKind::Kitti360)
-        } else if dir.join("lidar_bin").is_dir() {
-            Ok(SequenceKind::Mcd)
-        } else {
-            Err(StreetsError::Dataset {
-                path: dir.to_path_buf(),
-                message: "not a labelled sequence: expected velodyne_points/ (KITTI-360) or \
-                          lidar_bin/ (MCD) with gt_labels/ and poses"
-                    .into(),
-            })
-        }
-    }
+/// The layout of `dir` ([`SequenceKind::of`]), or an error naming the folder.
+pub fn detect_kind(dir: &Path) -> Result<SequenceKind> {
+    SequenceKind::of(dir).ok_or_else(|| StreetsError::Dataset {
+        path: dir.to_path_buf(),
+        message: "not a labelled sequence: expected velodyne_points/ (KITTI-360) or \
+                  lidar_bin/ (MCD) with gt_labels/ and poses"
+            .into(),
+    })
 }
 
 /// A real labelled sequence registered into a map's frame, with derived truth.
@@ -417,57 +398,6 @@ pub fn drives_along(trajectory: &[[f64; 2]], a: [f64; 2], b: [f64; 2]) -> bool {
     2 * near > n
 }
 
-/// An opened sequence of either layout.
-enum Sequence {
-    Kitti360(Kitti360Sequence),
-    Mcd(McdSequence),
-}
-
-impl Sequence {
-    fn open(kind: SequenceKind, dir: &Path) -> geodata::datasets::Result<Sequence> {
-        Ok(match kind {
-            SequenceKind::Kitti360 => Sequence::Kitti360(Kitti360Sequence::open(dir)?),
-            SequenceKind::Mcd => Sequence::Mcd(McdSequence::open(dir)?),
-        })
-    }
-
-    fn frames(&self) -> geodata::datasets::Result<Vec<u64>> {
-        match self {
-            Sequence::Kitti360(s) => s.frames(),
-            Sequence::Mcd(s) => s.frames(),
-        }
-    }
-
-    fn pose_frames(&self) -> Vec<u64> {
-        match self {
-            Sequence::Kitti360(s) => s.pose_frames().collect(),
-            Sequence::Mcd(s) => s.pose_frames().collect(),
-        }
-    }
-
-    /// world_T_sensor (the LiDAR) of a frame.
-    fn world_from_sensor(&self, frame: u64) -> Option<nalgebra::Isometry3<f64>> {
-        match self {
-            Sequence::Kitti360(s) => s.world_from_velodyne(frame),
-            Sequence::Mcd(s) => s.world_from_lidar(frame),
-        }
-    }
-
-    fn georef(&self) -> geodata::mercator::ScaledMercator {
-        match self {
-            Sequence::Kitti360(s) => s.georef(),
-            Sequence::Mcd(s) => s.georef(),
-        }
-    }
-
-    fn load_scan(&self, frame: u64) -> geodata::datasets::Result<Scan> {
-        match self {
-            Sequence::Kitti360(s) => s.load_scan(frame),
-            Sequence::Mcd(s) => s.load_scan(frame),
-        }
-    }
-}
-
 fn dataset_error(dir: &Path, e: geodata::datasets::DatasetError) -> StreetsError {
     StreetsError::Dataset {
         path: dir.to_path_buf(),
@@ -484,30 +414,33 @@ pub fn load_sequence(
     options: &TruthOptions,
     progress: &dyn Fn(usize, usize),
 ) -> Result<RealDataset> {
-    let kind = SequenceKind::detect(dir)?;
+    let kind = detect_kind(dir)?;
     let map = OsmMap::load(map_path)?;
     if map.streets.segments.is_empty() {
         return Err(StreetsError::NoStreets {
             path: map_path.display().to_string(),
         });
     }
-    let seq = Sequence::open(kind, dir).map_err(|e| dataset_error(dir, e))?;
+    let seq = kind.open(dir).map_err(|e| dataset_error(dir, e))?;
     let frames = seq.frames().map_err(|e| dataset_error(dir, e))?;
     let mut parts: Vec<PointCloud> = Vec::with_capacity(frames.len());
     // The drive: every pose between the first and the last scan (the pose files of both
     // layouts hold the frames between the labelled scans too).
     let span = frames[0]..=frames[frames.len() - 1];
-    let georef = seq.georef();
+    let georef = seq.georeference();
     let trajectory: Vec<[f64; 2]> = seq
         .pose_frames()
+        .map_err(|e| dataset_error(dir, e))?
         .into_iter()
         .filter(|f| span.contains(f))
-        .filter_map(|f| seq.world_from_sensor(f))
-        .map(|w| {
+        .map(|f| {
+            let w = seq
+                .world_from_sensor(f)
+                .map_err(|e| dataset_error(dir, e))?;
             let l = geodata::datasets::local_from_world_pose(&georef, &w, &map.frame);
-            [l.translation.vector.x, l.translation.vector.y]
+            Ok([l.translation.vector.x, l.translation.vector.y])
         })
-        .collect();
+        .collect::<Result<_>>()?;
     for (i, &f) in frames.iter().enumerate() {
         let scan = seq.load_scan(f).map_err(|e| dataset_error(dir, e))?;
         if scan.cloud.label.is_none() {

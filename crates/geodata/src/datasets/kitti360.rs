@@ -31,7 +31,7 @@
 //! | other values | – | unlabelled |
 
 use super::{attach_labels, check_rotation, floats, frames_in, iso_from_rows, read_text};
-use super::{DatasetError, Result, Scan};
+use super::{DatasetError, Georeference, LidarSequence, Result, Scan, SequenceKind};
 use crate::classes::Class;
 use crate::cloud::kitti::{read_kitti_bin, read_label_file};
 use crate::cloud::ReadOptions;
@@ -114,19 +114,56 @@ impl Kitti360Sequence {
             let raw = read_label_file(&label_path, Some(cloud.len()))?;
             attach_labels(&mut cloud, raw, kitti360_class);
         }
-        let world_from_sensor =
-            self.world_from_velodyne(frame)
-                .ok_or_else(|| DatasetError::MissingPose {
-                    path: self.dir.clone(),
-                    frame,
-                })?;
+        let world_from_sensor = LidarSequence::world_from_sensor(self, frame)?;
         Ok(Scan {
             frame,
             path,
             cloud,
             world_from_sensor,
-            georef: self.georef,
+            georef: Georeference::ScaledMercator(self.georef),
         })
+    }
+}
+
+impl LidarSequence for Kitti360Sequence {
+    fn kind(&self) -> Option<SequenceKind> {
+        Some(SequenceKind::Kitti360)
+    }
+
+    fn name(&self) -> &'static str {
+        SequenceKind::Kitti360.name()
+    }
+
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn labelled(&self) -> bool {
+        true
+    }
+
+    fn frames(&self) -> Result<Vec<u64>> {
+        Kitti360Sequence::frames(self)
+    }
+
+    fn pose_frames(&self) -> Result<Vec<u64>> {
+        Ok(Kitti360Sequence::pose_frames(self).collect())
+    }
+
+    fn world_from_sensor(&self, frame: u64) -> Result<Isometry3<f64>> {
+        self.world_from_velodyne(frame)
+            .ok_or_else(|| DatasetError::MissingPose {
+                path: self.dir.clone(),
+                frame,
+            })
+    }
+
+    fn georeference(&self) -> Georeference {
+        Georeference::ScaledMercator(self.georef)
+    }
+
+    fn load_scan(&self, frame: u64) -> Result<Scan> {
+        Kitti360Sequence::load_scan(self, frame)
     }
 }
 

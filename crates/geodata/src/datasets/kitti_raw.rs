@@ -12,7 +12,7 @@
 //! inverse of frame 0's pose, so world x stays east and y north (a georeferenced frame).
 
 use super::{check_rotation, floats, frames_in, iso_from_rows, read_text};
-use super::{DatasetError, Result, Scan};
+use super::{DatasetError, Georeference, LidarSequence, Result, Scan, SequenceKind};
 use crate::cloud::kitti::read_kitti_bin;
 use crate::cloud::ReadOptions;
 use crate::mercator::ScaledMercator;
@@ -158,6 +158,11 @@ impl KittiRawDrive {
         ))
     }
 
+    /// world_T_velodyne of a frame.
+    pub fn world_from_velodyne(&self, frame: u64) -> Result<Isometry3<f64>> {
+        Ok(self.world_from_imu(frame)? * self.imu_from_velo)
+    }
+
     /// Loads a scan (no labels) with its Velodyne pose.
     pub fn load_scan(&self, frame: u64) -> Result<Scan> {
         let path = self
@@ -165,14 +170,53 @@ impl KittiRawDrive {
             .join("velodyne_points")
             .join(format!("{frame:010}.bin"));
         let (cloud, _) = read_kitti_bin(&path, &ReadOptions::default())?;
-        let world_from_sensor = self.world_from_imu(frame)? * self.imu_from_velo;
+        let world_from_sensor = self.world_from_velodyne(frame)?;
         Ok(Scan {
             frame,
             path,
             cloud,
             world_from_sensor,
-            georef: self.georef,
+            georef: Georeference::ScaledMercator(self.georef),
         })
+    }
+}
+
+impl LidarSequence for KittiRawDrive {
+    fn kind(&self) -> Option<SequenceKind> {
+        Some(SequenceKind::KittiRaw)
+    }
+
+    fn name(&self) -> &'static str {
+        SequenceKind::KittiRaw.name()
+    }
+
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn labelled(&self) -> bool {
+        false
+    }
+
+    fn frames(&self) -> Result<Vec<u64>> {
+        KittiRawDrive::frames(self)
+    }
+
+    /// Frames with an OXTS record.
+    fn pose_frames(&self) -> Result<Vec<u64>> {
+        frames_in(&self.dir.join("oxts"), "txt")
+    }
+
+    fn world_from_sensor(&self, frame: u64) -> Result<Isometry3<f64>> {
+        self.world_from_velodyne(frame)
+    }
+
+    fn georeference(&self) -> Georeference {
+        Georeference::ScaledMercator(self.georef)
+    }
+
+    fn load_scan(&self, frame: u64) -> Result<Scan> {
+        KittiRawDrive::load_scan(self, frame)
     }
 }
 

@@ -36,7 +36,7 @@
 //! | other values | – | unlabelled |
 
 use super::{attach_labels, check_rotation, floats, frames_in, iso_from_rows, read_text};
-use super::{DatasetError, Result, Scan};
+use super::{DatasetError, Georeference, LidarSequence, Result, Scan, SequenceKind};
 use crate::classes::Class;
 use crate::cloud::kitti::{read_kitti_bin, read_label_file};
 use crate::cloud::ReadOptions;
@@ -160,19 +160,57 @@ impl McdSequence {
             let raw = read_label_file(&label_path, Some(cloud.len()))?;
             attach_labels(&mut cloud, raw, mcd_class);
         }
-        let world_from_sensor =
-            self.world_from_lidar(frame)
-                .ok_or_else(|| DatasetError::MissingPose {
-                    path: self.dir.join("pose_inW.csv"),
-                    frame,
-                })?;
+        let world_from_sensor = LidarSequence::world_from_sensor(self, frame)?;
         Ok(Scan {
             frame,
             path,
             cloud,
             world_from_sensor,
-            georef: self.georef,
+            georef: Georeference::ScaledMercator(self.georef),
         })
+    }
+}
+
+impl LidarSequence for McdSequence {
+    fn kind(&self) -> Option<SequenceKind> {
+        Some(SequenceKind::Mcd)
+    }
+
+    fn name(&self) -> &'static str {
+        SequenceKind::Mcd.name()
+    }
+
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn labelled(&self) -> bool {
+        true
+    }
+
+    fn frames(&self) -> Result<Vec<u64>> {
+        McdSequence::frames(self)
+    }
+
+    fn pose_frames(&self) -> Result<Vec<u64>> {
+        Ok(McdSequence::pose_frames(self).collect())
+    }
+
+    /// world_T_lidar of a frame.
+    fn world_from_sensor(&self, frame: u64) -> Result<Isometry3<f64>> {
+        self.world_from_lidar(frame)
+            .ok_or_else(|| DatasetError::MissingPose {
+                path: self.dir.join("pose_inW.csv"),
+                frame,
+            })
+    }
+
+    fn georeference(&self) -> Georeference {
+        Georeference::ScaledMercator(self.georef)
+    }
+
+    fn load_scan(&self, frame: u64) -> Result<Scan> {
+        McdSequence::load_scan(self, frame)
     }
 }
 

@@ -1,14 +1,29 @@
-//! Readers for the real labelled LiDAR scans in `../shared/data/lidar/`.
+//! Readers for the real labelled LiDAR scans in `../shared/data/lidar/`, behind one trait.
 //!
-//! Each reader gives [`Scan`]s: the cloud in the sensor frame (with `intensity`, and for
-//! labelled datasets `label` = urbansem [`crate::classes::Class`] id and `raw_label` = the
-//! dataset's id), the sensor pose in the dataset's world frame, and that world frame's
-//! georeference ([`ScaledMercator`]). [`Scan::local_from_sensor`] places the scan in any
-//! [`LocalFrame`], the frame OSM maps are read into.
+//! Every reader is a [`LidarSequence`]: its scan frames, the sensor pose of a frame in the
+//! dataset's world frame, that world frame's [`Georeference`], and [`Scan`]s — the cloud in
+//! the sensor frame (with `intensity`, and for labelled datasets `label` = urbansem
+//! [`crate::classes::Class`] id and `raw_label` = the dataset's id) with its pose.
+//! [`open_sequence`] detects a folder's layout ([`SequenceKind::of`]) and opens it, so code
+//! that reads scans needs no match per dataset. [`Scan::local_from_sensor`] places a scan in
+//! any [`LocalFrame`], the frame OSM maps are read into.
 //!
 //! - [`mcd`]: MCD `kth_day_06` (Ouster OS1-128, KTH campus, Stockholm).
 //! - [`kitti360`]: KITTI-360 `2013_05_28_drive_0009` (Velodyne HDL-64E, Karlsruhe).
 //! - [`kitti_raw`]: KITTI raw `2011_09_26_drive_0005` frame 0 (HDL-64E + OXTS).
+//!
+//! Simulated `localization` datasets are sequences too (`geosim::sequence::SimLocalization`,
+//! in the map's [`LocalFrame`]); geodata does not read them, the simulator's crate does.
+//!
+//! ```no_run
+//! use geodata::datasets::{open_sequence, LidarSequence};
+//! let seq = open_sequence("../shared/data/lidar/mcd_kth_day_06")?;
+//! for frame in seq.frames()? {
+//!     let scan = seq.load_scan(frame)?;
+//!     println!("{} frame {frame}: {} points", seq.name(), scan.cloud.len());
+//! }
+//! # Ok::<(), geodata::datasets::DatasetError>(())
+//! ```
 
 pub mod kitti360;
 pub mod kitti_raw;
@@ -18,6 +33,7 @@ use crate::cloud::{CloudError, PointCloud};
 use crate::mercator::ScaledMercator;
 use crate::projection::LocalFrame;
 use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -56,6 +72,15 @@ pub enum DatasetError {
     /// The georeference origin is invalid.
     #[error("{0}")]
     Mercator(#[from] crate::mercator::MercatorError),
+    /// The local frame's origin is invalid.
+    #[error("{0}")]
+    Projection(#[from] crate::projection::ProjectionError),
+    /// A folder holds none of the known sequence layouts.
+    #[error("{path}: not a LiDAR sequence: expected velodyne_points/ with velodyne_poses*.txt (KITTI-360) or with oxts/ (KITTI raw), or lidar_bin/ with pose_inW.csv (MCD)")]
+    UnknownLayout {
+        /// The folder.
+        path: PathBuf,
+    },
 }
 
 /// Shorthand for results of this module.
@@ -72,8 +97,142 @@ pub struct Scan {
     pub cloud: PointCloud,
     /// Sensor pose in the dataset's world frame (x east, y north, z up, metres).
     pub world_from_sensor: Isometry3<f64>,
-    /// The world frame's scaled-Mercator georeference.
-    pub georef: ScaledMercator,
+    /// The world frame's georeference.
+    pub georef: Georeference,
+}
+
+/// How a dataset's world x, y (metres, x east, y north) map to WGS84.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Georeference {
+    /// A scaled Mercator about an origin (KITTI-360, MCD, KITTI raw).
+    ScaledMercator(ScaledMercator),
+    /// A local transverse-Mercator frame (simulated datasets: the frame of their OSM map).
+    TransverseMercator(LocalFrame),
+}
+
+impl Georeference {
+    /// WGS84 (lat, lon) in degrees of a world position.
+    pub fn to_wgs84(&self, world_xy_m: [f64; 2]) -> (f64, f64) {
+        match self {
+            Georeference::ScaledMercator(m) => m.to_wgs84(world_xy_m),
+            Georeference::TransverseMercator(f) => f.to_wgs84(world_xy_m),
+        }
+    }
+
+    /// World position of a WGS84 latitude/longitude in degrees.
+    pub fn to_world(&self, lat_deg: f64, lon_deg: f64) -> [f64; 2] {
+        match self {
+            Georeference::ScaledMercator(m) => m.to_world(lat_deg, lon_deg),
+            Georeference::TransverseMercator(f) => f.to_local(lat_deg, lon_deg),
+        }
+    }
+
+    /// Angle in radians from world +x to grid east of `frame` at a world position (the
+    /// correction to add to a world yaw; see [`ScaledMercator::yaw_to_local_rad`]).
+    pub fn yaw_to_local_rad(&self, world_xy_m: [f64; 2], frame: &LocalFrame) -> f64 {
+        match self {
+            Georeference::ScaledMercator(m) => m.yaw_to_local_rad(world_xy_m, frame),
+            Georeference::TransverseMercator(world) => {
+                // Grid yaw → geographic yaw (+ world convergence) → grid yaw of `frame`.
+                let (lat, lon) = world.to_wgs84(world_xy_m);
+                world.convergence_rad(world_xy_m) - frame.convergence_rad(frame.to_local(lat, lon))
+            }
+        }
+    }
+}
+
+/// The layout of a real sequence folder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SequenceKind {
+    /// KITTI-360 (`velodyne_points/`, `velodyne_poses*.txt`, `gt_labels/`).
+    Kitti360,
+    /// MCD (`lidar_bin/`, `pose_inW.csv`, `hhs_calib.yaml`, `gt_labels/`).
+    Mcd,
+    /// KITTI raw (`velodyne_points/`, `oxts/`, `calib/`; no labels).
+    KittiRaw,
+}
+
+impl SequenceKind {
+    /// Short name (`kitti360`, `mcd`, `kitti_raw`).
+    pub fn name(self) -> &'static str {
+        match self {
+            SequenceKind::Kitti360 => "kitti360",
+            SequenceKind::Mcd => "mcd",
+            SequenceKind::KittiRaw => "kitti_raw",
+        }
+    }
+
+    /// The layout of `dir`, if it is one of the known ones: MCD when it has `pose_inW.csv`
+    /// or `lidar_bin/`, else KITTI raw when it has `velodyne_points/` and `oxts/`, else
+    /// KITTI-360 when it has `velodyne_points/`.
+    pub fn of(dir: &Path) -> Option<SequenceKind> {
+        if dir.join("pose_inW.csv").exists() || dir.join("lidar_bin").is_dir() {
+            Some(SequenceKind::Mcd)
+        } else if dir.join("velodyne_points").is_dir() {
+            if dir.join("oxts").is_dir() {
+                Some(SequenceKind::KittiRaw)
+            } else {
+                Some(SequenceKind::Kitti360)
+            }
+        } else {
+            None
+        }
+    }
+
+    /// Opens `dir` as a sequence of this layout.
+    pub fn open(self, dir: &Path) -> Result<Box<dyn LidarSequence>> {
+        Ok(match self {
+            SequenceKind::Kitti360 => Box::new(kitti360::Kitti360Sequence::open(dir)?),
+            SequenceKind::Mcd => Box::new(mcd::McdSequence::open(dir)?),
+            SequenceKind::KittiRaw => Box::new(kitti_raw::KittiRawDrive::open(dir)?),
+        })
+    }
+}
+
+/// A LiDAR sequence: scans by frame number, each with the sensor's pose in the dataset's
+/// georeferenced world frame, and per-point labels where the dataset has them.
+///
+/// Frames are the numbers of the scan files, sorted; [`LidarSequence::pose_frames`] may hold
+/// more (poses between the scans, e.g. the whole drive).
+pub trait LidarSequence: Send + Sync {
+    /// The layout read, or `None` for a sequence that is not one of [`SequenceKind`]'s
+    /// (a simulated dataset).
+    fn kind(&self) -> Option<SequenceKind>;
+
+    /// Short name of the layout (`kitti360`, `mcd`, `kitti_raw`, `sim_localization`).
+    fn name(&self) -> &'static str;
+
+    /// The sequence folder.
+    fn dir(&self) -> &Path;
+
+    /// Whether the scans carry per-point labels (`label`, `raw_label`) where label files exist.
+    fn labelled(&self) -> bool;
+
+    /// Frame numbers that have a scan, sorted.
+    fn frames(&self) -> Result<Vec<u64>>;
+
+    /// Frame numbers that have a sensor pose, sorted.
+    fn pose_frames(&self) -> Result<Vec<u64>>;
+
+    /// Sensor pose of a frame in the world frame ([`DatasetError::MissingPose`] if none).
+    fn world_from_sensor(&self, frame: u64) -> Result<Isometry3<f64>>;
+
+    /// The world frame's georeference.
+    fn georeference(&self) -> Georeference;
+
+    /// Loads a frame's scan with its labels (where the dataset has them) and pose.
+    fn load_scan(&self, frame: u64) -> Result<Scan>;
+}
+
+/// Opens a sequence folder of any known layout ([`SequenceKind::of`]).
+pub fn open_sequence(dir: impl AsRef<Path>) -> Result<Box<dyn LidarSequence>> {
+    let dir = dir.as_ref();
+    SequenceKind::of(dir)
+        .ok_or_else(|| DatasetError::UnknownLayout {
+            path: dir.to_path_buf(),
+        })?
+        .open(dir)
 }
 
 /// A sensor pose in a [`LocalFrame`], with its WGS84 position.
@@ -130,7 +289,7 @@ impl Scan {
 
 /// Moves a world pose of `georef` rigidly into `frame` (see [`Scan::local_from_sensor`]).
 pub fn local_from_world_pose(
-    georef: &ScaledMercator,
+    georef: &Georeference,
     world_from_sensor: &Isometry3<f64>,
     frame: &LocalFrame,
 ) -> Isometry3<f64> {
@@ -235,7 +394,7 @@ mod tests {
 
     #[test]
     fn local_pose_of_a_world_pose_at_the_frame_origin() {
-        let georef = ScaledMercator::new(59.35, 18.07).unwrap();
+        let georef = Georeference::ScaledMercator(ScaledMercator::new(59.35, 18.07).unwrap());
         let frame = LocalFrame::new(59.35, 18.07).unwrap();
         let pose = Isometry3::from_parts(
             Translation3::new(0.0, 0.0, 5.0),
@@ -251,7 +410,7 @@ mod tests {
     fn heading_follows_the_meridian_convergence() {
         // A sensor 10 km east of the local origin looking geographic north: in the local
         // frame its x axis must point along the mapped image of that meridian.
-        let georef = ScaledMercator::new(59.35, 18.07).unwrap();
+        let georef = Georeference::ScaledMercator(ScaledMercator::new(59.35, 18.07).unwrap());
         let frame = LocalFrame::new(59.35, 18.07).unwrap();
         let pose = Isometry3::from_parts(
             Translation3::new(10_000.0, 0.0, 0.0),
@@ -270,6 +429,33 @@ mod tests {
             "convergence is not trivial here"
         );
         assert!((l.translation.vector.x - a[0]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_transverse_mercator_world_is_its_own_local_frame() {
+        let frame = LocalFrame::new(48.98, 8.39).unwrap();
+        let georef = Georeference::TransverseMercator(frame);
+        let pose = Isometry3::from_parts(
+            Translation3::new(2_000.0, -1_500.0, 1.8),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 2.0),
+        );
+        let same = local_from_world_pose(&georef, &pose, &frame);
+        assert!((same.translation.vector - pose.translation.vector).norm() < 1e-6);
+        assert!(same.rotation.angle_to(&pose.rotation) < 1e-9);
+        // Into another frame: the same position and geographic heading as through WGS84.
+        let other = LocalFrame::new(48.99, 8.42).unwrap();
+        let moved = local_from_world_pose(&georef, &pose, &other);
+        let (lat, lon) = frame.to_wgs84([2_000.0, -1_500.0]);
+        let xy = other.to_local(lat, lon);
+        assert!((moved.translation.vector.x - xy[0]).abs() < 1e-6);
+        let x = moved.rotation * Vector3::x();
+        let geo_other = x.y.atan2(x.x) + other.convergence_rad(xy);
+        let geo_world = 2.0 + frame.convergence_rad([2_000.0, -1_500.0]);
+        assert!(
+            (geo_other - geo_world).abs() < 1e-9,
+            "{geo_other} vs {geo_world}"
+        );
+        assert_eq!(georef.to_world(lat, lon)[0], frame.to_local(lat, lon)[0]);
     }
 
     #[test]

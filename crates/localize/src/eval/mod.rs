@@ -8,7 +8,7 @@ pub mod run;
 pub use report::{EvalReport, EvalSetup, RankMethod, ScanOutcome};
 
 use crate::{LocalizeError, Pose2, Result};
-use geodata::datasets::mcd::McdSequence;
+use geodata::datasets::{LidarSequence, SequenceKind};
 use geodata::osm::OsmMap;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -142,7 +142,16 @@ pub fn is_mcd(dir: &Path) -> bool {
 /// The MCD scans of a sequence (every `stride`-th frame), levelled into the sensor frame with
 /// their documented poses in the map's local frame.
 pub fn mcd_scans(dir: &Path, map: &OsmMap, stride: usize) -> Result<Vec<EvalScan>> {
-    let seq = McdSequence::open(dir)?;
+    sequence_scans(SequenceKind::Mcd.open(dir)?.as_ref(), map, stride)
+}
+
+/// The scans of a LiDAR sequence (every `stride`-th frame), levelled into the sensor frame
+/// with their dataset poses in the map's local frame as truth.
+pub fn sequence_scans(
+    seq: &dyn LidarSequence,
+    map: &OsmMap,
+    stride: usize,
+) -> Result<Vec<EvalScan>> {
     let frames = seq.frames()?;
     let mut out = Vec::new();
     for f in frames.into_iter().step_by(stride.max(1)) {
