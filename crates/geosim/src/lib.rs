@@ -23,6 +23,7 @@
 //!   dropouts) returning a labelled [`geodata::cloud::PointCloud`].
 //! - [`figure`]: a picture of the world around a point (streets, buildings vs map, clutter).
 //! - [`dataset`]: `localization`, `streets` and `relations` datasets written as PLY + JSON.
+//! - [`sequence`]: a `localization` dataset read back as a `geodata` `LidarSequence`.
 //!
 //! Every random step takes a seed and draws from its own stream ([`stream_rng`]), so a
 //! result does not depend on thread scheduling: same seed, byte-identical output.
@@ -47,6 +48,7 @@ pub mod ground;
 pub mod raycast;
 pub mod scene;
 pub mod sensor;
+pub mod sequence;
 pub mod truth;
 
 use rand::SeedableRng;
