@@ -15,6 +15,7 @@ use crate::parse::{
 };
 use serde::Serialize;
 use std::collections::HashMap;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use thiserror::Error;
@@ -470,6 +471,38 @@ impl InferReport {
             },
         }
     }
+
+    /// The ground problem's size, the MAP state's cost and bound, and seconds per phase.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{}: {} ground atoms, {} ground formulas ({} higher-order)",
+            self.program, self.ground_atoms, self.ground_factors, self.higher_order_factors
+        );
+        let _ = writeln!(out, "method            {}", self.method);
+        let _ = writeln!(out, "cost              {}", self.cost);
+        let _ = writeln!(out, "violated weight   {}", self.violated_weight);
+        let _ = writeln!(out, "hard violations   {}", self.hard_violations);
+        if let Some(lb) = self.lower_bound {
+            let _ = writeln!(
+                out,
+                "lower bound       {lb}  (of cost + hard weight × violations)"
+            );
+            let _ = writeln!(
+                out,
+                "persistent        {:.2} %",
+                100.0 * self.persistent_fraction
+            );
+        }
+        let s = &self.seconds;
+        let _ = writeln!(
+            out,
+            "seconds           parse {:.3}  ground {:.3}  quadratize {:.3}  solve {:.3}  total {:.3}",
+            s.parse, s.ground, s.quadratize, s.solve, s.total
+        );
+        out
+    }
 }
 
 /// Another engine's answer scored by our evaluator (`mln score --json`).
@@ -487,6 +520,24 @@ pub struct ScoreReport {
     pub violated_weight: f64,
     /// Violated hard formulas.
     pub hard_violations: usize,
+}
+
+impl ScoreReport {
+    /// The answer's size, cost and violations.
+    pub fn text(&self) -> String {
+        format!(
+            "{}: {} atoms ({} are not unknown atoms of this ground problem)\n\
+             cost              {}\n\
+             violated weight   {}\n\
+             hard violations   {}\n",
+            self.answer,
+            self.answer_atoms,
+            self.answer_atoms_not_unknown,
+            self.cost,
+            self.violated_weight,
+            self.hard_violations
+        )
+    }
 }
 
 /// One epoch of weight learning in a [`LearnReport`].
@@ -554,6 +605,26 @@ impl LearnReport {
             weights: learnt.weights.clone(),
             seconds,
         }
+    }
+
+    /// The training problem's size, the training errors before and after, the output file.
+    pub fn text(&self) -> String {
+        format!(
+            "{}: {} unknown atoms ({} true in the labels), {} ground formulas; {} labels ({} not unknown atoms)\n\
+             training errors   {} (MAP under the starting weights) -> {} (MAP under the learnt weights), {} epochs\n\
+             wrote {} in {:.2} s\n",
+            self.program,
+            self.ground_atoms,
+            self.true_atoms,
+            self.ground_factors,
+            self.labels,
+            self.labels_unused,
+            self.errors_start,
+            self.errors_learnt,
+            self.epochs.len(),
+            self.output,
+            self.seconds
+        )
     }
 }
 

@@ -10,6 +10,7 @@
 //! - [`qssr`]: iterated quadratize → QPBO → fix persistencies in the original function.
 //! - [`tabu`]: one-flip tabu search and Gray-code enumeration with incremental gains.
 //! - [`opb`]: the pseudo-Boolean competition `.opb` objective format.
+//! - [`report`]: an `.opb` objective minimised by QSSR, as `urbansem pbo solve` prints it.
 //! - [`instances`]: seeded benchmark instances (denoising grid, random sparse, 3-D segmentation).
 
 pub mod instances;
@@ -19,4 +20,5 @@ pub mod polynomial;
 pub mod qpbo;
 pub mod qssr;
 pub mod quadratize;
+pub mod report;
 pub mod tabu;

@@ -225,6 +225,28 @@ impl RelationGraph {
         }
         s + "}\n"
     }
+
+    /// The graph as text: a count line, then one line per edge with its relations.
+    pub fn text(&self) -> String {
+        let mut s = format!(
+            "{} objects, {} labelled edges:\n",
+            self.objects.len(),
+            self.edges.len()
+        );
+        for e in &self.edges {
+            let (a, b) = (self.object(e.a), self.object(e.b));
+            let names: Vec<&str> = e.relations().iter().map(|r| r.name()).collect();
+            s += &format!(
+                "  {} #{} → {} #{}: {}\n",
+                a.map_or("?", |o| o.class.name()),
+                e.a,
+                b.map_or("?", |o| o.class.name()),
+                e.b,
+                names.join(", ")
+            );
+        }
+        s
+    }
 }
 
 #[cfg(test)]

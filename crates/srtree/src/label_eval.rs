@@ -30,6 +30,7 @@ use geodata::classes::Class;
 use geodata::cloud::PointCloud;
 use rustc_hash::FxHashMap;
 use serde::Serialize;
+use std::fmt::Write as _;
 
 /// The protocol in one paragraph, as printed by the CLI.
 pub const PROTOCOL: &str = "per sequence: scans in frame order, first half = training part, second half = test part; \
@@ -245,4 +246,138 @@ pub fn evaluate_labels(
         total,
         model,
     })
+}
+
+/// The agreement rates of one [`LabelScore`], as reported.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LabelRates {
+    /// Cells scored.
+    pub cells: usize,
+    /// Share of cells where the Dirichlet choice is the true class.
+    pub dirichlet: f64,
+    /// Share of cells where the majority is the true class.
+    pub majority: f64,
+    /// Mixed cells scored.
+    pub mixed_cells: usize,
+    /// The Dirichlet share on mixed cells.
+    pub dirichlet_mixed: f64,
+    /// The majority share on mixed cells.
+    pub majority_mixed: f64,
+}
+
+impl From<&LabelScore> for LabelRates {
+    fn from(s: &LabelScore) -> Self {
+        Self {
+            cells: s.cells,
+            dirichlet: s.dirichlet_rate(),
+            majority: s.majority_rate(),
+            mixed_cells: s.mixed_cells,
+            dirichlet_mixed: s.dirichlet_rate_mixed(),
+            majority_mixed: s.majority_rate_mixed(),
+        }
+    }
+}
+
+/// Dirichlet label choice against majority vote on the real scans (`map eval-labels --json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LabelEvalReport {
+    /// The protocol ([`PROTOCOL`]).
+    pub protocol: String,
+    /// Cell size, metres.
+    pub resolution_m: f64,
+    /// Scans per sequence, in loading order.
+    #[serde(serialize_with = "as_map")]
+    pub scans: Vec<(String, usize)>,
+    /// Points of all sequences.
+    pub points: usize,
+    /// Points per sequence, in loading order.
+    #[serde(skip)]
+    pub sequence_points: Vec<usize>,
+    /// Training cells per sequence.
+    #[serde(serialize_with = "as_map")]
+    pub train_cells: Vec<(String, usize)>,
+    /// Test rates per sequence.
+    #[serde(serialize_with = "as_map")]
+    pub sequences: Vec<(String, LabelRates)>,
+    /// Test rates over all sequences.
+    pub total: LabelRates,
+    /// Seconds spent reading the scans.
+    pub seconds_load: f64,
+    /// Seconds spent evaluating.
+    pub seconds_eval: f64,
+}
+
+impl LabelEvalReport {
+    /// The report of `evaluation` on `sequences` (read in `seconds_load`, evaluated in `seconds_eval`).
+    pub fn new(
+        sequences: &[Sequence],
+        evaluation: &LabelEvaluation,
+        options: &LabelEvalOptions,
+        seconds_load: f64,
+        seconds_eval: f64,
+    ) -> Self {
+        Self {
+            protocol: PROTOCOL.to_owned(),
+            resolution_m: options.resolution_m,
+            scans: sequences
+                .iter()
+                .map(|s| (s.name.clone(), s.scans.len()))
+                .collect(),
+            points: sequences.iter().map(|s| s.points()).sum(),
+            sequence_points: sequences.iter().map(|s| s.points()).collect(),
+            train_cells: evaluation.train_cells.clone(),
+            sequences: evaluation
+                .sequences
+                .iter()
+                .map(|(n, s)| (n.clone(), LabelRates::from(s)))
+                .collect(),
+            total: LabelRates::from(&evaluation.total),
+            seconds_load,
+            seconds_eval,
+        }
+    }
+
+    /// The protocol, the sequences' sizes and a table of both agreements per sequence.
+    pub fn table_text(&self) -> String {
+        let mut out = format!("protocol: {}\n", self.protocol);
+        for ((name, scans), points) in self.scans.iter().zip(&self.sequence_points) {
+            let _ = writeln!(out, "  {name}: {scans} scans, {points} points");
+        }
+        for (n, c) in &self.train_cells {
+            let _ = writeln!(out, "  {n}: {c} training cells");
+        }
+        let _ = writeln!(
+            out,
+            "{:<10} {:>9} {:>10} {:>10} {:>9} {:>10} {:>10}",
+            "test", "cells", "Dirichlet", "majority", "mixed", "Dir.mixed", "maj.mixed"
+        );
+        let total = ("all".to_string(), self.total);
+        for (n, s) in self.sequences.iter().chain(std::iter::once(&total)) {
+            let _ = writeln!(
+                out,
+                "{:<10} {:>9} {:>9.2}% {:>9.2}% {:>9} {:>9.2}% {:>9.2}%",
+                n,
+                s.cells,
+                100.0 * s.dirichlet,
+                100.0 * s.majority,
+                s.mixed_cells,
+                100.0 * s.dirichlet_mixed,
+                100.0 * s.majority_mixed
+            );
+        }
+        let _ = writeln!(
+            out,
+            "({:.1} s reading, {:.1} s evaluating, {} m cells)",
+            self.seconds_load, self.seconds_eval, self.resolution_m
+        );
+        out
+    }
+}
+
+/// Serializes (key, value) pairs as a map.
+fn as_map<S: serde::Serializer, V: Serialize>(
+    pairs: &[(String, V)],
+    serializer: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    serializer.collect_map(pairs.iter().map(|(k, v)| (k, v)))
 }

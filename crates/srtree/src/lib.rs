@@ -22,6 +22,7 @@
 //! - [`graph`]: the spatial relation graph and its queries.
 //! - [`semantic`]: the semantic map: the cells of [`map`] and the relation graph over their objects.
 //! - [`io`]: the documented binary `.srt` file of a semantic map.
+//! - [`report`]: what `map build` and `map query` print, as typed values.
 //!
 //! ```
 //! use srtree::map::{MapOptions, SrMap};
@@ -43,6 +44,7 @@ pub mod label_eval;
 pub mod map;
 pub mod objects;
 pub mod relations;
+pub mod report;
 pub mod rules;
 pub mod scans;
 pub mod semantic;

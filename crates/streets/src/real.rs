@@ -694,6 +694,38 @@ impl RealEvalReport {
     }
 }
 
+impl RealEvalReport {
+    /// The sequence read, the coverage, the true widths, then the evaluation's table and
+    /// details (`dataset`: the sequence folder, `map`: the OSM file).
+    pub fn text(&self, dataset: &Path, map: &Path) -> String {
+        let (c, t, d) = (&self.coverage, &self.truth, &self.dataset);
+        format!(
+            "{:?} sequence {}: {} scans, {} points registered into {}\n\
+             coverage: the drive passes {} drivable segments ({:.0} m), {} of them with bins outside the intersection masks; {} have a derived truth ({:.0} m; {} also with sidewalk), {} an estimate\n\
+             true driving-area widths: median {:.1} m (min {:.1}, max {:.1})\n\
+             {}\n\
+             {}\n",
+            d.kind,
+            dataset.display(),
+            d.scans,
+            d.points,
+            map.display(),
+            c.passed,
+            c.passed_m,
+            c.estimable,
+            c.with_truth,
+            c.with_truth_m,
+            c.with_sidewalk_truth,
+            c.with_estimate,
+            t.width_m_median,
+            t.width_m_min,
+            t.width_m_max,
+            self.report.table_text(),
+            self.report.details_text()
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

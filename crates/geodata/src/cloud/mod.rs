@@ -39,6 +39,7 @@
 
 pub mod error;
 mod guard;
+pub mod info;
 pub mod kitti;
 pub mod las;
 pub mod lzf;

@@ -37,6 +37,34 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
+/// A labelled dataset whose raw class ids (its label files) map to urbansem classes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LabelSet {
+    /// MCD ([`mcd::mcd_class`]).
+    Mcd,
+    /// KITTI-360 ([`kitti360::kitti360_class`]).
+    Kitti360,
+}
+
+impl LabelSet {
+    /// The set named `mcd`, `kitti360` or `kitti-360`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "mcd" => Some(LabelSet::Mcd),
+            "kitti360" | "kitti-360" => Some(LabelSet::Kitti360),
+            _ => None,
+        }
+    }
+
+    /// The urbansem class of a raw id of this set.
+    pub fn class(self, raw: u32) -> crate::classes::Class {
+        match self {
+            LabelSet::Mcd => mcd::mcd_class(raw),
+            LabelSet::Kitti360 => kitti360::kitti360_class(raw),
+        }
+    }
+}
+
 /// An error while reading a dataset.
 #[derive(Debug, Error)]
 pub enum DatasetError {

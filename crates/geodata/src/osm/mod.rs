@@ -42,6 +42,7 @@
 pub mod error;
 pub mod geometry;
 pub mod index;
+pub mod info;
 pub mod model;
 pub mod network;
 mod pbf;

@@ -2,12 +2,12 @@
 
 use anyhow::{bail, Context};
 use clap::Subcommand;
-use geodata::classes::Class;
+use geodata::cloud::info::CloudInfo;
 use geodata::cloud::kitti::read_label_file;
 use geodata::cloud::{
     read_cloud_with, write_cloud_with, Encoding, Format, ReadOptions, WriteOptions,
 };
-use std::fmt::Write as _;
+use geodata::datasets::LabelSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -100,89 +100,18 @@ fn info(path: &Path, json: bool, drop_non_finite: bool) -> anyhow::Result<()> {
     let start = Instant::now();
     let (cloud, report) = read_cloud_with(path, &ReadOptions { drop_non_finite })
         .with_context(|| format!("reading point cloud {}", path.display()))?;
-    let read_s = start.elapsed().as_secs_f64();
-    let columns = cloud.columns().names();
-    let bounds = cloud.bounds();
-    let hist = cloud.class_histogram();
-    let precision = match cloud.precision {
-        geodata::cloud::Precision::F32 => "f32",
-        geodata::cloud::Precision::F64 => "f64",
-    };
-    let points_per_s = if read_s > 0.0 {
-        cloud.len() as f64 / read_s
-    } else {
-        f64::INFINITY
-    };
+    let info = CloudInfo::new(
+        path,
+        format,
+        bytes,
+        &cloud,
+        &report,
+        start.elapsed().as_secs_f64(),
+    );
     if json {
-        let classes: serde_json::Map<String, serde_json::Value> = if cloud.label.is_some() {
-            Class::ALL
-                .iter()
-                .map(|c| {
-                    (
-                        c.name().to_string(),
-                        serde_json::json!(hist[c.id() as usize]),
-                    )
-                })
-                .collect()
-        } else {
-            serde_json::Map::new()
-        };
-        let value = serde_json::json!({
-            "file": path.display().to_string(),
-            "format": format.name(),
-            "bytes": bytes,
-            "points": cloud.len(),
-            "points_in_file": report.points_in_file,
-            "dropped_non_finite": report.dropped_non_finite,
-            "columns": columns,
-            "precision": precision,
-            "bounds": bounds.map(|b| serde_json::json!({ "min": b.min, "max": b.max })),
-            "classes": classes,
-            "read_seconds": read_s,
-            "points_per_second": points_per_s,
-        });
-        return print_out(&(serde_json::to_string_pretty(&value)? + "\n"));
+        return print_out(&(serde_json::to_string_pretty(&serde_json::to_value(&info)?)? + "\n"));
     }
-    let mut out = String::new();
-    writeln!(out, "{}", path.display())?;
-    writeln!(out, "  format     {} ({bytes} bytes)", format.name())?;
-    writeln!(out, "  points     {}", cloud.len())?;
-    if report.dropped_non_finite > 0 {
-        writeln!(
-            out,
-            "  dropped    {} of {} points with non-finite coordinates",
-            report.dropped_non_finite, report.points_in_file
-        )?;
-    }
-    writeln!(
-        out,
-        "  columns    {} (positions {precision})",
-        columns.join(" ")
-    )?;
-    if let Some(b) = bounds {
-        writeln!(
-            out,
-            "  bounds     x {:.3} .. {:.3}, y {:.3} .. {:.3}, z {:.3} .. {:.3} m",
-            b.min[0], b.max[0], b.min[1], b.max[1], b.min[2], b.max[2]
-        )?;
-    }
-    if cloud.label.is_some() {
-        writeln!(out, "  classes")?;
-        for c in Class::ALL {
-            let n = hist[c.id() as usize];
-            if n > 0 {
-                let pct = 100.0 * n as f64 / cloud.len().max(1) as f64;
-                writeln!(out, "    {:<11} {n:>10} ({pct:5.1} %)", c.name())?;
-            }
-        }
-    }
-    writeln!(
-        out,
-        "  read       {:.3} s ({:.2} M points/s)",
-        read_s,
-        points_per_s / 1e6
-    )?;
-    print_out(&out)
+    print_out(&info.text())
 }
 
 /// Writes to stdout; a closed pipe (`| head`) is not an error.
@@ -218,12 +147,10 @@ fn convert(
         let raw = read_label_file(label_path, Some(cloud.len()))
             .with_context(|| format!("reading labels {}", label_path.display()))?;
         if let Some(set) = label_set {
-            let map: fn(u32) -> Class = match set {
-                "mcd" => geodata::datasets::mcd::mcd_class,
-                "kitti360" | "kitti-360" => geodata::datasets::kitti360::kitti360_class,
-                other => super::usage!("unknown --label-set {other:?}; use mcd or kitti360"),
+            let Some(set) = LabelSet::from_name(set) else {
+                super::usage!("unknown --label-set {set:?}; use mcd or kitti360");
             };
-            cloud.label = Some(raw.iter().map(|&r| map(r).id()).collect());
+            cloud.label = Some(raw.iter().map(|&r| set.class(r).id()).collect());
         }
         cloud.raw_label = Some(raw);
     }

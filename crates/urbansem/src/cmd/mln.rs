@@ -240,13 +240,7 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
     if args.json {
         super::print_json(&report)?;
     } else {
-        println!(
-            "{}: {} atoms ({} are not unknown atoms of this ground problem)",
-            report.answer, report.answer_atoms, report.answer_atoms_not_unknown
-        );
-        println!("cost              {}", report.cost);
-        println!("violated weight   {}", report.violated_weight);
-        println!("hard violations   {}", report.hard_violations);
+        print!("{}", report.text());
     }
     Ok(())
 }
@@ -301,17 +295,7 @@ fn learn(args: &LearnArgs) -> anyhow::Result<()> {
     if args.json {
         super::print_json(&r)?;
     } else {
-        println!(
-            "{}: {} unknown atoms ({} true in the labels), {} ground formulas; {} labels ({} not unknown atoms)",
-            r.program, r.ground_atoms, r.true_atoms, r.ground_factors, r.labels, r.labels_unused
-        );
-        println!(
-            "training errors   {} (MAP under the starting weights) -> {} (MAP under the learnt weights), {} epochs",
-            r.errors_start,
-            r.errors_learnt,
-            r.epochs.len()
-        );
-        println!("wrote {} in {:.2} s", r.output, r.seconds);
+        print!("{}", r.text());
     }
     Ok(())
 }
@@ -366,29 +350,7 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
     if args.json {
         super::print_json(&report)?;
     } else {
-        println!(
-            "{}: {} ground atoms, {} ground formulas ({} higher-order)",
-            args.problem.program.display(),
-            report.ground_atoms,
-            report.ground_factors,
-            report.higher_order_factors
-        );
-        println!("method            {}", args.method.name());
-        println!("cost              {}", r.scores.cost);
-        println!("violated weight   {}", r.scores.violated_weight);
-        println!("hard violations   {}", r.scores.hard_violations);
-        if let Some(lb) = r.lower_bound {
-            println!("lower bound       {lb}  (of cost + hard weight × violations)");
-            println!("persistent        {:.2} %", 100.0 * r.persistent_fraction);
-        }
-        println!(
-            "seconds           parse {:.3}  ground {:.3}  quadratize {:.3}  solve {:.3}  total {:.3}",
-            report.seconds.parse,
-            report.seconds.ground,
-            report.seconds.quadratize,
-            report.seconds.solve,
-            report.seconds.total
-        );
+        print!("{}", report.text());
     }
     Ok(())
 }

@@ -3,7 +3,6 @@
 use anyhow::Context;
 use clap::Subcommand;
 use geodata::classes::Class;
-use serde_json::{json, Value};
 use srtree::amodal::MapOutlines;
 use srtree::dataset::RelationsDataset;
 use srtree::features::ViewObject;
@@ -12,6 +11,7 @@ use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
 use srtree::relations::{evaluate, relation_graph, train, RelationModel, TrainOptions};
+use srtree::report::{BuildReport, QueryReport};
 use srtree::semantic::SemanticMap;
 use srtree::SrtreeError;
 use std::path::{Path, PathBuf};
@@ -216,35 +216,11 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             let mut semantic = SemanticMap::new(map);
             semantic.relations.objects = objects.iter().map(|o| o.node()).collect();
             write_map(&out, &semantic).with_context(|| format!("writing {}", out.display()))?;
-            let map = semantic.cells;
-            let mem = map.memory();
-            let summary = json!({
-                "points": stats.points,
-                "cells": map.len(),
-                "objects": objects.len(),
-                "rays": stats.rays,
-                "misses": stats.misses,
-                "tree_height": map.tree_height(),
-                "memory": mem,
-                "seconds_read": read_s,
-                "seconds_insert": insert_s,
-                "points_per_second": stats.points as f64 / insert_s.max(1e-9),
-                "out": out.display().to_string(),
-            });
+            let report = BuildReport::new(&semantic, &stats, read_s, insert_s, &out);
             if json {
-                println!("{}", serde_json::to_string_pretty(&summary)?);
+                super::print_json(&report)?;
             } else {
-                println!(
-                    "{}: {} points → {} cells ({} objects) in {:.2} s ({:.1} M points/s); {:.0} bytes per cell; R-tree height {}",
-                    out.display(),
-                    stats.points,
-                    map.len(),
-                    objects.len(),
-                    insert_s,
-                    stats.points as f64 / insert_s.max(1e-9) / 1e6,
-                    mem.bytes_per_cell,
-                    map.tree_height()
-                );
+                print!("{}", report.text());
             }
             Ok(())
         }
@@ -289,44 +265,11 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
                 (None, None, None, Some(o)) => m.cells_of_object(o),
                 _ => super::usage!("give exactly one of --box, --near, --class, --object"),
             };
-            let seconds = t.elapsed().as_secs_f64();
-            let rows: Vec<Value> = cells
-                .iter()
-                .map(|&i| {
-                    let c = &m.cells()[i as usize];
-                    json!({
-                        "centre": m.centre(c.key),
-                        "class": c.class().name(),
-                        "object": c.object,
-                        "hits": c.hits,
-                        "occupancy": c.occupancy(),
-                        "rgb": m.mean_rgb(i),
-                    })
-                })
-                .collect();
+            let report = QueryReport::new(&m, &cells, t.elapsed().as_secs_f64());
             if json {
-                println!(
-                    "{}",
-                    serde_json::to_string_pretty(
-                        &json!({"count": rows.len(), "seconds": seconds, "cells": rows})
-                    )?
-                );
+                super::print_json(&report)?;
             } else {
-                println!("{} cells ({:.3} ms)", rows.len(), seconds * 1e3);
-                for r in rows.iter().take(50) {
-                    println!(
-                        "  {:>9.2} {:>9.2} {:>7.2}  {:<10} object {:<6} hits {}",
-                        r["centre"][0].as_f64().unwrap_or(0.0),
-                        r["centre"][1].as_f64().unwrap_or(0.0),
-                        r["centre"][2].as_f64().unwrap_or(0.0),
-                        r["class"].as_str().unwrap_or(""),
-                        r["object"],
-                        r["hits"]
-                    );
-                }
-                if rows.len() > 50 {
-                    println!("  … {} more (use --json for all)", rows.len() - 50);
-                }
+                print!("{}", report.text());
             }
             Ok(())
         }
@@ -348,84 +291,28 @@ fn eval_labels(
     model_out: Option<&Path>,
     json: bool,
 ) -> anyhow::Result<()> {
-    use srtree::label_eval::{evaluate_labels, LabelEvalOptions, LabelScore, PROTOCOL};
+    use srtree::label_eval::{evaluate_labels, LabelEvalOptions, LabelEvalReport};
     let t = Instant::now();
     let sequences = srtree::scans::load_sequences(data, max_scans)
         .with_context(|| format!("reading the labelled scans under {}", data.display()))?;
     let load_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let ev = evaluate_labels(
-        &sequences,
-        &LabelEvalOptions {
-            resolution_m: resolution,
-            ..LabelEvalOptions::default()
-        },
-    )?;
+    let options = LabelEvalOptions {
+        resolution_m: resolution,
+        ..LabelEvalOptions::default()
+    };
+    let ev = evaluate_labels(&sequences, &options)?;
     let eval_s = t.elapsed().as_secs_f64();
     if let Some(p) = model_out {
         geodata::fsio::write_atomic(p, serde_json::to_string_pretty(&ev.model)?)
             .with_context(|| format!("writing {}", p.display()))?;
     }
-    let score_json = |s: &LabelScore| {
-        json!({
-            "cells": s.cells,
-            "dirichlet": s.dirichlet_rate(),
-            "majority": s.majority_rate(),
-            "mixed_cells": s.mixed_cells,
-            "dirichlet_mixed": s.dirichlet_rate_mixed(),
-            "majority_mixed": s.majority_rate_mixed(),
-        })
-    };
+    let report = LabelEvalReport::new(&sequences, &ev, &options, load_s, eval_s);
     if json {
-        let seqs: serde_json::Map<String, Value> = ev
-            .sequences
-            .iter()
-            .map(|(n, s)| (n.clone(), score_json(s)))
-            .collect();
-        let out = json!({
-            "protocol": PROTOCOL,
-            "resolution_m": resolution,
-            "scans": sequences.iter().map(|s| (s.name.clone(), json!(s.scans.len()))).collect::<serde_json::Map<String, Value>>(),
-            "points": sequences.iter().map(|s| s.points()).sum::<usize>(),
-            "train_cells": ev.train_cells.iter().map(|(n, c)| (n.clone(), json!(c))).collect::<serde_json::Map<String, Value>>(),
-            "sequences": seqs,
-            "total": score_json(&ev.total),
-            "seconds_load": load_s,
-            "seconds_eval": eval_s,
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+        super::print_json(&report)?;
+    } else {
+        print!("{}", report.table_text());
     }
-    println!("protocol: {PROTOCOL}");
-    for s in &sequences {
-        println!(
-            "  {}: {} scans, {} points",
-            s.name,
-            s.scans.len(),
-            s.points()
-        );
-    }
-    for (n, c) in &ev.train_cells {
-        println!("  {n}: {c} training cells");
-    }
-    println!(
-        "{:<10} {:>9} {:>10} {:>10} {:>9} {:>10} {:>10}",
-        "test", "cells", "Dirichlet", "majority", "mixed", "Dir.mixed", "maj.mixed"
-    );
-    let total = ("all".to_string(), ev.total);
-    for (n, s) in ev.sequences.iter().chain(std::iter::once(&total)) {
-        println!(
-            "{:<10} {:>9} {:>9.2}% {:>9.2}% {:>9} {:>9.2}% {:>9.2}%",
-            n,
-            s.cells,
-            100.0 * s.dirichlet_rate(),
-            100.0 * s.majority_rate(),
-            s.mixed_cells,
-            100.0 * s.dirichlet_rate_mixed(),
-            100.0 * s.majority_rate_mixed()
-        );
-    }
-    println!("({load_s:.1} s reading, {eval_s:.1} s evaluating, {resolution} m cells)");
     Ok(())
 }
 
@@ -512,23 +399,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             } else if dot {
                 print!("{}", graph.to_dot());
             } else {
-                println!(
-                    "{} objects, {} labelled edges:",
-                    graph.objects.len(),
-                    graph.edges.len()
-                );
-                for e in &graph.edges {
-                    let (a, b) = (graph.object(e.a), graph.object(e.b));
-                    let names: Vec<&str> = e.relations().iter().map(|r| r.name()).collect();
-                    println!(
-                        "  {} #{} → {} #{}: {}",
-                        a.map_or("?", |o| o.class.name()),
-                        e.a,
-                        b.map_or("?", |o| o.class.name()),
-                        e.b,
-                        names.join(", ")
-                    );
-                }
+                print!("{}", graph.text());
             }
             if let Some(path) = save {
                 m.relations = graph;

@@ -6,12 +6,11 @@ use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::cloud::read_cloud;
 use geodata::osm::OsmMap;
-use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use streets::dataset::StreetsDataset;
 use streets::eval::{evaluate, EvalOptions};
-use streets::model::{dataset_bins, ClassifierOptions, GeometryOptions, StreetModel, Target};
+use streets::model::{ClassifierOptions, StreetModel, Target};
 use streets::real::{load_sequence, RealEvalReport, TruthOptions};
 use streets::svm::SvmOptions;
 
@@ -413,31 +412,7 @@ fn eval_real(
         super::print_json(&r)?;
         eprintln!("{}", r.report.details_text());
     } else {
-        let (c, t) = (&r.coverage, &r.truth);
-        println!(
-            "{:?} sequence {}: {} scans, {} points registered into {}",
-            real.kind,
-            dataset.display(),
-            real.scans,
-            real.dataset.cloud.len(),
-            map.display()
-        );
-        println!(
-            "coverage: the drive passes {} drivable segments ({:.0} m), {} of them with bins outside the intersection masks; {} have a derived truth ({:.0} m; {} also with sidewalk), {} an estimate",
-            c.passed,
-            c.passed_m,
-            c.estimable,
-            c.with_truth,
-            c.with_truth_m,
-            c.with_sidewalk_truth,
-            c.with_estimate
-        );
-        println!(
-            "true driving-area widths: median {:.1} m (min {:.1}, max {:.1})",
-            t.width_m_median, t.width_m_min, t.width_m_max
-        );
-        println!("{}", r.report.table_text());
-        println!("{}", r.report.details_text());
+        print!("{}", r.text(dataset, map));
     }
     Ok(())
 }
@@ -455,68 +430,23 @@ fn kitti(
     let (train, test) = streets::kitti::train_test_bins(data, train_scans, test_scans)
         .with_context(|| format!("reading KITTI-360 scans from {}", data.display()))?;
     let features_s = t.elapsed().as_secs_f64();
-    let mut results = serde_json::Map::new();
-    for target in [Target::DrivingArea, Target::WithSidewalk] {
-        let t = Instant::now();
-        let r = streets::kitti::train_and_test(&train, &test, target, &training.classifier())?;
-        let mut entry = json!({
-            "precision": r.precision, "recall": r.recall, "f1": r.f1,
-            "train_bins": train.len(), "test_bins": test.len(),
-            "seconds": t.elapsed().as_secs_f64(),
-        });
-        if let Some(dir) = sim_dataset {
-            let ds = StreetsDataset::load(dir)
-                .with_context(|| format!("loading the streets dataset {}", dir.display()))?;
-            let geometry = GeometryOptions {
-                features: streets::features::FeatureOptions {
-                    colour: false,
-                    ..Default::default()
-                },
-                ..GeometryOptions::default()
-            };
-            let bins = dataset_bins(&ds, &geometry, target);
-            let r2 = streets::kitti::train_xy_and_test(
-                &bins.features,
-                &bins.labels,
-                &test,
-                target,
-                &training.classifier(),
-            )?;
-            entry["sim_to_kitti"] =
-                json!({"precision": r2.precision, "recall": r2.recall, "f1": r2.f1});
-        }
-        results.insert(target.key().into(), entry);
-    }
-    results.insert("features_seconds".into(), json!(features_s));
-    let v = serde_json::Value::Object(results);
+    let sim = sim_dataset
+        .map(|dir| {
+            StreetsDataset::load(dir)
+                .with_context(|| format!("loading the streets dataset {}", dir.display()))
+        })
+        .transpose()?;
+    let report = streets::kitti::evaluate_bins(
+        &train,
+        &test,
+        sim.as_ref(),
+        &training.classifier(),
+        features_s,
+    )?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        super::print_json(&report)?;
     } else {
-        println!(
-            "KITTI-360 {}: {} training bins, {} test bins (thesis raw F1: driving area 0.81, with sidewalk 0.85)",
-            data.display(),
-            train.len(),
-            test.len()
-        );
-        for key in ["driving_area", "with_sidewalk"] {
-            let e = &v[key];
-            println!(
-                "  {key:<14} P {:.3} R {:.3} F1 {:.3}{}",
-                e["precision"].as_f64().unwrap_or(f64::NAN),
-                e["recall"].as_f64().unwrap_or(f64::NAN),
-                e["f1"].as_f64().unwrap_or(f64::NAN),
-                if e["sim_to_kitti"].is_object() {
-                    format!(
-                        "   | trained on simulation: P {:.3} R {:.3} F1 {:.3}",
-                        e["sim_to_kitti"]["precision"].as_f64().unwrap_or(f64::NAN),
-                        e["sim_to_kitti"]["recall"].as_f64().unwrap_or(f64::NAN),
-                        e["sim_to_kitti"]["f1"].as_f64().unwrap_or(f64::NAN)
-                    )
-                } else {
-                    String::new()
-                }
-            );
-        }
+        print!("{}", report.text(data));
     }
     Ok(())
 }
