@@ -685,6 +685,23 @@ mod tests {
     }
 
     #[test]
+    fn reports_print_one_value_per_line() {
+        let score = ScoreReport {
+            answer: "a.db".into(),
+            answer_atoms: 3,
+            answer_atoms_not_unknown: 1,
+            cost: -1.5,
+            violated_weight: 0.5,
+            hard_violations: 0,
+        };
+        assert_eq!(
+            score.text(),
+            "a.db: 3 atoms (1 are not unknown atoms of this ground problem)\n\
+             cost              -1.5\nviolated weight   0.5\nhard violations   0\n"
+        );
+    }
+
+    #[test]
     fn missing_files_name_their_step() {
         let files = ProblemFiles {
             program: PathBuf::from("/nonexistent/prog.mln"),

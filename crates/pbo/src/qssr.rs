@@ -69,7 +69,7 @@ impl Default for QssrOptions {
 }
 
 /// What one QSSR round did.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct QssrRound {
     /// Unfixed variables occurring in the function at the start of the round.
     pub free_variables: usize,

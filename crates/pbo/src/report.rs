@@ -9,45 +9,6 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
-/// One QSSR round of a [`SolveReport`].
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct RoundReport {
-    /// Unfixed variables occurring in the function at the start of the round.
-    pub free_variables: usize,
-    /// Higher-order terms at the start of the round.
-    pub higher_order_terms: usize,
-    /// Slack variables of this round's quadratization.
-    pub slacks: usize,
-    /// Variables fixed by QPBO in this round.
-    pub fixed_by_qpbo: usize,
-    /// Additional variables fixed by probing in this round.
-    pub fixed_by_probe: usize,
-    /// Roof-dual lower bound of this round's quadratic function.
-    pub lower_bound: f64,
-    /// Energy of the persistent values with every free variable at 0.
-    pub energy: f64,
-    /// Seconds spent quadratizing.
-    pub seconds_quadratize: f64,
-    /// Seconds spent in QPBO and probing.
-    pub seconds_solve: f64,
-}
-
-impl From<&QssrRound> for RoundReport {
-    fn from(r: &QssrRound) -> Self {
-        Self {
-            free_variables: r.free_variables,
-            higher_order_terms: r.higher_order_terms,
-            slacks: r.slacks,
-            fixed_by_qpbo: r.fixed_by_qpbo,
-            fixed_by_probe: r.fixed_by_probe,
-            lower_bound: r.lower_bound,
-            energy: r.energy,
-            seconds_quadratize: r.seconds_quadratize,
-            seconds_solve: r.seconds_solve,
-        }
-    }
-}
-
 /// Seconds per phase of a [`SolveReport`].
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SolveSeconds {
@@ -98,7 +59,7 @@ pub struct SolveReport {
     /// Persistent share of the occurring variables.
     pub labelled_fraction: f64,
     /// One record per QSSR round.
-    pub rounds: Vec<RoundReport>,
+    pub rounds: Vec<QssrRound>,
     /// Seconds per phase.
     pub seconds: SolveSeconds,
     /// The value (0 or 1) of every variable, by name.
@@ -131,7 +92,7 @@ pub fn solve_opb_file(path: &Path, options: &QssrOptions) -> Result<SolveReport,
         lower_bound: result.lower_bound,
         objective: sign * result.energy,
         labelled_fraction: result.labelled_fraction,
-        rounds: result.rounds.iter().map(RoundReport::from).collect(),
+        rounds: result.rounds,
         seconds: SolveSeconds {
             parse: parse_s,
             quadratize: result.seconds.quadratize,

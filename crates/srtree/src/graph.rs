@@ -293,6 +293,10 @@ mod tests {
         };
         assert_eq!(g.objects_left_of_point([10.0, 0.0, 0.0], &vp), vec![1]);
         assert!(g.to_dot().contains("o1 -> o2 [label=\"LeftOf\"]"));
+        assert_eq!(
+            g.text(),
+            "3 objects, 2 labelled edges:\n  car #1 → car #2: LeftOf\n  car #2 → car #1: RightOf\n"
+        );
         assert_eq!(Relation::from_name("behind"), Some(Relation::Behind));
     }
 

@@ -381,3 +381,45 @@ fn as_map<S: serde::Serializer, V: Serialize>(
 ) -> std::result::Result<S::Ok, S::Error> {
     serializer.collect_map(pairs.iter().map(|(k, v)| (k, v)))
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn the_report_keeps_the_sequence_order_in_text_and_keys_in_json() {
+        let score = LabelScore {
+            cells: 4,
+            dirichlet_agree: 3,
+            majority_agree: 2,
+            mixed_cells: 2,
+            dirichlet_agree_mixed: 1,
+            majority_agree_mixed: 0,
+        };
+        let rates = LabelRates::from(&score);
+        let report = LabelEvalReport {
+            protocol: PROTOCOL.to_owned(),
+            resolution_m: 0.5,
+            scans: vec![("mcd".into(), 2), ("kitti360".into(), 3)],
+            points: 30,
+            sequence_points: vec![10, 20],
+            train_cells: vec![("mcd".into(), 5), ("kitti360".into(), 7)],
+            sequences: vec![("mcd".into(), rates), ("kitti360".into(), rates)],
+            total: rates,
+            seconds_load: 0.0,
+            seconds_eval: 0.0,
+        };
+        let text = report.table_text();
+        let mcd = text.find("  mcd: 2 scans, 10 points").unwrap();
+        let kitti = text.find("  kitti360: 3 scans, 20 points").unwrap();
+        assert!(mcd < kitti, "loading order: {text}");
+        assert!(text.contains(
+            "mcd                4     75.00%     50.00%         2     50.00%      0.00%"
+        ));
+        let json = serde_json::to_value(&report).unwrap();
+        assert_eq!(json["scans"]["kitti360"], 3);
+        assert_eq!(json["sequences"]["mcd"]["dirichlet"], 0.75);
+        assert!(json.get("sequence_points").is_none());
+    }
+}

@@ -322,6 +322,26 @@ impl RelationModel {
         let mln = map_relations(&scene, &self.mln, infer)?;
         Ok(Inferred { svm, mln })
     }
+
+    /// The relation graph over a map's objects seen from `viewpoint`, with SVM + MLN
+    /// relations; `outlines` complete the buildings the map shows only in part.
+    pub fn infer_map_graph(
+        &self,
+        map: &crate::map::SrMap,
+        viewpoint: Viewpoint,
+        outlines: &crate::amodal::MapOutlines,
+        infer: &InferOptions,
+    ) -> Result<RelationGraph> {
+        let objects =
+            crate::objects::extract_objects(map, &crate::objects::ObjectOptions::default());
+        let view: Vec<ViewObject> = objects
+            .iter()
+            .map(|o| ViewObject::from_map_object_with_outlines(map, o, &viewpoint, outlines))
+            .collect();
+        let out = self.infer(&view, infer)?;
+        let nodes: Vec<ObjectNode> = objects.iter().map(|o| o.node()).collect();
+        Ok(relation_graph(&nodes, &out.mln, viewpoint))
+    }
 }
 
 /// The relation graph of an assignment (RightOf/InFrontOf added as complements).

@@ -149,3 +149,58 @@ impl QueryReport {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::map::MapOptions;
+    use crate::objects::ObjectOptions;
+    use geodata::classes::Class;
+    use geodata::cloud::PointCloud;
+
+    /// `n` car points 1 m apart along x, one per 0.1 m cell.
+    fn car_row(n: usize) -> SrMap {
+        let cloud = PointCloud {
+            positions: (0..n).map(|i| [i as f64 + 0.05, 0.05, 0.05]).collect(),
+            label: Some(vec![Class::Car.id(); n]),
+            ..PointCloud::default()
+        };
+        let mut map = SrMap::new(MapOptions::default()).unwrap();
+        map.insert_cloud(&cloud, None).unwrap();
+        map
+    }
+
+    #[test]
+    fn a_query_lists_fifty_cells_then_counts_the_rest() {
+        let map = car_row(53);
+        let mut ids: Vec<u32> = (0..map.len() as u32).collect();
+        ids.sort_unstable();
+        let report = QueryReport::new(&map, &ids, 0.002);
+        assert_eq!(report.count, 53);
+        assert!(report.cells.iter().all(|c| c.class == "car" && c.hits == 1));
+        let text = report.text();
+        assert!(text.starts_with("53 cells (2.000 ms)\n"), "{text}");
+        assert_eq!(text.lines().count(), 1 + 50 + 1);
+        assert!(
+            text.ends_with("  … 3 more (use --json for all)\n"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_build_report_counts_points_cells_and_objects() {
+        let cloud = PointCloud {
+            positions: vec![[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]],
+            label: Some(vec![Class::Car.id(); 2]),
+            ..PointCloud::default()
+        };
+        let mut cells = SrMap::new(MapOptions::default()).unwrap();
+        let stats = cells.insert_cloud(&cloud, None).unwrap();
+        let map = SemanticMap::with_objects(cells, &ObjectOptions::default());
+        let report = BuildReport::new(&map, &stats, 0.1, 2.0, Path::new("m.srt"));
+        assert_eq!((report.points, report.cells, report.rays), (2, 2, 0));
+        assert_eq!(report.points_per_second, 1.0);
+        assert!(report.text().starts_with("m.srt: 2 points → 2 cells ("));
+    }
+}

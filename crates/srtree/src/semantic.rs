@@ -29,4 +29,13 @@ impl SemanticMap {
             relations: RelationGraph::default(),
         }
     }
+
+    /// A semantic map of these cells with their extracted objects as graph nodes, without
+    /// relations yet.
+    pub fn with_objects(cells: SrMap, options: &crate::objects::ObjectOptions) -> SemanticMap {
+        let objects = crate::objects::extract_objects(&cells, options);
+        let mut map = SemanticMap::new(cells);
+        map.relations.objects = objects.iter().map(|o| o.node()).collect();
+        map
+    }
 }

@@ -282,3 +282,44 @@ impl KittiReport {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn target(sim: Option<Prf>) -> KittiTargetReport {
+        KittiTargetReport {
+            precision: 0.5,
+            recall: 0.25,
+            f1: 1.0 / 3.0,
+            train_bins: 10,
+            test_bins: 20,
+            seconds: 0.0,
+            sim_to_kitti: sim,
+        }
+    }
+
+    #[test]
+    fn the_simulation_column_appears_only_when_trained_on_simulation() {
+        let sim = Prf {
+            precision: 1.0,
+            recall: 0.5,
+            f1: 2.0 / 3.0,
+        };
+        let report = KittiReport {
+            driving_area: target(None),
+            with_sidewalk: target(Some(sim)),
+            features_seconds: 0.0,
+        };
+        assert_eq!(
+            report.text(Path::new("seq")),
+            "KITTI-360 seq: 10 training bins, 20 test bins (thesis raw F1: driving area 0.81, with sidewalk 0.85)\n\
+             \x20 driving_area   P 0.500 R 0.250 F1 0.333\n\
+             \x20 with_sidewalk  P 0.500 R 0.250 F1 0.333   | trained on simulation: P 1.000 R 0.500 F1 0.667\n"
+        );
+        let json = serde_json::to_value(report).unwrap();
+        assert!(json["driving_area"].get("sim_to_kitti").is_none());
+        assert_eq!(json["with_sidewalk"]["sim_to_kitti"]["precision"], 1.0);
+    }
+}

@@ -141,3 +141,78 @@ impl CloudInfo {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn classes_are_listed_in_class_order_and_empty_ones_left_out() {
+        let cloud = PointCloud {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 2.0, 3.0],
+                [2.0, 0.0, 1.0],
+                [0.0, 1.0, 0.0],
+            ],
+            label: Some(vec![
+                Class::Tree.id(),
+                Class::Car.id(),
+                Class::Car.id(),
+                Class::Tree.id(),
+            ]),
+            ..PointCloud::default()
+        };
+        let report = ReadReport {
+            points_in_file: 4,
+            dropped_non_finite: 0,
+        };
+        let info = CloudInfo::new(Path::new("c.ply"), Format::Ply, 100, &cloud, &report, 0.0);
+        assert_eq!(info.classes.len(), Class::ALL.len());
+        assert_eq!(info.classes["car"], 2);
+        assert_eq!(info.points_per_second, f64::INFINITY);
+        assert_eq!(
+            info.bounds,
+            Some(BoundsInfo {
+                min: [0.0; 3],
+                max: [2.0, 2.0, 3.0]
+            })
+        );
+        let text = info.text();
+        let car = text.find("    car ").unwrap();
+        let tree = text.find("    tree ").unwrap();
+        assert!(car < tree, "Class::ALL order: {text}");
+        assert!(
+            !text.contains("building"),
+            "empty classes are left out: {text}"
+        );
+        assert!(
+            text.contains("  car                  2 ( 50.0 %)\n"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_cloud_without_labels_has_no_classes() {
+        let cloud = PointCloud {
+            positions: vec![[0.0, 0.0, 0.0]],
+            ..PointCloud::default()
+        };
+        let report = ReadReport {
+            points_in_file: 1,
+            dropped_non_finite: 0,
+        };
+        let info = CloudInfo::new(
+            Path::new("c.bin"),
+            Format::KittiBin,
+            16,
+            &cloud,
+            &report,
+            1.0,
+        );
+        assert!(info.classes.is_empty());
+        assert!(!info.text().contains("classes"));
+        assert_eq!(info.points_per_second, 1.0);
+    }
+}

@@ -56,12 +56,13 @@ impl LabelSet {
         }
     }
 
-    /// The urbansem class of a raw id of this set.
-    pub fn class(self, raw: u32) -> crate::classes::Class {
-        match self {
-            LabelSet::Mcd => mcd::mcd_class(raw),
-            LabelSet::Kitti360 => kitti360::kitti360_class(raw),
-        }
+    /// Sets `label` (urbansem ids) and `raw_label` of a cloud from this set's ids.
+    pub fn attach(self, cloud: &mut PointCloud, raw: Vec<u32>) {
+        let map = match self {
+            LabelSet::Mcd => mcd::mcd_class,
+            LabelSet::Kitti360 => kitti360::kitti360_class,
+        };
+        attach_labels(cloud, raw, map);
     }
 }
 
@@ -419,6 +420,25 @@ pub(crate) fn attach_labels(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn label_sets_are_found_by_their_names() {
+        assert_eq!(LabelSet::from_name("mcd"), Some(LabelSet::Mcd));
+        assert_eq!(LabelSet::from_name("kitti-360"), Some(LabelSet::Kitti360));
+        assert_eq!(LabelSet::from_name("kitti360"), Some(LabelSet::Kitti360));
+        assert_eq!(LabelSet::from_name("semantickitti"), None);
+        let mut cloud = PointCloud {
+            positions: vec![[0.0; 3]; 2],
+            ..PointCloud::default()
+        };
+        LabelSet::Kitti360.attach(&mut cloud, vec![7, 26]);
+        assert_eq!(cloud.raw_label, Some(vec![7, 26]));
+        let want: Vec<u8> = [7, 26]
+            .iter()
+            .map(|&r| kitti360::kitti360_class(r).id())
+            .collect();
+        assert_eq!(cloud.label, Some(want));
+    }
 
     #[test]
     fn local_pose_of_a_world_pose_at_the_frame_origin() {

@@ -119,3 +119,30 @@ impl OsmInfo {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn counts_a_building_and_a_street_and_prints_them() {
+        let xml = r#"<osm version="0.6">
+          <node id="1" lat="48.0" lon="11.0"/><node id="2" lat="48.0" lon="11.001"/>
+          <node id="3" lat="48.001" lon="11.001"/>
+          <way id="10"><nd ref="1"/><nd ref="2"/><nd ref="3"/><nd ref="1"/><tag k="building" v="yes"/></way>
+          <way id="11"><nd ref="1"/><nd ref="3"/><tag k="highway" v="service"/></way>
+        </osm>"#;
+        let map = OsmMap::from_xml_str(xml).unwrap();
+        let info = OsmInfo::new(Path::new("t.osm"), &map, 0.5);
+        assert_eq!((info.buildings, info.building_outlines), (1, 1));
+        assert_eq!((info.highway_ways, info.segments), (1, 1));
+        assert_eq!((info.nodes, info.ways, info.relations), (3, 2, 0));
+        let text = info.text();
+        assert!(text.starts_with("t.osm\n  elements        3 nodes, 2 ways, 0 relations\n"));
+        assert!(
+            text.contains("  buildings       1 (1 closed ways + 0 multipolygons) → 1 outlines\n")
+        );
+        assert!(text.ends_with("  parse time      0.500 s\n"));
+    }
+}

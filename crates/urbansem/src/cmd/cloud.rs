@@ -146,13 +146,15 @@ fn convert(
         }
         let raw = read_label_file(label_path, Some(cloud.len()))
             .with_context(|| format!("reading labels {}", label_path.display()))?;
-        if let Some(set) = label_set {
-            let Some(set) = LabelSet::from_name(set) else {
-                super::usage!("unknown --label-set {set:?}; use mcd or kitti360");
-            };
-            cloud.label = Some(raw.iter().map(|&r| set.class(r).id()).collect());
+        match label_set {
+            Some(name) => {
+                let Some(set) = LabelSet::from_name(name) else {
+                    super::usage!("unknown --label-set {name:?}; use mcd or kitti360");
+                };
+                set.attach(&mut cloud, raw);
+            }
+            None => cloud.raw_label = Some(raw),
         }
-        cloud.raw_label = Some(raw);
     }
     write_cloud_with(output, &cloud, &WriteOptions { encoding })
         .with_context(|| format!("writing point cloud {}", output.display()))?;

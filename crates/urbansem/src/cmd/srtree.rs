@@ -5,12 +5,11 @@ use clap::Subcommand;
 use geodata::classes::Class;
 use srtree::amodal::MapOutlines;
 use srtree::dataset::RelationsDataset;
-use srtree::features::ViewObject;
 use srtree::graph::Viewpoint;
 use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
-use srtree::objects::{extract_objects, ObjectOptions};
-use srtree::relations::{evaluate, relation_graph, train, RelationModel, TrainOptions};
+use srtree::objects::ObjectOptions;
+use srtree::relations::{evaluate, train, RelationModel, TrainOptions};
 use srtree::report::{BuildReport, QueryReport};
 use srtree::semantic::SemanticMap;
 use srtree::SrtreeError;
@@ -212,9 +211,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
                 .insert_cloud(&c, origin)
                 .with_context(|| format!("inserting {}", cloud.display()))?;
             let insert_s = t.elapsed().as_secs_f64();
-            let objects = extract_objects(&map, &ObjectOptions::default());
-            let mut semantic = SemanticMap::new(map);
-            semantic.relations.objects = objects.iter().map(|o| o.node()).collect();
+            let semantic = SemanticMap::with_objects(map, &ObjectOptions::default());
             write_map(&out, &semantic).with_context(|| format!("writing {}", out.display()))?;
             let report = BuildReport::new(&semantic, &stats, read_s, insert_s, &out);
             if json {
@@ -384,16 +381,11 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 position: [v[0], v[1], 1.8],
                 yaw_rad: v[2],
             };
-            let objects = extract_objects(&m.cells, &ObjectOptions::default());
-            let view: Vec<ViewObject> = objects
-                .iter()
-                .map(|o| ViewObject::from_map_object_with_outlines(&m.cells, o, &vp, &outlines))
-                .collect();
             let mut infer = mln::infer::InferOptions::default();
             infer.walksat.seed = seed;
-            let out = model.infer(&view, &infer).context("inferring relations")?;
-            let nodes: Vec<_> = objects.iter().map(|o| o.node()).collect();
-            let graph = relation_graph(&nodes, &out.mln, vp);
+            let graph = model
+                .infer_map_graph(&m.cells, vp, &outlines, &infer)
+                .context("inferring relations")?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&graph)?);
             } else if dot {
