@@ -23,6 +23,7 @@
 //!   dropouts) returning a labelled [`geodata::cloud::PointCloud`].
 //! - [`figure`]: a picture of the world around a point (streets, buildings vs map, clutter).
 //! - [`dataset`]: `localization`, `streets` and `relations` datasets written as PLY + JSON.
+//! - [`job`]: `sim dataset` as one call ([`job::write_dataset`]): kind, map, overrides.
 //! - [`sequence`]: a `localization` dataset read back as a `geodata` `LidarSequence`.
 //!
 //! Every random step takes a seed and draws from its own stream ([`stream_rng`]), so a
@@ -45,6 +46,7 @@ pub mod city;
 pub mod dataset;
 pub mod figure;
 pub mod ground;
+pub mod job;
 pub mod raycast;
 pub mod scene;
 pub mod sensor;

@@ -75,6 +75,16 @@ impl Default for TrainOptions {
     }
 }
 
+impl TrainOptions {
+    /// The default options with every random step (SVM, weight learning) seeded by `seed`.
+    pub fn seeded(seed: u64) -> Self {
+        let mut o = TrainOptions::default();
+        o.svm.seed = seed;
+        o.learn.infer.walksat.seed = seed;
+        o
+    }
+}
+
 /// A trained relation model.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct RelationModel {

@@ -3,7 +3,6 @@
 //! running (bad input file, I/O), 2 a usage error (clap's, or a [`cmd::UsageError`]).
 
 mod cmd;
-mod report;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

@@ -2,17 +2,10 @@
 
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
-use geodata::osm::OsmMap;
-use geosim::city::{generate_city, generate_city_with_stats, CityOptions};
-use geosim::dataset::{
-    write_localization, write_relations, write_streets, DatasetSummary, LocalizationOptions,
-    RelationsOptions, StreetsOptions,
-};
-use geosim::scene::{MapErrorOptions, SceneOptions};
-use geosim::sensor::SensorOptions;
+use geosim::city::{generate_city_with_stats, CityOptions};
+use geosim::job::{write_dataset, DatasetJob};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::PathBuf;
 
 /// Which dataset `urbansem sim dataset` writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -23,6 +16,16 @@ pub enum DatasetKind {
     Streets,
     /// Viewpoint scenes with objects, true boxes and true On/LeftOf/Behind relations.
     Relations,
+}
+
+impl From<DatasetKind> for geosim::job::DatasetKind {
+    fn from(k: DatasetKind) -> Self {
+        match k {
+            DatasetKind::Localization => Self::Localization,
+            DatasetKind::Streets => Self::Streets,
+            DatasetKind::Relations => Self::Relations,
+        }
+    }
 }
 
 /// Subcommands of `urbansem sim`.
@@ -155,89 +158,33 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
                     "--sensor {sensor}: car-mounted sensors are simulated for localization datasets only"
                 );
             }
-            std::fs::create_dir_all(&out)
-                .with_context(|| format!("creating the output folder {}", out.display()))?;
-            let (map, map_path) = load_or_default(map.as_deref(), &out)?;
-            let tune = |mut sensor: SensorOptions| {
-                if let Some(h) = h_step_deg {
-                    sensor.h_step_deg = h;
-                }
-                if let Some(v) = v_step_deg {
-                    sensor.v_step_deg = v;
-                }
-                if let Some(r) = range_m {
-                    sensor.range_max_m = r;
-                }
-                sensor
-            };
-            let scene_with = |on_by_default: bool| SceneOptions {
-                map_error: if (on_by_default && !no_map_error) || map_error {
-                    MapErrorOptions::osm_like()
-                } else {
-                    MapErrorOptions::none()
-                },
-                ..SceneOptions::default()
+            let job = DatasetJob {
+                kind: kind.into(),
+                map,
+                out,
+                seed,
+                scans,
+                map_error: (no_map_error || map_error).then_some(map_error),
+                h_step_deg,
+                v_step_deg,
+                range_m,
+                route_m,
+                spacing_m,
+                sensor: sensor_kind,
+                annotator_noise,
+                train,
             };
             let bar = ProgressBar::new(0);
             bar.set_style(
                 ProgressStyle::with_template("{bar:30} {pos}/{len} scans [{elapsed}<{eta}]")
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
-            let progress = |done: usize, total: usize| {
+            let report = write_dataset(&job, &|done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
-            };
-            let started = Instant::now();
-            let summary: DatasetSummary = match kind {
-                DatasetKind::Localization => {
-                    let defaults = LocalizationOptions::for_sensor(sensor_kind);
-                    let options = LocalizationOptions {
-                        scans: scans.unwrap_or(defaults.scans),
-                        scene: scene_with(true),
-                        sensor: tune(defaults.sensor.clone()),
-                        spacing_m: spacing_m.unwrap_or(defaults.spacing_m),
-                        ..defaults
-                    };
-                    write_localization(&map, &map_path, &out, &options, seed, &progress)
-                }
-                DatasetKind::Streets => {
-                    let defaults = StreetsOptions::default();
-                    let options = StreetsOptions {
-                        route_m,
-                        spacing_m: spacing_m.unwrap_or(defaults.spacing_m),
-                        max_scans: scans.unwrap_or(0),
-                        scene: scene_with(false),
-                        sensor: tune(defaults.sensor.clone()),
-                        ..defaults
-                    };
-                    write_streets(&map, &map_path, &out, &options, seed, &progress)
-                }
-                DatasetKind::Relations => {
-                    let defaults = RelationsOptions::default();
-                    let options = RelationsOptions {
-                        scenes: scans.unwrap_or(defaults.scenes),
-                        train,
-                        annotator_noise,
-                        scene: scene_with(false),
-                        sensor: tune(defaults.sensor.clone()),
-                        ..defaults
-                    };
-                    write_relations(&map, &map_path, &out, &options, seed, &progress)
-                }
-            }
-            .with_context(|| format!("simulating the {kind:?} dataset into {}", out.display()))?;
+            })?;
             bar.finish_and_clear();
-            println!(
-                "{}: {:?} dataset, {} scans, {} points, {:.1} M rays in {:.1} s ({:.2} M rays/s), total {:.1} s",
-                out.display(),
-                kind,
-                summary.scans,
-                summary.points,
-                summary.rays as f64 / 1e6,
-                summary.cast_seconds,
-                summary.rays as f64 / summary.cast_seconds.max(1e-9) / 1e6,
-                started.elapsed().as_secs_f64()
-            );
+            println!("{}", report.text());
             Ok(())
         }
         SimCommand::Bench {
@@ -246,28 +193,5 @@ pub fn run(command: SimCommand) -> anyhow::Result<()> {
             seed,
             json,
         } => urbansem_bench::sim::bench_sim(map.as_deref(), scans, seed, json),
-    }
-}
-
-/// Loads the map, or writes the embedded default city into `out` and loads that.
-fn load_or_default(map: Option<&Path>, out: &Path) -> anyhow::Result<(OsmMap, String)> {
-    match map {
-        Some(path) => Ok((
-            OsmMap::load(path).with_context(|| format!("loading the map {}", path.display()))?,
-            path.display().to_string(),
-        )),
-        None => {
-            let xml = generate_city(&CityOptions::default(), 1)
-                .context("generating the embedded default city")?;
-            let path = out.join("city.osm");
-            geodata::fsio::write_atomic(&path, &xml)
-                .with_context(|| format!("writing {}", path.display()))?;
-            // Recorded relative to the dataset folder: the dataset can move, and the same
-            // command writes the same dataset.json wherever OUT is.
-            Ok((
-                OsmMap::from_xml_str(&xml).context("parsing the embedded default city")?,
-                "city.osm".to_owned(),
-            ))
-        }
     }
 }

@@ -313,16 +313,9 @@ fn eval_labels(
     Ok(())
 }
 
-pub(crate) fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
+fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
     RelationsDataset::load(dir, &MapOptions::default(), &ObjectOptions::default())
         .with_context(|| format!("loading the relations dataset {}", dir.display()))
-}
-
-pub(crate) fn train_options(seed: u64) -> TrainOptions {
-    let mut o = TrainOptions::default();
-    o.svm.seed = seed;
-    o.learn.infer.walksat.seed = seed;
-    o
 }
 
 fn read_model(path: &Path) -> anyhow::Result<RelationModel> {
@@ -339,8 +332,8 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             let ds = load_dataset(&dataset)?;
             let load_s = t.elapsed().as_secs_f64();
             let t = Instant::now();
-            let model =
-                train(&ds.train, &train_options(seed)).context("training the relation model")?;
+            let model = train(&ds.train, &TrainOptions::seeded(seed))
+                .context("training the relation model")?;
             geodata::fsio::write_atomic(&out, serde_json::to_string_pretty(&model)?)
                 .with_context(|| format!("writing {}", out.display()))?;
             println!(
@@ -435,7 +428,8 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 Some(p) => read_model(&p)?,
                 None => {
                     let scenes = train_scenes.as_ref().unwrap_or(&ds.train);
-                    train(scenes, &train_options(seed)).context("training the relation model")?
+                    train(scenes, &TrainOptions::seeded(seed))
+                        .context("training the relation model")?
                 }
             };
             let train_s = t.elapsed().as_secs_f64();

@@ -1,21 +1,21 @@
 //! Demo stage of srtree: a semantic map and its spatial relations.
 
-use super::{DemoArgs, StageOutput};
-use crate::cmd::srtree::{load_dataset, train_options};
+use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
 use serde_json::json;
+use srtree::dataset::RelationsDataset;
 use srtree::features::ViewObject;
 use srtree::graph::Relation;
 use srtree::io::write_map;
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
-use srtree::relations::{evaluate, relation_graph, train};
+use srtree::relations::{evaluate, relation_graph, train, TrainOptions};
 use srtree::semantic::SemanticMap;
 use std::time::Instant;
 
 /// The demo stage: a small simulated relations dataset, a model trained on it, and one test
 /// scene's labelled map (top view) with its relation graph.
-pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use crate::report::{encode_png_rgb, escape, Html};
     use geodata::svg::Svg;
     use geodata::topview::TopView;
@@ -48,8 +48,9 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     )
     .context("simulating the relations dataset")?;
     let sim_s = t.elapsed().as_secs_f64();
-    let ds = load_dataset(&dir)?;
-    let mut train_opts = train_options(args.seed);
+    let ds = RelationsDataset::load(&dir, &MapOptions::default(), &ObjectOptions::default())
+        .with_context(|| format!("loading the relations dataset {}", dir.display()))?;
+    let mut train_opts = TrainOptions::seeded(args.seed);
     train_opts.folds = 4;
     train_opts.cs = vec![0.01, 0.1];
     train_opts.positive_weights = vec![1.0, 2.0];

@@ -1,8 +1,8 @@
 //! Demo stage of mln: MAP inference on the thesis' synthetic problems.
 
-use super::pbo::image_png;
-use super::{DemoArgs, StageOutput};
+use crate::pbo::image_png;
 use crate::report::Html;
+use crate::{DemoArgs, StageOutput};
 use serde_json::{json, Map, Value};
 use std::time::Instant;
 
@@ -25,7 +25,8 @@ fn ground_generated(
     Ok((program, problem))
 }
 
-pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+/// The demo stage of mln: MAP inference on the thesis' synthetic problems, by QSSR and MaxWalkSAT.
+pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use mln::generate::{friends_smokers, image_denoising, FriendsSmokersOptions};
     use mln::infer::{map_inference, InferOptions, Method};
     let side = 90;

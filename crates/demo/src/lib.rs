@@ -1,53 +1,69 @@
-//! `urbansem demo`: every capability that exists so far, on embedded default data, with a
-//! report in `demo-out/` (`summary.json`, `index.html` with figures).
+//! `urbansem demo`: every capability that exists so far, run on the embedded default city,
+//! with a report (`summary.json`, `timings.json`, `index.html` with figures, figure files).
+//!
+//! A harness above every crate of the pipeline, as `urbansem-bench` is: one module per
+//! crate's stage (`city`, `sim`, `pbo`, `mln`, `streets`, `localize`, `srtree`), each a
+//! [`Stage`] giving its summary entry and report section; [`run`] runs them in pipeline order
+//! and writes the report. Like the binary, it reports errors with `anyhow`. The `urbansem`
+//! binary only parses `urbansem demo`'s options, shows progress and prints where the report is.
 
-mod city;
-mod localize;
-mod mln;
-mod pbo;
-mod sim;
-mod srtree;
-mod streets;
+pub mod city;
+pub mod localize;
+pub mod mln;
+pub mod pbo;
+pub mod report;
+pub mod sim;
+pub mod srtree;
+pub mod streets;
 
-use crate::report::Html;
 use anyhow::Context;
-use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
+use report::Html;
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Options of `urbansem demo`.
-#[derive(Args)]
+/// Options of the demo.
+#[derive(Clone, Debug)]
 pub struct DemoArgs {
     /// Output folder for summary.json and index.html.
-    #[arg(long, default_value = "demo-out")]
     pub out: PathBuf,
     /// Seed of every random step (same seed, same report numbers).
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
 
+/// Where the demo wrote its report.
+#[derive(Clone, Debug)]
+pub struct DemoOutcome {
+    /// `summary.json`: every stage's numbers, timings aside.
+    pub summary_path: PathBuf,
+    /// `timings.json`: every stage's timings.
+    pub timings_path: PathBuf,
+    /// `index.html`: the report with figures.
+    pub html_path: PathBuf,
+    /// Wall time of the whole demo.
+    pub seconds: f64,
+}
+
 /// One stage's contribution: its summary entry and its report section.
-pub(crate) struct StageOutput {
+pub struct StageOutput {
     /// Key of the stage's entry in `summary.json`.
-    pub(crate) key: &'static str,
+    pub key: &'static str,
     /// The stage's entry in `summary.json` (an object; its timings move to `timings.json`).
-    pub(crate) summary: Value,
+    pub summary: Value,
     /// Section title in `index.html`.
-    pub(crate) title: &'static str,
+    pub title: &'static str,
     /// Section text (HTML).
-    pub(crate) text_html: String,
+    pub text_html: String,
     /// Inline figures (HTML: `<svg>` or `<img>`).
-    pub(crate) figures: Vec<String>,
+    pub figures: Vec<String>,
     /// Figures also written as files into the output folder: (file name, bytes).
-    pub(crate) files: Vec<(&'static str, Vec<u8>)>,
+    pub files: Vec<(&'static str, Vec<u8>)>,
 }
 
 /// One demo stage: a capability run on the embedded data, giving its summary entry and its
 /// report section. The stages live one module per crate (`city`, `sim`, `pbo`, `mln`,
 /// `streets`, `localize`, `srtree`); this module only runs them and writes the report.
-pub(crate) trait Stage {
+pub trait Stage {
     /// The name shown while the stage runs.
     fn name(&self) -> &'static str;
     /// Runs the stage.
@@ -68,7 +84,7 @@ impl Stage for FnStage {
 }
 
 /// The stages, in pipeline order.
-fn stages() -> Vec<Box<dyn Stage>> {
+pub fn stages() -> Vec<Box<dyn Stage>> {
     vec![
         Box::new(FnStage("geodata: embedded default city", city::stage)),
         Box::new(FnStage("geodata: simulated scans", sim::stage)),
@@ -97,26 +113,22 @@ fn stages() -> Vec<Box<dyn Stage>> {
     ]
 }
 
-/// Runs the demo.
-pub fn run(args: DemoArgs) -> anyhow::Result<()> {
+/// Runs every stage in pipeline order and writes the report into `args.out`; `progress` is
+/// called before each stage with (stage index, stage count, stage name).
+pub fn run(args: &DemoArgs, progress: &dyn Fn(usize, usize, &str)) -> anyhow::Result<DemoOutcome> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output folder {}", args.out.display()))?;
     let stages = stages();
-    let bar = ProgressBar::new(stages.len() as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} [{elapsed}]")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
     let t0 = Instant::now();
     let mut summary = Map::new();
     let mut timings = Map::new();
     let mut html = Html::default();
-    for stage in &stages {
+    for (k, stage) in stages.iter().enumerate() {
         let name = stage.name();
-        bar.set_message(name);
+        progress(k, stages.len(), name);
         let t = Instant::now();
         let out = stage
-            .run(&args)
+            .run(args)
             .with_context(|| format!("demo stage {name:?}"))?;
         let mut entry = out.summary;
         let mut stage_timings = take_timings(&mut entry).unwrap_or_else(|| json!({}));
@@ -131,9 +143,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             geodata::fsio::write_atomic(&path, bytes)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
-        bar.inc(1);
     }
-    bar.finish_and_clear();
+    progress(stages.len(), stages.len(), "done");
     summary.insert("seed".into(), json!(args.seed));
     timings.insert("seconds_total".into(), json!(t0.elapsed().as_secs_f64()));
     let summary_path = args.out.join("summary.json");
@@ -153,13 +164,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let html_path = args.out.join("index.html");
     geodata::fsio::write_atomic(&html_path, html.finish("urbansem demo"))
         .with_context(|| format!("writing {}", html_path.display()))?;
-    println!(
-        "demo finished in {:.1} s: {} and {}",
-        t0.elapsed().as_secs_f64(),
-        summary_path.display(),
-        html_path.display()
-    );
-    Ok(())
+    Ok(DemoOutcome {
+        summary_path,
+        timings_path,
+        html_path,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
 /// Whether a summary key holds a timing (seconds, or a rate per second).

@@ -1,12 +1,13 @@
 //! Demo stage: the embedded default city.
 
-use super::{DemoArgs, StageOutput};
+use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
 use geodata::svg::Svg;
 use serde_json::json;
 use std::time::Instant;
 
-pub(super) fn stage(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
+/// The demo stage of the embedded default city: its numbers and a map of buildings and streets.
+pub fn stage(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let t = Instant::now();
     let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let generate_s = t.elapsed().as_secs_f64();

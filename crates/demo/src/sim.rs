@@ -1,13 +1,13 @@
 //! Demo stage of the simulator: scans of the embedded default city.
 
-use super::{DemoArgs, StageOutput};
+use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
 use geosim::scene::{MapErrorOptions, Scene, SceneOptions};
 use geosim::sensor::{scan_with, ScanFrame, SensorOptions};
 use std::time::Instant;
 
 /// The demo's simulator stage: scans on the embedded default city, a map and a scan top view.
-pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use crate::report::{encode_png_rgb, Html};
     use geodata::classes::Class;
     use geodata::topview::TopView;

@@ -1,7 +1,7 @@
 //! Demo stages of pbo: binary image denoising with QPBO, higher-order functions with QSSR.
 
-use super::{DemoArgs, StageOutput};
 use crate::report::{encode_png_rgb, Html};
+use crate::{DemoArgs, StageOutput};
 use pbo::polynomial::{Literal, Polynomial};
 use pbo::qpbo::{Label, Qpbo};
 use pbo::qssr::{solve, QssrOptions};
@@ -12,7 +12,7 @@ use serde_json::{json, Map};
 use std::time::Instant;
 
 /// A seeded binary image of discs and bars, and a copy with a share of pixels flipped.
-pub(super) fn synthetic_image(side: usize, noise: f64, seed: u64) -> (Vec<bool>, Vec<bool>) {
+pub fn synthetic_image(side: usize, noise: f64, seed: u64) -> (Vec<bool>, Vec<bool>) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut clean = vec![false; side * side];
     let s = side as f64;
@@ -38,7 +38,8 @@ pub(super) fn synthetic_image(side: usize, noise: f64, seed: u64) -> (Vec<bool>,
     (clean, noisy)
 }
 
-pub(super) fn image_png(side: usize, pixels: &[bool]) -> anyhow::Result<Vec<u8>> {
+/// A black-and-white image as a PNG file.
+pub fn image_png(side: usize, pixels: &[bool]) -> anyhow::Result<Vec<u8>> {
     let rgb: Vec<u8> = pixels
         .iter()
         .flat_map(|&p| if p { [30, 30, 40] } else { [240, 236, 226] })
@@ -46,7 +47,8 @@ pub(super) fn image_png(side: usize, pixels: &[bool]) -> anyhow::Result<Vec<u8>>
     encode_png_rgb(side as u32, side as u32, &rgb)
 }
 
-pub(super) fn denoise_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+/// The demo stage of pbo's QPBO: binary image denoising on a 4-connected grid.
+pub fn denoise_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let side = 256;
     let (clean, noisy) = synthetic_image(side, 0.15, args.seed);
     let (unary, smooth) = (10, 8);
@@ -135,7 +137,8 @@ fn random_higher_order(vars: u32, terms: usize, seed: u64) -> Polynomial {
     f
 }
 
-pub(super) fn higher_order_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+/// The demo stage of pbo's QSSR: a random cubic function, per quadratizer, with and without probing.
+pub fn higher_order_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let f = random_higher_order(2000, 5000, args.seed);
     let mut rows = Vec::new();
     let mut per_method = Map::new();

@@ -1,6 +1,6 @@
 //! Demo stage of streets: widths and offsets on a simulated dataset.
 
-use super::{DemoArgs, StageOutput};
+use crate::{DemoArgs, StageOutput};
 use anyhow::{bail, Context};
 use serde_json::json;
 use std::time::Instant;
@@ -10,7 +10,7 @@ use streets::model::ClassifierOptions;
 
 /// The demo stage: a small simulated streets dataset on the embedded city, the evaluation
 /// and a Fig. 4.5-like figure (centre lines, buildings, estimated and true boundaries).
-pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use crate::report::Html;
     use geodata::svg::Svg;
     use geosim::dataset::{write_streets, StreetsOptions};

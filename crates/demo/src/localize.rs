@@ -1,6 +1,6 @@
 //! Demo stages of localize: one scan on the map, and a car-LiDAR drive along its track.
 
-use super::{DemoArgs, StageOutput};
+use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
 use localize::eval::{Accuracy, SimDataset};
 use localize::pipeline::{LocalizeOptions, Localizer};
@@ -28,7 +28,7 @@ fn rows_table(rows: &[Value], columns: &[(&str, &str, usize)]) -> String {
 
 /// The demo stage: simulated scans of the embedded default city (with the OSM map-error
 /// model) localized on its map without a prior.
-pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use geosim::scene::{MapErrorOptions, Scene, SceneOptions};
     use geosim::sensor::{scan_with, ScanFrame, SensorOptions};
 
@@ -143,7 +143,7 @@ pub(super) fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
 /// The demo's car-LiDAR stage: a simulated HDL-64 drive through the embedded default city
 /// (OSM map-error model on), localized in track mode with odometry that drifts 2 % and
 /// 1° per 50 m, drawn over the map with the truth.
-pub(super) fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
+pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use geosim::dataset::{write_localization, LocalizationOptions};
 
     const SCANS: usize = 12;
@@ -278,14 +278,11 @@ mod tests {
 
     #[test]
     fn demo_stage_localizes_simulated_scans() {
-        use clap::{Args, FromArgMatches};
         let out = std::env::temp_dir().join("urbansem-localize-demo-test");
-        let matches = DemoArgs::augment_args(clap::Command::new("demo")).get_matches_from([
-            "demo",
-            "--out",
-            &out.display().to_string(),
-        ]);
-        let args = DemoArgs::from_arg_matches(&matches).unwrap();
+        let args = DemoArgs {
+            out: out.clone(),
+            seed: 1,
+        };
         let stage = stage(&args).unwrap();
         assert_eq!(stage.key, "localize");
         assert_eq!(stage.summary["scans"], 2);
@@ -302,14 +299,11 @@ mod tests {
 
     #[test]
     fn demo_track_stage_follows_a_simulated_hdl64_drive() {
-        use clap::{Args, FromArgMatches};
         let out = tempfile::tempdir().unwrap();
-        let matches = DemoArgs::augment_args(clap::Command::new("demo")).get_matches_from([
-            "demo",
-            "--out",
-            &out.path().display().to_string(),
-        ]);
-        let args = DemoArgs::from_arg_matches(&matches).unwrap();
+        let args = DemoArgs {
+            out: out.path().to_path_buf(),
+            seed: 1,
+        };
         let stage = track_stage(&args).unwrap();
         assert_eq!(stage.key, "localize_track");
         assert_eq!(stage.summary["scans_after_first_window"], 8);
