@@ -16,9 +16,11 @@
 //! - [`topview`]: a top-view raster of coloured points (highest point per pixel).
 //! - [`svg`]: an SVG canvas in the local frame for pictures of maps and results.
 //! - [`fsio`]: atomic output files (written beside the target, renamed into place).
+//! - [`context`]: an error naming the step that failed, with its cause, for jobs.
 
 pub mod classes;
 pub mod cloud;
+pub mod context;
 pub mod datasets;
 pub mod fsio;
 pub mod georef;

@@ -140,6 +140,9 @@ pub enum SrtreeError {
     /// The consistency MLN could not be built or grounded.
     #[error("relation MLN: {0}")]
     Mln(String),
+    /// A step of a job failed (loading, training, writing …).
+    #[error(transparent)]
+    Context(#[from] geodata::context::ContextError),
 }
 
 /// Shorthand for results of this crate.

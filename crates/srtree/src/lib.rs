@@ -23,6 +23,7 @@
 //! - [`semantic`]: the semantic map: the cells of [`map`] and the relation graph over their objects.
 //! - [`io`]: the documented binary `.srt` file of a semantic map.
 //! - [`report`]: what `map build` and `map query` print, as typed values.
+//! - [`jobs`]: `relations train` and `relations eval` as library calls returning their results.
 //!
 //! ```
 //! use srtree::map::{MapOptions, SrMap};
@@ -40,6 +41,7 @@ pub mod error;
 pub mod features;
 pub mod graph;
 pub mod io;
+pub mod jobs;
 pub mod label_eval;
 pub mod map;
 pub mod objects;

@@ -16,6 +16,7 @@
 //! - [`eval`]: the 5-fold round robin evaluation of Table 4.1.
 //! - [`geojson`]: WGS84 polygons per segment.
 //! - [`kitti`]: the bin classifier on real KITTI-360 scans.
+//! - [`jobs`]: `streets eval`, `eval-real` and `kitti` as library calls returning reports.
 //! - [`synthetic`]: labelled ground clouds with known geometry (test fixtures).
 
 pub mod corridor;
@@ -25,6 +26,7 @@ pub mod features;
 pub mod geojson;
 pub mod grid;
 pub mod inference;
+pub mod jobs;
 pub mod kitti;
 pub mod model;
 pub mod potentials;
@@ -155,6 +157,9 @@ pub enum StreetsError {
     /// A map could not be read.
     #[error(transparent)]
     Osm(#[from] geodata::osm::OsmError),
+    /// A step of a job failed (loading, evaluating, writing …).
+    #[error(transparent)]
+    Context(#[from] geodata::context::ContextError),
 }
 
 /// Shorthand for results of this crate.

@@ -4,12 +4,10 @@ use anyhow::Context;
 use clap::Subcommand;
 use geodata::classes::Class;
 use srtree::amodal::MapOutlines;
-use srtree::dataset::RelationsDataset;
 use srtree::graph::Viewpoint;
 use srtree::io::{read_map, write_map};
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::ObjectOptions;
-use srtree::relations::{evaluate, train, RelationModel, TrainOptions};
 use srtree::report::{BuildReport, QueryReport};
 use srtree::semantic::SemanticMap;
 use srtree::SrtreeError;
@@ -313,36 +311,18 @@ fn eval_labels(
     Ok(())
 }
 
-fn load_dataset(dir: &Path) -> anyhow::Result<RelationsDataset> {
-    RelationsDataset::load(dir, &MapOptions::default(), &ObjectOptions::default())
-        .with_context(|| format!("loading the relations dataset {}", dir.display()))
-}
-
-fn read_model(path: &Path) -> anyhow::Result<RelationModel> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{}: not a relation model", path.display()))
-}
-
 /// Runs one `urbansem relations` subcommand.
 pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
     match command {
         RelationsCommand::Train { dataset, out, seed } => {
-            let t = Instant::now();
-            let ds = load_dataset(&dataset)?;
-            let load_s = t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let model = train(&ds.train, &TrainOptions::seeded(seed))
-                .context("training the relation model")?;
-            geodata::fsio::write_atomic(&out, serde_json::to_string_pretty(&model)?)
-                .with_context(|| format!("writing {}", out.display()))?;
+            let run = srtree::jobs::train_model(&dataset, &out, seed)?;
             println!(
                 "{}: trained on {} scenes ({:.1} s loading, {:.1} s training); MLN weights {:?}",
                 out.display(),
-                ds.train.len(),
-                load_s,
-                t.elapsed().as_secs_f64(),
-                model.mln
+                run.scenes,
+                run.load_s,
+                run.train_s,
+                run.model.mln
             );
             Ok(())
         }
@@ -369,7 +349,7 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
                 }
             };
             let mut m = read_map(&map).with_context(|| format!("reading {}", map.display()))?;
-            let model = read_model(&model)?;
+            let model = srtree::jobs::read_model(&model)?;
             let vp = Viewpoint {
                 position: [v[0], v[1], 1.8],
                 yaw_rad: v[2],
@@ -400,79 +380,24 @@ pub fn run_relations(command: RelationsCommand) -> anyhow::Result<()> {
             json,
             seed,
         } => {
-            let t = Instant::now();
-            // Across datasets every scene of the test dataset is unseen: test on all of
-            // them (a 14-scene test split holds as few as 7 Behind pairs).
-            let (ds, train_scenes) = if train_dataset.is_empty() {
-                (load_dataset(&dataset)?, None)
-            } else {
-                let split = match RelationsDataset::load_across(
-                    &dataset,
-                    &train_dataset,
-                    &MapOptions::default(),
-                    &ObjectOptions::default(),
-                ) {
-                    Err(SrtreeError::TestAmongTraining { path }) => crate::cmd::usage!(
-                        "--train-dataset {} is the test dataset: its scenes would be tested after training on them; leave --train-dataset out to use its own train/test split",
-                        path.display()
-                    ),
-                    r => r.with_context(|| {
-                        format!("loading the relations datasets {}", dataset.display())
-                    })?,
-                };
-                (split.test, Some(split.train))
+            let job = srtree::jobs::EvalJob {
+                dataset,
+                model,
+                train_datasets: train_dataset,
+                errors_out: errors,
+                seed,
             };
-            let load_s = t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let model = match model {
-                Some(p) => read_model(&p)?,
-                None => {
-                    let scenes = train_scenes.as_ref().unwrap_or(&ds.train);
-                    train(scenes, &TrainOptions::seeded(seed))
-                        .context("training the relation model")?
-                }
+            let run = match srtree::jobs::eval_relations(&job) {
+                Err(SrtreeError::TestAmongTraining { path }) => crate::cmd::usage!(
+                    "--train-dataset {} is the test dataset: its scenes would be tested after training on them; leave --train-dataset out to use its own train/test split",
+                    path.display()
+                ),
+                r => r?,
             };
-            let train_s = t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let mut infer = mln::infer::InferOptions::default();
-            infer.walksat.seed = seed;
-            let ev = evaluate(&model, &ds, &infer).context("evaluating")?;
-            if let Some(path) = &errors {
-                let mut lines = String::new();
-                for e in &ev.errors {
-                    lines += &serde_json::to_string(e)?;
-                    lines.push('\n');
-                }
-                geodata::fsio::write_atomic(path, lines)
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
             if json {
-                super::print_json(&ev.report())?;
+                super::print_json(&run.evaluation.report())?;
             } else {
-                println!(
-                    "{}: {} train{} / {} test scenes, {} test pairs ({} with an object missing from the map)",
-                    dataset.display(),
-                    train_scenes.as_ref().map_or(ds.train.len(), Vec::len),
-                    if train_dataset.is_empty() {
-                        String::new()
-                    } else {
-                        let names: Vec<String> =
-                            train_dataset.iter().map(|p| p.display().to_string()).collect();
-                        format!(" (of {})", names.join(", "))
-                    },
-                    ds.test.len(),
-                    ev.pairs,
-                    ev.missing_pairs
-                );
-                print!("{}", ev.table_text());
-                println!(
-                    "MLN weights: transitivity {:?}, evidence {:?}; {:.1} s loading, {:.1} s training, {:.1} s testing",
-                    model.mln.transitivity,
-                    model.mln.evidence,
-                    load_s,
-                    train_s,
-                    t.elapsed().as_secs_f64()
-                );
+                print!("{}", run.text(&job));
             }
             Ok(())
         }

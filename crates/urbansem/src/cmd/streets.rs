@@ -6,12 +6,9 @@ use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use geodata::cloud::read_cloud;
 use geodata::osm::OsmMap;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
-use streets::dataset::StreetsDataset;
-use streets::eval::{evaluate, EvalOptions};
+use std::path::PathBuf;
+use streets::eval::EvalOptions;
 use streets::model::{ClassifierOptions, StreetModel, Target};
-use streets::real::{load_sequence, RealEvalReport, TruthOptions};
 use streets::svm::SvmOptions;
 
 /// Arguments of `urbansem streets`.
@@ -239,19 +236,9 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             segments_out,
             eval,
         } => {
-            let t = Instant::now();
-            let ds = StreetsDataset::load(&dataset)
-                .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
-            let load_s = t.elapsed().as_secs_f64();
             let mut options = eval.options();
             options.geometry.corridor.mask_nearer_segments = !thesis_mask;
-            let mut report = evaluate(&ds, &options)
-                .with_context(|| format!("evaluating {}", dataset.display()))?;
-            report.seconds.insert("load".into(), load_s);
-            if let Some(p) = segments_out {
-                geodata::fsio::write_atomic(&p, serde_json::to_vec_pretty(&report.geometries)?)
-                    .with_context(|| format!("writing {}", p.display()))?;
-            }
+            let report = streets::jobs::eval_dataset(&dataset, &options, segments_out.as_deref())?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
                 eprintln!("{}", report.details_text());
@@ -267,15 +254,33 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             json,
             segments_out,
             eval,
-        } => eval_real(&dataset, &map, json, segments_out.as_deref(), &eval),
+        } => {
+            let r = streets::jobs::eval_real(
+                &dataset,
+                &map,
+                &eval.options(),
+                segments_out.as_deref(),
+                &|done, total| {
+                    if done == total || done % 10 == 0 {
+                        eprintln!("streets eval-real: {done}/{total} scans registered");
+                    }
+                },
+            )?;
+            if json {
+                super::print_json(&r)?;
+                eprintln!("{}", r.report.details_text());
+            } else {
+                print!("{}", r.text(&dataset, &map));
+            }
+            Ok(())
+        }
         StreetsCommand::Train {
             dataset,
             target,
             out,
             training,
         } => {
-            let ds = StreetsDataset::load(&dataset)
-                .with_context(|| format!("loading the streets dataset {}", dataset.display()))?;
+            let ds = streets::jobs::load_dataset(&dataset)?;
             let model = StreetModel::train(&ds, target.into(), &training.classifier())?;
             geodata::fsio::write_atomic(&out, serde_json::to_vec(&model)?)
                 .with_context(|| format!("writing {}", out.display()))?;
@@ -331,14 +336,21 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             sim_dataset,
             json,
             training,
-        } => kitti(
-            &data,
-            train_scans,
-            test_scans,
-            sim_dataset.as_deref(),
-            json,
-            &training,
-        ),
+        } => {
+            let report = streets::jobs::kitti_eval(
+                &data,
+                train_scans,
+                test_scans,
+                sim_dataset.as_deref(),
+                &training.classifier(),
+            )?;
+            if json {
+                super::print_json(&report)?;
+            } else {
+                print!("{}", report.text(&data));
+            }
+            Ok(())
+        }
         StreetsCommand::BenchSvm {
             dataset,
             train,
@@ -359,94 +371,4 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             json,
         ),
     }
-}
-
-/// `urbansem streets eval-real`.
-fn eval_real(
-    dataset: &Path,
-    map: &Path,
-    json: bool,
-    segments_out: Option<&Path>,
-    eval: &EvalArgs,
-) -> anyhow::Result<()> {
-    let options = eval.options();
-    let truth_options = TruthOptions::default();
-    let t = Instant::now();
-    let real = load_sequence(
-        dataset,
-        map,
-        &options.geometry.corridor,
-        &truth_options,
-        &|done, total| {
-            if done == total || done % 10 == 0 {
-                eprintln!("streets eval-real: {done}/{total} scans registered");
-            }
-        },
-    )
-    .with_context(|| {
-        format!(
-            "reading the sequence {} with the map {}",
-            dataset.display(),
-            map.display()
-        )
-    })?;
-    let load_s = t.elapsed().as_secs_f64();
-    // The derived truth is written before the evaluation, so that a sequence too poorly
-    // observed to evaluate can still be inspected.
-    let write_segments = |geometries: Option<&Vec<streets::eval::SegmentGeometry>>| {
-        let Some(p) = segments_out else {
-            return Ok(());
-        };
-        let rows = real.segment_rows(geometries.map(Vec::as_slice));
-        geodata::fsio::write_atomic(p, serde_json::to_vec_pretty(&rows)?)
-            .with_context(|| format!("writing {}", p.display()))
-    };
-    write_segments(None)?;
-    real.check_evaluable(dataset, map, options.folds, &truth_options)?;
-    let mut report = evaluate(&real.dataset, &options)
-        .with_context(|| format!("evaluating {} on {}", dataset.display(), map.display()))?;
-    report.seconds.insert("load_and_truth".into(), load_s);
-    write_segments(report.geometries.get("driving_area"))?;
-    let r = RealEvalReport::new(&real, report, truth_options);
-    if json {
-        super::print_json(&r)?;
-        eprintln!("{}", r.report.details_text());
-    } else {
-        print!("{}", r.text(dataset, map));
-    }
-    Ok(())
-}
-
-/// KITTI-360: per-scan bins (0.2 m, 40 m × 40 m around the sensor, in the sensor's level frame).
-fn kitti(
-    data: &Path,
-    train_scans: usize,
-    test_scans: usize,
-    sim_dataset: Option<&Path>,
-    json: bool,
-    training: &TrainingArgs,
-) -> anyhow::Result<()> {
-    let t = Instant::now();
-    let (train, test) = streets::kitti::train_test_bins(data, train_scans, test_scans)
-        .with_context(|| format!("reading KITTI-360 scans from {}", data.display()))?;
-    let features_s = t.elapsed().as_secs_f64();
-    let sim = sim_dataset
-        .map(|dir| {
-            StreetsDataset::load(dir)
-                .with_context(|| format!("loading the streets dataset {}", dir.display()))
-        })
-        .transpose()?;
-    let report = streets::kitti::evaluate_bins(
-        &train,
-        &test,
-        sim.as_ref(),
-        &training.classifier(),
-        features_s,
-    )?;
-    if json {
-        super::print_json(&report)?;
-    } else {
-        print!("{}", report.text(data));
-    }
-    Ok(())
 }
