@@ -645,7 +645,7 @@ impl BoundLevel {
 
 /// Index file codec of the prepared map (see [`crate::index`]).
 impl DtTensor {
-    pub(crate) fn encode<'a>(&'a self, e: &mut crate::index::Enc<'a>) {
+    pub(crate) fn encode<'a>(&'a self, e: &mut crate::codec::Enc<'a>) {
         e.f64(self.origin[0]);
         e.f64(self.origin[1]);
         e.f64(self.grid_m);
@@ -657,7 +657,7 @@ impl DtTensor {
         e.bytes(&self.data);
     }
 
-    pub(crate) fn decode<R: std::io::Read>(d: &mut crate::index::Dec<'_, R>) -> Result<DtTensor> {
+    pub(crate) fn decode<R: std::io::Read>(d: &mut crate::codec::Dec<'_, R>) -> Result<DtTensor> {
         let origin: [f64; 2] = d.f64s("tensor origin")?;
         let grid_m = d.f64("tensor grid")?;
         let (width, height, channels) = (
@@ -691,7 +691,7 @@ impl DtTensor {
 }
 
 impl BoundLevel {
-    fn encode<'a>(&'a self, e: &mut crate::index::Enc<'a>) {
+    fn encode<'a>(&'a self, e: &mut crate::codec::Enc<'a>) {
         e.i64(self.offset);
         e.u64(self.w as u64);
         e.u64(self.h as u64);
@@ -699,7 +699,7 @@ impl BoundLevel {
         e.bytes(&self.data);
     }
 
-    fn decode<R: std::io::Read>(d: &mut crate::index::Dec<'_, R>) -> Result<BoundLevel> {
+    fn decode<R: std::io::Read>(d: &mut crate::codec::Dec<'_, R>) -> Result<BoundLevel> {
         let offset = d.i64("pyramid offset")?;
         let (w, h, channels) = (
             d.usize("pyramid width")?,
@@ -725,7 +725,7 @@ impl BoundLevel {
 }
 
 impl BoundPyramid {
-    pub(crate) fn encode<'a>(&'a self, e: &mut crate::index::Enc<'a>) {
+    pub(crate) fn encode<'a>(&'a self, e: &mut crate::codec::Enc<'a>) {
         e.u64(self.levels.len() as u64);
         for l in &self.levels {
             l.encode(e);
@@ -734,7 +734,7 @@ impl BoundPyramid {
     }
 
     pub(crate) fn decode<R: std::io::Read>(
-        d: &mut crate::index::Dec<'_, R>,
+        d: &mut crate::codec::Dec<'_, R>,
     ) -> Result<BoundPyramid> {
         let n = d.count(32, "pyramid levels")?;
         let levels = (0..n)
@@ -756,6 +756,28 @@ pub struct Domain {
     pub i1: i64,
     /// One past the last cell y.
     pub j1: i64,
+}
+
+/// Index file codec of a domain (see [`crate::index`]).
+impl Domain {
+    pub(crate) fn encode(&self, e: &mut crate::codec::Enc<'_>) {
+        for v in [self.i0, self.j0, self.i1, self.j1] {
+            e.i64(v);
+        }
+    }
+
+    pub(crate) fn decode<R: std::io::Read>(d: &mut crate::codec::Dec<'_, R>) -> Result<Domain> {
+        let v: [i64; 4] = d.i64s("domain")?;
+        if v.iter().any(|x| x.unsigned_abs() > 1 << 40) || v[2] < v[0] || v[3] < v[1] {
+            return Err(d.bad(format!("domain {v:?} is not a cell box")));
+        }
+        Ok(Domain {
+            i0: v[0],
+            j0: v[1],
+            i1: v[2],
+            j1: v[3],
+        })
+    }
 }
 
 impl Domain {

@@ -229,7 +229,7 @@ fn inside(sorted_crossings: &[f64], x: f64) -> bool {
 
 /// Index file codec (see [`crate::index`]).
 impl FeasibleMask {
-    pub(crate) fn encode(&self, e: &mut crate::index::Enc<'_>) {
+    pub(crate) fn encode(&self, e: &mut crate::codec::Enc<'_>) {
         for v in [
             self.domain.i0,
             self.domain.j0,
@@ -253,9 +253,9 @@ impl FeasibleMask {
     }
 
     pub(crate) fn decode<R: std::io::Read>(
-        d: &mut crate::index::Dec<'_, R>,
+        d: &mut crate::codec::Dec<'_, R>,
     ) -> crate::Result<FeasibleMask> {
-        let domain = crate::index::decode_domain(d)?;
+        let domain = crate::chamfer::Domain::decode(d)?;
         let feasible_cells = d.u64("feasible cell count")?;
         let n = d.count(40, "feasible levels")?;
         let mut levels = Vec::with_capacity(n);

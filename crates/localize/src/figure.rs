@@ -2,8 +2,8 @@
 //! the edges visible from the chosen pose, the scan's walls at it, the candidates, the truth)
 //! and a track (the drive, every scan's candidates and chosen pose).
 
-use crate::eval::Accuracy;
 use crate::pipeline::{Localization, Localizer};
+use crate::Accuracy;
 use crate::{Pose2, Segment};
 use geodata::osm::OsmMap;
 use geodata::svg::Svg;

@@ -28,8 +28,9 @@
 
 use crate::candidates::{Domain, SearchOptions};
 use crate::chamfer::{map_edges, BoundPyramid, ChamferOptions, DtTensor};
+use crate::codec::{index_err, Dec, Enc};
 use crate::feasible::FeasibleMask;
-use crate::{LocalizeError, Result, Segment, WithContext};
+use crate::{Result, Segment, WithContext};
 use geodata::osm::OsmMap;
 use std::io::{BufReader, Read, Write};
 use std::path::{Path, PathBuf};
@@ -211,7 +212,7 @@ impl PreparedMap {
         }
         self.dt.encode(&mut body);
         self.pyramid.encode(&mut body);
-        encode_domain(&mut body, self.domain);
+        self.domain.encode(&mut body);
         match &self.feasible {
             None => body.u8(0),
             Some(f) => {
@@ -300,7 +301,7 @@ impl PreparedMap {
         }
         let dt = DtTensor::decode(&mut d)?;
         let pyramid = BoundPyramid::decode(&mut d)?;
-        let domain = decode_domain(&mut d)?;
+        let domain = Domain::decode(&mut d)?;
         let feasible = match d.u8("feasible mask flag")? {
             0 => None,
             1 => Some(FeasibleMask::decode(&mut d)?),
@@ -408,197 +409,4 @@ pub fn load_map_or_index(path: &Path) -> Result<(OsmMap, Option<PreparedMap>)> {
 pub fn is_index(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("uloc"))
-}
-
-fn index_err(path: &Path, message: String) -> LocalizeError {
-    LocalizeError::Index {
-        path: path.to_path_buf(),
-        message,
-    }
-}
-
-fn encode_domain(e: &mut Enc<'_>, d: Domain) {
-    for v in [d.i0, d.j0, d.i1, d.j1] {
-        e.i64(v);
-    }
-}
-
-pub(crate) fn decode_domain<R: Read>(d: &mut Dec<'_, R>) -> Result<Domain> {
-    let v: [i64; 4] = d.i64s("domain")?;
-    if v.iter().any(|x| x.unsigned_abs() > 1 << 40) || v[2] < v[0] || v[3] < v[1] {
-        return Err(d.bad(format!("domain {v:?} is not a cell box")));
-    }
-    Ok(Domain {
-        i0: v[0],
-        j0: v[1],
-        i1: v[2],
-        j1: v[3],
-    })
-}
-
-/// An index body being written: scalars and byte arrays in order.
-#[derive(Default)]
-pub(crate) struct Enc<'a> {
-    small: Vec<u8>,
-    /// (position in `small` before which the array comes, the array).
-    parts: Vec<(usize, &'a [u8])>,
-}
-
-impl<'a> Enc<'a> {
-    pub(crate) fn u8(&mut self, v: u8) {
-        self.small.push(v);
-    }
-    pub(crate) fn u32(&mut self, v: u32) {
-        self.small.extend_from_slice(&v.to_le_bytes());
-    }
-    pub(crate) fn u64(&mut self, v: u64) {
-        self.small.extend_from_slice(&v.to_le_bytes());
-    }
-    pub(crate) fn i64(&mut self, v: i64) {
-        self.small.extend_from_slice(&v.to_le_bytes());
-    }
-    pub(crate) fn f64(&mut self, v: f64) {
-        self.small.extend_from_slice(&v.to_le_bytes());
-    }
-    fn str(&mut self, s: &str) {
-        self.u64(s.len() as u64);
-        self.small.extend_from_slice(s.as_bytes());
-    }
-    /// A length-prefixed byte array (borrowed until the body is written).
-    pub(crate) fn bytes(&mut self, v: &'a [u8]) {
-        self.u64(v.len() as u64);
-        self.parts.push((self.small.len(), v));
-    }
-    fn len(&self) -> usize {
-        self.small.len() + self.parts.iter().map(|(_, p)| p.len()).sum::<usize>()
-    }
-    fn pieces(&self) -> impl Iterator<Item = &[u8]> {
-        let mut at = 0;
-        let mut out = Vec::new();
-        for (pos, part) in &self.parts {
-            out.push(&self.small[at..*pos]);
-            out.push(*part);
-            at = *pos;
-        }
-        out.push(&self.small[at..]);
-        out.into_iter()
-    }
-    fn crc(&self) -> u32 {
-        let mut h = crc32fast::Hasher::new();
-        for p in self.pieces() {
-            h.update(p);
-        }
-        h.finalize()
-    }
-    fn write_to(&self, w: &mut impl Write) -> std::io::Result<()> {
-        for p in self.pieces() {
-            w.write_all(p)?;
-        }
-        Ok(())
-    }
-}
-
-/// An index body being read: every read checked against the bytes left, checksummed.
-pub(crate) struct Dec<'p, R: Read> {
-    r: R,
-    path: &'p Path,
-    pos: u64,
-    end: u64,
-    crc: crc32fast::Hasher,
-}
-
-impl<R: Read> Dec<'_, R> {
-    pub(crate) fn bad(&self, message: String) -> LocalizeError {
-        index_err(self.path, format!("byte {}: {message}", self.pos))
-    }
-    fn fill(&mut self, buf: &mut [u8], what: &str) -> Result<()> {
-        if (buf.len() as u64) > self.end - self.pos {
-            return Err(self.bad(format!(
-                "{what}: {} bytes needed, {} left: truncated or corrupt",
-                buf.len(),
-                self.end - self.pos
-            )));
-        }
-        self.r
-            .read_exact(buf)
-            .map_err(|e| self.bad(format!("{what}: {e}")))?;
-        self.crc.update(buf);
-        self.pos += buf.len() as u64;
-        Ok(())
-    }
-    fn arr<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
-        let mut b = [0u8; N];
-        self.fill(&mut b, what)?;
-        Ok(b)
-    }
-    pub(crate) fn u8(&mut self, what: &str) -> Result<u8> {
-        Ok(self.arr::<1>(what)?[0])
-    }
-    pub(crate) fn u32(&mut self, what: &str) -> Result<u32> {
-        Ok(u32::from_le_bytes(self.arr(what)?))
-    }
-    pub(crate) fn u64(&mut self, what: &str) -> Result<u64> {
-        Ok(u64::from_le_bytes(self.arr(what)?))
-    }
-    pub(crate) fn i64(&mut self, what: &str) -> Result<i64> {
-        Ok(i64::from_le_bytes(self.arr(what)?))
-    }
-    /// `N` consecutive i64 values.
-    pub(crate) fn i64s<const N: usize>(&mut self, what: &str) -> Result<[i64; N]> {
-        let mut out = [0i64; N];
-        for v in &mut out {
-            *v = self.i64(what)?;
-        }
-        Ok(out)
-    }
-    /// `N` consecutive finite f64 values.
-    pub(crate) fn f64s<const N: usize>(&mut self, what: &str) -> Result<[f64; N]> {
-        let mut out = [0f64; N];
-        for v in &mut out {
-            *v = self.f64(what)?;
-        }
-        Ok(out)
-    }
-    pub(crate) fn f64(&mut self, what: &str) -> Result<f64> {
-        let v = f64::from_le_bytes(self.arr(what)?);
-        if !v.is_finite() {
-            return Err(self.bad(format!("{what} is {v}")));
-        }
-        Ok(v)
-    }
-    /// A size that must fit in memory and in the file (at least one byte per unit).
-    pub(crate) fn usize(&mut self, what: &str) -> Result<usize> {
-        let v = self.u64(what)?;
-        if v > self.end - self.pos + (1 << 20) {
-            return Err(self.bad(format!("{what} {v} is larger than the file")));
-        }
-        Ok(v as usize)
-    }
-    /// A count of items of `unit` bytes each that must fit in the bytes left.
-    pub(crate) fn count(&mut self, unit: u64, what: &str) -> Result<usize> {
-        let n = self.u64(what)?;
-        if n.saturating_mul(unit) > self.end - self.pos {
-            return Err(self.bad(format!(
-                "{n} {what} of {unit} bytes do not fit in the {} bytes left",
-                self.end - self.pos
-            )));
-        }
-        Ok(n as usize)
-    }
-    /// A length-prefixed byte array of exactly `expected` bytes.
-    pub(crate) fn bytes(&mut self, expected: usize, what: &str) -> Result<Vec<u8>> {
-        let n = self.count(1, what)?;
-        if n != expected {
-            return Err(self.bad(format!("{what}: {n} bytes, its geometry needs {expected}")));
-        }
-        let mut v = vec![0u8; n];
-        self.fill(&mut v, what)?;
-        Ok(v)
-    }
-    fn string(&mut self, what: &str) -> Result<String> {
-        let n = self.count(1, what)?;
-        let mut v = vec![0u8; n];
-        self.fill(&mut v, what)?;
-        String::from_utf8(v).map_err(|_| self.bad(format!("{what} is not UTF-8")))
-    }
 }

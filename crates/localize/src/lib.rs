@@ -34,6 +34,7 @@
 
 pub mod candidates;
 pub mod chamfer;
+mod codec;
 pub mod distractors;
 pub mod eval;
 pub mod extract_eval;
@@ -142,6 +143,38 @@ impl Pose2 {
             y: -(-s * self.x + c * self.y),
             yaw_rad: -self.yaw_rad,
         }
+    }
+}
+
+/// Thresholds of an accurate pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Accuracy {
+    /// Largest position error, metres.
+    pub max_m: f64,
+    /// Largest heading error, radians.
+    pub max_rad: f64,
+}
+
+impl Accuracy {
+    /// The thesis' thresholds for the chamfer methods: 4 m, 0.2 rad.
+    pub const THESIS: Accuracy = Accuracy {
+        max_m: 4.0,
+        max_rad: 0.2,
+    };
+    /// The car-mounted targets' thresholds (issue 15): 2 m, 3°.
+    pub const STRICT: Accuracy = Accuracy {
+        max_m: 2.0,
+        max_rad: 3.0 * (std::f64::consts::PI / 180.0),
+    };
+    /// The thesis' thresholds for the hashing baseline: 5 m, π/6.
+    pub const HASHING: Accuracy = Accuracy {
+        max_m: 5.0,
+        max_rad: std::f64::consts::FRAC_PI_6,
+    };
+
+    /// Whether `pose` is accurate with respect to `truth`.
+    pub fn accepts(&self, pose: &Pose2, truth: &Pose2) -> bool {
+        pose.distance_to(truth) <= self.max_m && pose.yaw_error_to(truth) <= self.max_rad
     }
 }
 

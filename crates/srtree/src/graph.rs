@@ -72,6 +72,19 @@ pub struct ObjectNode {
     pub bbox: OrientedBox,
 }
 
+impl crate::objects::MapObject {
+    /// The graph node of this object.
+    pub fn node(&self) -> ObjectNode {
+        ObjectNode {
+            id: self.id,
+            class: self.class,
+            cells: self.cells.len(),
+            centroid: self.centroid,
+            bbox: self.bbox,
+        }
+    }
+}
+
 /// A labelled edge: the relations that hold for the ordered pair (a, b).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RelationEdge {

@@ -104,19 +104,6 @@ pub struct MapObject {
     pub bbox: OrientedBox,
 }
 
-impl MapObject {
-    /// The graph node of this object.
-    pub fn node(&self) -> crate::graph::ObjectNode {
-        crate::graph::ObjectNode {
-            id: self.id,
-            class: self.class,
-            cells: self.cells.len(),
-            centroid: self.centroid,
-            bbox: self.bbox,
-        }
-    }
-}
-
 /// Eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix (Jacobi rotations).
 #[allow(clippy::needless_range_loop)]
 pub fn smallest_eigenvector(m: [[f64; 3]; 3]) -> [f64; 3] {

@@ -183,37 +183,7 @@ pub fn sequence_scans(
     Ok(out)
 }
 
-/// Thresholds of an accurate pose.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Accuracy {
-    /// Largest position error, metres.
-    pub max_m: f64,
-    /// Largest heading error, radians.
-    pub max_rad: f64,
-}
-
-impl Accuracy {
-    /// The thesis' thresholds for the chamfer methods: 4 m, 0.2 rad.
-    pub const THESIS: Accuracy = Accuracy {
-        max_m: 4.0,
-        max_rad: 0.2,
-    };
-    /// The car-mounted targets' thresholds (issue 15): 2 m, 3°.
-    pub const STRICT: Accuracy = Accuracy {
-        max_m: 2.0,
-        max_rad: 3.0 * (std::f64::consts::PI / 180.0),
-    };
-    /// The thesis' thresholds for the hashing baseline: 5 m, π/6.
-    pub const HASHING: Accuracy = Accuracy {
-        max_m: 5.0,
-        max_rad: std::f64::consts::FRAC_PI_6,
-    };
-
-    /// Whether `pose` is accurate with respect to `truth`.
-    pub fn accepts(&self, pose: &Pose2, truth: &Pose2) -> bool {
-        pose.distance_to(truth) <= self.max_m && pose.yaw_error_to(truth) <= self.max_rad
-    }
-}
+pub use crate::Accuracy;
 
 /// Whether one of the `k` best-ranked poses within `w` metres of the truth is accurate
 /// (thesis §5.4.3); `ranked` is best first.
