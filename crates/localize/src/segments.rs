@@ -10,6 +10,7 @@
 
 use crate::surfaces::SurfaceCell;
 use crate::{orientation_diff, Segment};
+use geodata::osm::geometry::{major_axis_angle, mean_and_scatter};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -313,17 +314,8 @@ fn fit_segment(points: &[[f64; 2]], a: [f64; 2], b: [f64; 2]) -> Option<Segment>
     if points.len() < 2 {
         return None;
     }
-    let n = points.len() as f64;
-    let mx = points.iter().map(|p| p[0]).sum::<f64>() / n;
-    let my = points.iter().map(|p| p[1]).sum::<f64>() / n;
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in points {
-        let (dx, dy) = (p[0] - mx, p[1] - my);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
-    let angle = 0.5 * f64::atan2(2.0 * sxy, sxx - syy);
+    let ([mx, my], scatter) = mean_and_scatter(points);
+    let angle = major_axis_angle(scatter);
     let d = [angle.cos(), angle.sin()];
     let proj = |p: [f64; 2]| (p[0] - mx) * d[0] + (p[1] - my) * d[1];
     let mut ts: Vec<f64> = points.iter().map(|&p| proj(p)).collect();
@@ -409,7 +401,7 @@ fn fit_two(s: &Segment, t: &Segment) -> Segment {
         sxy += l * (dx * dy + spread * d[0] * d[1]);
         syy += l * (dy * dy + spread * d[1] * d[1]);
     }
-    let angle = 0.5 * f64::atan2(2.0 * sxy, sxx - syy);
+    let angle = major_axis_angle([sxx, sxy, syy]);
     let d = [angle.cos(), angle.sin()];
     let proj = |p: [f64; 2]| (p[0] - mx) * d[0] + (p[1] - my) * d[1];
     let ts = [s.a, s.b, t.a, t.b].map(proj);

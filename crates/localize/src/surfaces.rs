@@ -247,7 +247,7 @@ pub fn vertical_cells(points: &[[f64; 3]], options: &SurfaceOptions) -> Result<V
             continue;
         }
         // The line's direction is the large eigenvector; the normal is perpendicular.
-        let line_dir = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+        let line_dir = geodata::osm::geometry::major_axis_angle([cxx, cxy, cyy]);
         normals.insert(*key, crate::wrap_pi(line_dir + std::f64::consts::FRAC_PI_2));
     }
     let mut keys: Vec<[i32; 3]> = voxels.keys().copied().collect();

@@ -14,6 +14,7 @@
 
 use crate::map::SrMap;
 use geodata::classes::Class;
+use geodata::osm::geometry::{major_axis_angle, mean_and_scatter};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -178,17 +179,8 @@ pub fn oriented_box(
         (best as f64 + 0.5) / bins as f64 * quarter
     } else {
         // Footprint major axis (2-D PCA).
-        let n = points.len().max(1) as f64;
-        let mx = points.iter().map(|p| p[0]).sum::<f64>() / n;
-        let my = points.iter().map(|p| p[1]).sum::<f64>() / n;
-        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-        for p in points {
-            let (dx, dy) = (p[0] - mx, p[1] - my);
-            sxx += dx * dx;
-            sxy += dx * dy;
-            syy += dy * dy;
-        }
-        0.5 * (2.0 * sxy).atan2(sxx - syy)
+        let footprint: Vec<[f64; 2]> = points.iter().map(|p| [p[0], p[1]]).collect();
+        major_axis_angle(mean_and_scatter(&footprint).1)
     };
     let (s, c) = yaw.sin_cos();
     let mut axes: [Vec<f64>; 3] = [Vec::new(), Vec::new(), Vec::new()];

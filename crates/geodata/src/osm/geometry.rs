@@ -1,5 +1,28 @@
 //! Small planar geometry helpers on `[x, y]` points: ring area, point in ring/polygon,
-//! segment–segment and segment–box intersection, point–segment distance.
+//! segment–segment and segment–box intersection, point–segment distance, the principal axis
+//! of a point set (2-D PCA).
+
+/// Mean and scatter `[sxx, sxy, syy]` (sums of products of the centred coordinates) of
+/// planar points; the mean of no points is the origin.
+pub fn mean_and_scatter(points: &[[f64; 2]]) -> ([f64; 2], [f64; 3]) {
+    let n = points.len().max(1) as f64;
+    let mx = points.iter().map(|p| p[0]).sum::<f64>() / n;
+    let my = points.iter().map(|p| p[1]).sum::<f64>() / n;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (dx, dy) = (p[0] - mx, p[1] - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    ([mx, my], [sxx, sxy, syy])
+}
+
+/// Direction of the major axis of a planar scatter or covariance `[sxx, sxy, syy]`, radians
+/// in [−π/2, π/2] (its larger eigenvector, in closed form).
+pub fn major_axis_angle(s: [f64; 3]) -> f64 {
+    0.5 * (2.0 * s[1]).atan2(s[0] - s[2])
+}
 
 /// Signed area of a ring (last vertex not repeated): positive when counter-clockwise.
 pub fn signed_area(ring: &[[f64; 2]]) -> f64 {
@@ -213,6 +236,32 @@ pub fn rings_overlap(r1: &[[f64; 2]], r2: &[[f64; 2]]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn principal_axis_of_a_rotated_cloud() {
+        // An elongated cross of points rotated by 30°, centred at (5, -2).
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let pts: Vec<[f64; 2]> = (-10..=10)
+            .flat_map(|i| [[i as f64, 0.3], [i as f64, -0.3]])
+            .map(|[x, y]| [5.0 + c * x - s * y, -2.0 + s * x + c * y])
+            .collect();
+        let (mean, scatter) = mean_and_scatter(&pts);
+        assert!((mean[0] - 5.0).abs() < 1e-12 && (mean[1] + 2.0).abs() < 1e-12);
+        assert!((major_axis_angle(scatter) - 30f64.to_radians()).abs() < 1e-12);
+        // The same angle from the eigenvector of the 2 × 2 matrix, computed another way.
+        let m = nalgebra::Matrix2::new(scatter[0], scatter[1], scatter[1], scatter[2]);
+        let eig = m.symmetric_eigen();
+        let k = if eig.eigenvalues[0] > eig.eigenvalues[1] {
+            0
+        } else {
+            1
+        };
+        let v = eig.eigenvectors.column(k);
+        let angle = v[1].atan2(v[0]);
+        let diff = (angle - major_axis_angle(scatter)).rem_euclid(std::f64::consts::PI);
+        assert!(diff < 1e-9 || std::f64::consts::PI - diff < 1e-9, "{angle}");
+        assert_eq!(mean_and_scatter(&[]), ([0.0, 0.0], [0.0, 0.0, 0.0]));
+    }
 
     #[test]
     fn longest_edge_box_of_a_rotated_l_shape() {
