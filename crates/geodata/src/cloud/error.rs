@@ -37,7 +37,7 @@ pub enum CloudError {
         source: std::io::Error,
     },
     /// The extension names no supported format.
-    #[error("{path}: unknown point cloud format {extension:?}; use .ply, .pcd, .las, .laz or .bin (KITTI)")]
+    #[error("{path}: unknown point cloud format {extension:?}; use .ply, .pcd, .las, .laz, .bin (KITTI) or .mcap (ROS 2 bag, read only)")]
     UnknownFormat {
         /// The file.
         path: PathBuf,
@@ -136,6 +136,74 @@ pub enum CloudError {
         /// The crate's error.
         source: las::Error,
     },
+    /// The MCAP container of a ROS 2 bag is malformed or ends early (the `mcap` crate's error).
+    #[error("{path}: {at}: MCAP: {source}; the bag is truncated (a recording that did not finish?) or not an MCAP file")]
+    Mcap {
+        /// The bag.
+        path: PathBuf,
+        /// The byte offset in the bag where reading stopped.
+        at: Location,
+        /// The crate's error.
+        source: Box<::mcap::McapError>,
+    },
+    /// A bag has no topic of the name asked for, or the choice of topic is ambiguous.
+    #[error("{path}: {problem}; point cloud topics in this bag: {}", list_or_none(.point_cloud_topics))]
+    Topic {
+        /// The bag.
+        path: PathBuf,
+        /// What is wrong with the choice.
+        problem: String,
+        /// The bag's `sensor_msgs/msg/PointCloud2` topics.
+        point_cloud_topics: Vec<String>,
+    },
+    /// A topic read as point clouds is not `sensor_msgs/msg/PointCloud2` in CDR.
+    #[error("{path}: topic {topic}: schema {schema:?} with encoding {encoding:?}; expected \"sensor_msgs/msg/PointCloud2\" in \"cdr\"")]
+    WrongSchema {
+        /// The bag.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// Its schema name (empty without a schema).
+        schema: String,
+        /// Its message encoding.
+        encoding: String,
+    },
+    /// A topic has fewer messages than the index asked for.
+    #[error("{path}: topic {topic} has {messages} messages, so there is no message {index} (indices start at 0)")]
+    NoMessage {
+        /// The bag.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// The index asked for.
+        index: usize,
+        /// Messages on the topic.
+        messages: usize,
+    },
+    /// A message's CDR bytes do not decode as the schema says.
+    #[error("{path}: topic {topic} message {index}: byte {offset} of the message: {problem}")]
+    BadMessage {
+        /// The bag.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// 0-based index of the message on its topic.
+        index: usize,
+        /// Byte offset within the message's CDR data (encapsulation header included).
+        offset: u64,
+        /// What is wrong.
+        problem: Box<MessageProblem>,
+    },
+    /// A point of a decoded message is invalid (non-finite position, bad label, …).
+    #[error("topic {topic} message {index}: {source}")]
+    InMessage {
+        /// The topic.
+        topic: String,
+        /// 0-based index of the message on its topic.
+        index: usize,
+        /// The point's error, naming the bag and the point.
+        source: Box<CloudError>,
+    },
     /// Two columns of one cloud disagree in length.
     #[error("column {column} has {len} values but the cloud has {points} points")]
     ColumnLength {
@@ -146,6 +214,97 @@ pub enum CloudError {
         /// Number of positions.
         points: usize,
     },
+}
+
+/// What is wrong inside one ROS 2 message (see [`CloudError::BadMessage`]).
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum MessageProblem {
+    /// The message ends inside a field.
+    #[error("the message ends inside {field}: {need} bytes needed, {left} left")]
+    Truncated {
+        /// The field being read.
+        field: &'static str,
+        /// Bytes the field needs.
+        need: u64,
+        /// Bytes left in the message.
+        left: u64,
+    },
+    /// The 4-byte encapsulation header names no plain CDR representation.
+    #[error(
+        "encapsulation {id:#06x} is not plain CDR (0x0000 big-endian or 0x0001 little-endian)"
+    )]
+    Encapsulation {
+        /// The representation id.
+        id: u16,
+    },
+    /// A string is not NUL-terminated UTF-8.
+    #[error("{field} is not a NUL-terminated UTF-8 string")]
+    BadString {
+        /// The field.
+        field: &'static str,
+    },
+    /// A coordinate field is missing.
+    #[error("no point field {name:?} (fields: {fields}); a point cloud needs x, y and z")]
+    MissingField {
+        /// The missing field.
+        name: &'static str,
+        /// The fields the message has.
+        fields: String,
+    },
+    /// A field's datatype is not one of `sensor_msgs/msg/PointField`'s eight.
+    #[error(
+        "point field {name:?} has datatype {datatype}; PointField defines 1 (INT8) to 8 (FLOAT64)"
+    )]
+    BadDatatype {
+        /// The field.
+        name: String,
+        /// Its datatype.
+        datatype: u8,
+    },
+    /// A coordinate field is an array.
+    #[error("point field {name:?} has count {count}; a coordinate needs count 1")]
+    CoordinateCount {
+        /// The field.
+        name: String,
+        /// Its count.
+        count: u32,
+    },
+    /// A field does not fit inside one point.
+    #[error("point field {name:?} spans bytes {offset}..{end} but point_step is {point_step}")]
+    FieldOutsidePoint {
+        /// The field.
+        name: String,
+        /// Its offset in the point.
+        offset: u32,
+        /// One past its last byte.
+        end: u64,
+        /// Bytes per point.
+        point_step: u32,
+    },
+    /// The point data does not hold width × height points of point_step bytes.
+    #[error("width {width} × height {height} points of point_step {point_step} (row_step {row_step}) need {need} bytes of data, but data has {data}; the header or the data is wrong")]
+    DataLength {
+        /// Points per row.
+        width: u32,
+        /// Rows.
+        height: u32,
+        /// Bytes per point.
+        point_step: u32,
+        /// Bytes per row.
+        row_step: u32,
+        /// Bytes the header calls for: height × max(row_step, width × point_step).
+        need: u128,
+        /// Bytes of data present.
+        data: u64,
+    },
+}
+
+fn list_or_none(topics: &[String]) -> String {
+    if topics.is_empty() {
+        "none".to_owned()
+    } else {
+        topics.join(", ")
+    }
 }
 
 /// Shorthand for results of this module.

@@ -1,4 +1,5 @@
-//! The column-wise [`PointCloud`] and its file formats: PLY, PCD, LAS/LAZ and KITTI `.bin`.
+//! The column-wise [`PointCloud`] and its file formats: PLY, PCD, LAS/LAZ, KITTI `.bin`, and
+//! ROS 2 bags (`.mcap`, read only: see [`mcap`]).
 //!
 //! A cloud is one vector of positions plus optional columns of the same length:
 //! `intensity` (f32), `rgb` ([u8; 3]), `label` (urbansem [`Class`] id), `raw_label` (the
@@ -24,6 +25,7 @@
 //! | PCD (ascii, binary, binary_compressed; read as PCL does, see [`pcd`]) | F4/F8 (read: any numeric) | F4 | U4 `rgb` (0x00RRGGBB; F4-packed `rgb`/`rgba` and U1 `r g b` read) | U1 | U4 (read: also a wider `label`) | U4 |
 //! | LAS/LAZ 1.4 (format 6/7) | integer grid, 0.1 mm | u16 field + exact f32 in extra bytes | u16 ×257 | classification (see [`las`]) | extra bytes | extra bytes |
 //! | KITTI `.bin` | f32 | f32 reflectance | – | separate uint32 label file | separate | – |
+//! | ROS 2 bag `.mcap` (read only; `sensor_msgs/msg/PointCloud2`, see [`mcap`]) | any numeric `x y z` | any numeric `intensity` | – | UINT8 `label` | wider `label`, `raw_label` | `object` |
 //!
 //! ```
 //! use geodata::cloud::{read_cloud, write_cloud, Columns, PointCloud, PointRecord, Precision};
@@ -43,6 +45,7 @@ pub mod info;
 pub mod kitti;
 pub mod las;
 pub mod lzf;
+pub mod mcap;
 pub mod pcd;
 pub mod ply;
 
@@ -389,6 +392,8 @@ pub enum Format {
     Laz,
     /// KITTI Velodyne `.bin` (f32 x y z reflectance).
     KittiBin,
+    /// A ROS 2 bag (rosbag2 MCAP), read only: the first message of its only PointCloud2 topic.
+    Mcap,
 }
 
 impl Format {
@@ -405,6 +410,7 @@ impl Format {
             "las" => Ok(Format::Las),
             "laz" => Ok(Format::Laz),
             "bin" => Ok(Format::KittiBin),
+            "mcap" => Ok(Format::Mcap),
             _ => Err(CloudError::UnknownFormat {
                 path: path.to_path_buf(),
                 extension,
@@ -420,11 +426,13 @@ impl Format {
             Format::Las => "las",
             Format::Laz => "laz",
             Format::KittiBin => "kitti-bin",
+            Format::Mcap => "mcap",
         }
     }
 }
 
-/// Reads a cloud, format by extension; a non-finite position is an error.
+/// Reads a cloud, format by extension; a non-finite position is an error. A `.mcap` bag
+/// gives the first message of its only PointCloud2 topic ([`mcap::read_bag_cloud`] picks others).
 pub fn read_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
     read_cloud_with(path, &ReadOptions::default()).map(|(c, _)| c)
 }
@@ -440,6 +448,7 @@ pub fn read_cloud_with(
         Format::Pcd => pcd::read_pcd(path, options),
         Format::Las | Format::Laz => las::read_las(path, options),
         Format::KittiBin => kitti::read_kitti_bin(path, options),
+        Format::Mcap => mcap::read_bag_cloud(path, None, 0, options),
     }
 }
 
@@ -461,6 +470,10 @@ pub fn write_cloud_with(
         Format::Pcd => pcd::write_pcd(path, cloud, options.encoding),
         Format::Las | Format::Laz => las::write_las(path, cloud),
         Format::KittiBin => kitti::write_kitti_bin(path, cloud),
+        Format::Mcap => Err(CloudError::Unsupported {
+            path: path.to_path_buf(),
+            what: "writing ROS 2 bags (.mcap is read only)".into(),
+        }),
     }
 }
 

@@ -4,6 +4,7 @@ use anyhow::{bail, Context};
 use clap::Subcommand;
 use geodata::cloud::info::CloudInfo;
 use geodata::cloud::kitti::read_label_file;
+use geodata::cloud::mcap::{bag_info, read_bag_cloud};
 use geodata::cloud::{
     read_cloud_with, write_cloud_with, Encoding, Format, ReadOptions, WriteOptions,
 };
@@ -14,9 +15,10 @@ use std::time::Instant;
 /// Subcommands of `urbansem cloud`.
 #[derive(Subcommand)]
 pub enum CloudCommand {
-    /// Read a point cloud (.ply, .pcd, .las, .laz, KITTI .bin) and print its statistics.
+    /// Read a point cloud (.ply, .pcd, .las, .laz, KITTI .bin) and print its statistics; for a
+    /// ROS 2 bag (.mcap), list its topics, message counts and point fields.
     Info {
-        /// The cloud file; the format is chosen by extension.
+        /// The cloud file or bag; the format is chosen by extension.
         file: PathBuf,
         /// Print one JSON object instead of a readable summary.
         #[arg(long)]
@@ -25,9 +27,10 @@ pub enum CloudCommand {
         #[arg(long)]
         drop_non_finite: bool,
     },
-    /// Convert a point cloud between formats (chosen by the extensions of IN and OUT).
+    /// Convert a point cloud between formats (chosen by the extensions of IN and OUT); IN may
+    /// be a ROS 2 bag (.mcap), of which one PointCloud2 message is converted.
     Convert {
-        /// The input cloud.
+        /// The input cloud or bag.
         input: PathBuf,
         /// The output cloud.
         output: PathBuf,
@@ -50,6 +53,12 @@ pub enum CloudCommand {
         /// Skip points with NaN/infinite coordinates (counted) instead of failing.
         #[arg(long)]
         drop_non_finite: bool,
+        /// The bag's PointCloud2 topic to read (.mcap input only; needed when the bag has several).
+        #[arg(long)]
+        topic: Option<String>,
+        /// Which message of the topic to read, 0-based in file order (.mcap input only; default 0).
+        #[arg(long)]
+        index: Option<usize>,
     },
 }
 
@@ -70,6 +79,8 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
             labels,
             label_set,
             drop_non_finite,
+            topic,
+            index,
         } => {
             let encoding = if ascii {
                 Encoding::Ascii
@@ -80,6 +91,14 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
             } else {
                 Encoding::BinaryLittleEndian
             };
+            let is_bag = Format::from_path(&input).ok() == Some(Format::Mcap);
+            if !is_bag && (topic.is_some() || index.is_some()) {
+                super::usage!(
+                    "--topic and --index select a message of a ROS 2 bag (.mcap); {} is not one",
+                    input.display()
+                );
+            }
+            let message = is_bag.then(|| (topic.as_deref(), index.unwrap_or(0)));
             convert(
                 &input,
                 &output,
@@ -87,6 +106,7 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
                 labels.as_deref(),
                 label_set.as_deref(),
                 drop_non_finite,
+                message,
             )
         }
     }
@@ -94,6 +114,14 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
 
 fn info(path: &Path, json: bool, drop_non_finite: bool) -> anyhow::Result<()> {
     let format = Format::from_path(path)?;
+    if format == Format::Mcap {
+        let info =
+            bag_info(path).with_context(|| format!("reading ROS 2 bag {}", path.display()))?;
+        if json {
+            return print_out(&(serde_json::to_string_pretty(&info)? + "\n"));
+        }
+        return print_out(&info.text());
+    }
     let bytes = std::fs::metadata(path)
         .with_context(|| format!("reading {}", path.display()))?
         .len();
@@ -130,11 +158,16 @@ fn convert(
     labels: Option<&Path>,
     label_set: Option<&str>,
     drop_non_finite: bool,
+    bag_message: Option<(Option<&str>, usize)>,
 ) -> anyhow::Result<()> {
     Format::from_path(output)?;
     let start = Instant::now();
-    let (mut cloud, report) = read_cloud_with(input, &ReadOptions { drop_non_finite })
-        .with_context(|| format!("reading point cloud {}", input.display()))?;
+    let options = ReadOptions { drop_non_finite };
+    let (mut cloud, report) = match bag_message {
+        Some((topic, index)) => read_bag_cloud(input, topic, index, &options),
+        None => read_cloud_with(input, &options),
+    }
+    .with_context(|| format!("reading point cloud {}", input.display()))?;
     if let Some(label_path) = labels {
         if report.dropped_non_finite > 0 {
             bail!(
