@@ -727,3 +727,65 @@ fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
         })
     })
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// A one-point little-endian message with x y z FLOAT32 and an empty frame id, written
+    /// out by hand: the offsets in the comments count from after the 4-byte header.
+    fn one_point() -> Vec<u8> {
+        let mut m = vec![0, 1, 0, 0];
+        let u32s = |m: &mut Vec<u8>, values: &[u32]| {
+            for v in values {
+                m.extend_from_slice(&v.to_le_bytes());
+            }
+        };
+        u32s(&mut m, &[7, 8, 1]); // 0: stamp, 8: frame_id length (NUL only)
+        m.extend_from_slice(&[0, 0, 0, 0]); // 12: NUL, 13..16: padding to 4
+        u32s(&mut m, &[1, 1, 3]); // 16: height, 20: width, 24: field count
+        for (name, offset) in [(b'x', 0u32), (b'y', 4), (b'z', 8)] {
+            u32s(&mut m, &[2]); // name length
+            m.extend_from_slice(&[name, 0, 0, 0]); // name, NUL, padding to 4
+            u32s(&mut m, &[offset]);
+            m.extend_from_slice(&[7, 0, 0, 0]); // FLOAT32, padding to 4
+            u32s(&mut m, &[1]); // count
+        }
+        m.extend_from_slice(&[0, 0, 0, 0]); // 88: is_bigendian, padding to 4
+        u32s(&mut m, &[12, 12, 12]); // 92: point_step, 96: row_step, 100: data length
+        for v in [1.5f32, -2.0, 0.25] {
+            m.extend_from_slice(&v.to_le_bytes()); // 104: data
+        }
+        m.push(1); // 116: is_dense
+        m
+    }
+
+    #[test]
+    fn a_hand_written_message_decodes_and_its_offsets_are_exact() {
+        let m = one_point();
+        let msg = decode_point_cloud2(&m).unwrap();
+        assert_eq!((msg.layout.width, msg.layout.height), (1, 1));
+        assert_eq!(msg.data_offset, 4 + 104);
+        assert_eq!(msg.layout.fields[2].name, "z");
+        let (cloud, report) = points_of(Path::new("a.mcap"), &msg, &ReadOptions::default())
+            .unwrap()
+            .unwrap();
+        assert_eq!(cloud.positions, vec![[1.5, -2.0, 0.25]]);
+        assert_eq!(
+            (cloud.precision, report.points_in_file),
+            (Precision::F32, 1)
+        );
+        // Cut before is_dense: the error is at the byte where is_dense starts.
+        let (offset, problem) = decode_point_cloud2(&m[..m.len() - 1]).unwrap_err();
+        assert_eq!(offset, 4 + 116);
+        assert_eq!(
+            problem,
+            MessageProblem::Truncated {
+                field: "is_dense",
+                need: 1,
+                left: 0
+            }
+        );
+    }
+}
