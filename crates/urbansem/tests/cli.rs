@@ -601,3 +601,111 @@ fn relations_eval_trains_on_one_dataset_and_tests_on_every_scene_of_another() {
     let out = infer(&["--cloud-frame", "utm:32N"]);
     assert_eq!(out.status.code(), Some(2), "--cloud-frame needs --osm");
 }
+
+/// A little-endian CDR `sensor_msgs/msg/PointCloud2` of x y z FLOAT32 points, frame "f".
+fn point_cloud2(points: &[[f32; 3]]) -> Vec<u8> {
+    let mut m = vec![0, 1, 0, 0];
+    let le = |m: &mut Vec<u8>, v: u32| m.extend_from_slice(&v.to_le_bytes());
+    // stamp; frame_id "f" (length 2 with the NUL) padded to 4; height, width, 3 fields.
+    for v in [0, 0, 2] {
+        le(&mut m, v);
+    }
+    m.extend_from_slice(&[b'f', 0, 0, 0]);
+    for v in [1, points.len() as u32, 3] {
+        le(&mut m, v);
+    }
+    for (name, offset) in [(b'x', 0), (b'y', 4), (b'z', 8)] {
+        le(&mut m, 2);
+        m.extend_from_slice(&[name, 0, 0, 0]);
+        le(&mut m, offset);
+        m.extend_from_slice(&[7, 0, 0, 0]); // FLOAT32, padding
+        le(&mut m, 1);
+    }
+    m.extend_from_slice(&[0, 0, 0, 0]); // is_bigendian, padding
+    for v in [12, 12 * points.len() as u32, 12 * points.len() as u32] {
+        le(&mut m, v); // point_step, row_step, data length
+    }
+    for v in points.iter().flatten() {
+        m.extend_from_slice(&v.to_le_bytes());
+    }
+    m.push(1);
+    m
+}
+
+/// Issue 18: `cloud info` lists a ROS 2 bag's topics; `cloud convert --topic --index` picks a
+/// message; `--topic`/`--index` on a non-bag input is a usage error (exit 2).
+#[test]
+fn cloud_info_and_convert_read_ros2_bags() {
+    use geodata::cloud::read_cloud;
+    use std::collections::BTreeMap;
+    let dir = std::env::temp_dir().join(format!("urbansem-bag-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bag = dir.join("two.mcap");
+    let file = std::io::BufWriter::new(std::fs::File::create(&bag).unwrap());
+    let mut w = mcap::WriteOptions::new().create(file).unwrap();
+    let schema = w
+        .add_schema("sensor_msgs/msg/PointCloud2", "ros2msg", b"")
+        .unwrap();
+    for (k, topic) in ["/a", "/b"].into_iter().enumerate() {
+        let channel_id = w
+            .add_channel(schema, topic, "cdr", &BTreeMap::new())
+            .unwrap();
+        for n in 1..=3u32 {
+            let points: Vec<[f32; 3]> = (0..n + k as u32).map(|i| [i as f32, 0.5, -1.0]).collect();
+            let header = mcap::records::MessageHeader {
+                channel_id,
+                sequence: n,
+                log_time: u64::from(n),
+                publish_time: u64::from(n),
+            };
+            w.write_to_known_channel(&header, &point_cloud2(&points))
+                .unwrap();
+        }
+    }
+    w.finish().unwrap();
+    drop(w);
+
+    let json: serde_json::Value = serde_json::from_slice(&stdout_of(
+        urbansem().args(["cloud", "info", "--json"]).arg(&bag),
+    ))
+    .unwrap();
+    assert_eq!(json["topics"][1]["topic"], "/b");
+    assert_eq!(json["topics"][1]["messages"], 3);
+    assert_eq!(json["topics"][1]["cloud"]["width"], 2);
+    assert_eq!(json["topics"][1]["cloud"]["fields"][2]["name"], "z");
+
+    let ply = dir.join("b2.ply");
+    stdout_of(
+        urbansem()
+            .args(["cloud", "convert"])
+            .arg(&bag)
+            .arg(&ply)
+            .args(["--topic", "/b", "--index", "2"]),
+    );
+    assert_eq!(read_cloud(&ply).unwrap().len(), 4);
+
+    // Two point cloud topics and no --topic: an error naming both.
+    let out = urbansem()
+        .args(["cloud", "convert"])
+        .arg(&bag)
+        .arg(&ply)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("/a, /b"), "{err}");
+    // --index on a PLY input.
+    let out = urbansem()
+        .args(["cloud", "convert"])
+        .arg(&ply)
+        .arg(dir.join("x.ply"))
+        .args(["--index", "1"])
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
