@@ -1,0 +1,364 @@
+//! ROS 2 bags (rosbag2 MCAP files) without ROS: list a bag's topics and read one
+//! `sensor_msgs/msg/PointCloud2` message as a [`PointCloud`].
+//!
+//! The MCAP container (chunks, zstd or lz4 compression, schemas, channels) is read by the
+//! `mcap` crate's streaming reader; the PointCloud2 message is decoded from its CDR bytes
+//! here (OMG CDR, DDS-XTypes 1.3 §7.4.3.5: a 4-byte encapsulation header, then each
+//! primitive aligned to its own size counted from after that header):
+//!
+//! ```text
+//! std_msgs/Header header        stamp.sec i32, stamp.nanosec u32, frame_id string
+//! uint32 height, uint32 width
+//! PointField[] fields           name string, offset u32, datatype u8, count u32
+//! bool is_bigendian
+//! uint32 point_step, uint32 row_step
+//! uint8[] data                  height rows of row_step bytes, point_step bytes a point
+//! bool is_dense
+//! ```
+//!
+//! Any field layout is read: `x y z` of any numeric datatype (FLOAT32 keeps
+//! [`Precision::F32`](super::Precision::F32), anything else gives F64) fill the positions; `intensity` (or
+//! `reflectance`), `label` (UINT8: urbansem's class id; wider: a dataset's id, kept in
+//! `raw_label`), `raw_label` and `object` fill their columns, as in the PCD reader. Other
+//! fields (`ring`, `t`/`time`/`timestamp`, normals, padding) are listed by [`bag_info`] but not
+//! stored: [`PointCloud`] has no column for them. Big-endian point data (`is_bigendian`) and
+//! big-endian CDR are honoured. Points with a non-finite coordinate follow
+//! [`ReadOptions::drop_non_finite`], as in every reader.
+//!
+//! # Cost and bounds
+//!
+//! One pass over the bag, stopping at the message asked for: time linear in the file, memory
+//! one decompressed chunk plus the cloud. Every length and count in a message is checked
+//! against the bytes left before anything is sized by it; `width × height × point_step` must
+//! match the data's length, so a header claiming 4 G points is a [`MessageProblem::DataLength`]
+//! error, not an allocation.
+
+mod point_cloud2;
+
+pub use point_cloud2::{CloudLayout, PointFieldInfo};
+
+use super::error::MessageProblem;
+use super::{io_err, path_buf, CloudError, Location, PointCloud, ReadOptions, ReadReport, Result};
+use point_cloud2::{decode_point_cloud2, points_of};
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// The schema name of ROS 2 point cloud messages.
+pub const POINT_CLOUD2: &str = "sensor_msgs/msg/PointCloud2";
+
+/// The message encoding of ROS 2 messages in a rosbag2 MCAP file.
+pub const CDR: &str = "cdr";
+
+/// One topic of a bag.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct TopicInfo {
+    /// Topic name (`/points`).
+    pub topic: String,
+    /// Messages on the topic.
+    pub messages: usize,
+    /// Schema name (`sensor_msgs/msg/PointCloud2`; empty without a schema).
+    pub schema: String,
+    /// Message encoding (`cdr` in rosbag2).
+    pub message_encoding: String,
+    /// For a PointCloud2 topic, the layout of its first message.
+    pub cloud: Option<CloudLayout>,
+}
+
+/// What a ROS 2 bag holds (`urbansem cloud info BAG.mcap`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct BagInfo {
+    /// The bag.
+    pub file: String,
+    /// File size in bytes.
+    pub bytes: u64,
+    /// Topics in name order.
+    pub topics: Vec<TopicInfo>,
+}
+
+impl BagInfo {
+    /// The PointCloud2 topics, in name order.
+    pub fn point_cloud_topics(&self) -> Vec<String> {
+        self.topics
+            .iter()
+            .filter(|t| t.schema == POINT_CLOUD2)
+            .map(|t| t.topic.clone())
+            .collect()
+    }
+
+    /// A readable listing: one line per topic, then the point fields of point cloud topics.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "{}", self.file);
+        let _ = writeln!(
+            out,
+            "  format     ROS 2 bag, MCAP ({} bytes), {} topics",
+            self.bytes,
+            self.topics.len()
+        );
+        for t in &self.topics {
+            let schema = if t.schema.is_empty() {
+                "(no schema)"
+            } else {
+                t.schema.as_str()
+            };
+            let _ = writeln!(
+                out,
+                "  topic      {}  {} messages  {} ({})",
+                t.topic, t.messages, schema, t.message_encoding
+            );
+            if let Some(c) = &t.cloud {
+                let _ = writeln!(
+                    out,
+                    "    points   {} × {} in frame {:?}, {} bytes a point{}",
+                    c.width,
+                    c.height,
+                    c.frame_id,
+                    c.point_step,
+                    if c.is_bigendian { ", big-endian" } else { "" }
+                );
+                let fields: Vec<String> = c
+                    .fields
+                    .iter()
+                    .map(|f| {
+                        let count = if f.count == 1 {
+                            String::new()
+                        } else {
+                            format!("×{}", f.count)
+                        };
+                        format!("{}:{}{count}@{}", f.name, f.datatype_name(), f.offset)
+                    })
+                    .collect();
+                let _ = writeln!(out, "    fields   {}", fields.join(" "));
+            }
+        }
+        out
+    }
+}
+
+/// What one pass over a bag saw of one topic.
+struct TopicScan {
+    schema: String,
+    encoding: String,
+    messages: usize,
+    /// The bytes of the picked message, when the topic was wanted and has it.
+    picked: Option<Vec<u8>>,
+}
+
+/// Largest record the MCAP reader may buffer: `RECORD_LIMIT_PER_BYTE` times the file's size,
+/// at least [`RECORD_LIMIT_MIN`] (a compressed chunk may expand; a corrupt length must not
+/// become an allocation).
+const RECORD_LIMIT_PER_BYTE: u64 = 64;
+/// See [`RECORD_LIMIT_PER_BYTE`].
+const RECORD_LIMIT_MIN: u64 = 256 << 20;
+/// Bytes handed to the MCAP reader at a time.
+const READ_BLOCK: usize = 1 << 20;
+
+/// One pass over a bag: per topic, its schema, encoding and message count, and for each topic
+/// that `wanted(topic, schema)` accepts, the bytes of its message number `index`. With
+/// `stop_early` the pass ends as soon as one wanted message is picked.
+fn scan(
+    path: &Path,
+    wanted: impl Fn(&str, &str) -> bool,
+    index: usize,
+    stop_early: bool,
+) -> Result<BTreeMap<String, TopicScan>> {
+    use ::mcap::records::Record;
+    use ::mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    use std::io::Read;
+
+    let mut file = std::fs::File::open(path).map_err(io_err(path))?;
+    let len = file.metadata().map_err(io_err(path))?.len();
+    let limit = len
+        .saturating_mul(RECORD_LIMIT_PER_BYTE)
+        .max(RECORD_LIMIT_MIN);
+    let options = LinearReaderOptions::default()
+        .with_validate_chunk_crcs(true)
+        .with_record_length_limit(usize::try_from(limit).unwrap_or(usize::MAX));
+    let mut reader = LinearReader::new_with_options(options);
+    let mut schemas: HashMap<u16, (String, String)> = HashMap::new();
+    // Channel id → topic; several channels may share a topic.
+    let mut channels: HashMap<u16, String> = HashMap::new();
+    let mut topics: BTreeMap<String, TopicScan> = BTreeMap::new();
+    let mut fed: u64 = 0;
+    let mcap_err = |fed: u64, source: ::mcap::McapError| CloudError::Mcap {
+        path: path_buf(path),
+        at: Location::Byte(fed),
+        source: Box::new(source),
+    };
+    while let Some(event) = reader.next_event() {
+        match event.map_err(|e| mcap_err(fed, e))? {
+            LinearReadEvent::ReadRequest(need) => {
+                let buf = reader.insert(need.clamp(1, READ_BLOCK));
+                let n = loop {
+                    match file.read(buf) {
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        other => break other.map_err(io_err(path))?,
+                    }
+                };
+                reader.notify_read(n);
+                fed += n as u64;
+            }
+            LinearReadEvent::Record { opcode, data } => {
+                match ::mcap::parse_record(opcode, data).map_err(|e| mcap_err(fed, e))? {
+                    Record::Schema { header, .. } => {
+                        schemas.insert(header.id, (header.name, header.encoding));
+                    }
+                    Record::Channel(c) => {
+                        let (schema, _) = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                        topics.entry(c.topic.clone()).or_insert_with(|| TopicScan {
+                            schema,
+                            encoding: c.message_encoding.clone(),
+                            messages: 0,
+                            picked: None,
+                        });
+                        channels.insert(c.id, c.topic);
+                    }
+                    Record::Message { header, data } => {
+                        let Some(topic) = channels.get(&header.channel_id) else {
+                            continue;
+                        };
+                        let Some(t) = topics.get_mut(topic) else {
+                            continue;
+                        };
+                        if t.messages == index && wanted(topic, &t.schema) {
+                            t.picked = Some(data.into_owned());
+                            if stop_early {
+                                t.messages += 1;
+                                return Ok(topics);
+                            }
+                        }
+                        t.messages += 1;
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(topics)
+}
+
+/// Lists a bag's topics: message counts, schemas, and the point fields of the first message
+/// of each PointCloud2 topic. Reads the whole bag once.
+pub fn bag_info(path: &Path) -> Result<BagInfo> {
+    let bytes = std::fs::metadata(path).map_err(io_err(path))?.len();
+    let topics = guarded(path, || {
+        scan(path, |_, schema| schema == POINT_CLOUD2, 0, false)
+    })?;
+    let mut out = Vec::new();
+    for (topic, t) in topics {
+        let cloud = match &t.picked {
+            Some(message) if t.encoding == CDR => Some(
+                decode_point_cloud2(message)
+                    .map_err(|(offset, problem)| CloudError::BadMessage {
+                        path: path_buf(path),
+                        topic: topic.clone(),
+                        index: 0,
+                        offset,
+                        problem: Box::new(problem),
+                    })?
+                    .layout,
+            ),
+            _ => None,
+        };
+        out.push(TopicInfo {
+            topic,
+            messages: t.messages,
+            schema: t.schema,
+            message_encoding: t.encoding,
+            cloud,
+        });
+    }
+    Ok(BagInfo {
+        file: path.display().to_string(),
+        bytes,
+        topics: out,
+    })
+}
+
+/// Reads message `index` (0-based, in file order) of a PointCloud2 `topic` of a bag as a
+/// cloud. Without a topic the bag must have exactly one PointCloud2 topic.
+///
+/// Stops reading at the message when the topic is named; without one the whole bag is read
+/// once (to be sure no second point cloud topic follows).
+pub fn read_bag_cloud(
+    path: &Path,
+    topic: Option<&str>,
+    index: usize,
+    options: &ReadOptions,
+) -> Result<(PointCloud, ReadReport)> {
+    let topics = guarded(path, || match topic {
+        Some(name) => scan(path, |t, _| t == name, index, true),
+        None => scan(path, |_, schema| schema == POINT_CLOUD2, index, false),
+    })?;
+    let cloud_topics: Vec<String> = topics
+        .iter()
+        .filter(|(_, t)| t.schema == POINT_CLOUD2)
+        .map(|(name, _)| name.clone())
+        .collect();
+    let topic_err = |problem: String| CloudError::Topic {
+        path: path_buf(path),
+        problem,
+        point_cloud_topics: cloud_topics.clone(),
+    };
+    let name = match topic {
+        Some(name) => name.to_owned(),
+        None => match cloud_topics.as_slice() {
+            [one] => one.clone(),
+            [] => return Err(topic_err(format!("no {POINT_CLOUD2} topic"))),
+            _ => {
+                return Err(topic_err(format!(
+                    "{} {POINT_CLOUD2} topics; name one (--topic)",
+                    cloud_topics.len()
+                )))
+            }
+        },
+    };
+    let Some(t) = topics.get(&name) else {
+        return Err(topic_err(format!("no topic {name:?}")));
+    };
+    if t.schema != POINT_CLOUD2 || t.encoding != CDR {
+        return Err(CloudError::WrongSchema {
+            path: path_buf(path),
+            topic: name,
+            schema: t.schema.clone(),
+            encoding: t.encoding.clone(),
+        });
+    }
+    let Some(message) = &t.picked else {
+        return Err(CloudError::NoMessage {
+            path: path_buf(path),
+            topic: name,
+            index,
+            messages: t.messages,
+        });
+    };
+    let bad = |(offset, problem): (u64, MessageProblem)| CloudError::BadMessage {
+        path: path_buf(path),
+        topic: name.clone(),
+        index,
+        offset,
+        problem: Box::new(problem),
+    };
+    let msg = decode_point_cloud2(message).map_err(bad)?;
+    points_of(path, &msg, options)
+        .map_err(bad)?
+        .map_err(|source| CloudError::InMessage {
+            topic: name.clone(),
+            index,
+            source: Box::new(source),
+        })
+}
+
+/// Runs a pass of the `mcap` crate's reader; a panic inside it on corrupt input becomes an
+/// error (see [`super::guard`]).
+fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    super::guard::catch_silently(f).unwrap_or_else(|| {
+        Err(CloudError::Corrupt {
+            path: path_buf(path),
+            at: Location::Byte(0),
+            message: "the MCAP reader failed on this bag's records".into(),
+        })
+    })
+}
