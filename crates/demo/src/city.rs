@@ -3,8 +3,31 @@
 use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
 use geodata::svg::Svg;
-use serde_json::json;
+use serde::Serialize;
 use std::time::Instant;
+
+/// The city stage's summary entry (`city` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct CitySummary {
+    /// Buildings (ways and multipolygons).
+    pub buildings: usize,
+    /// Highway ways.
+    pub highway_ways: usize,
+    /// Street segments between intersections.
+    pub segments: usize,
+    /// Intersections.
+    pub intersections: usize,
+    /// Pairs of neighbouring segments.
+    pub neighbour_pairs: usize,
+    /// Total street length, metres.
+    pub street_length_m: f64,
+    /// Latitude and longitude of the local frame's origin.
+    pub frame_origin_lat_lon: [f64; 2],
+    /// Bounding box: west, south, east, north.
+    pub bbox_lonlat: [f64; 4],
+    /// Seconds generating the city as OSM XML and parsing it back.
+    pub seconds_generate_and_parse: f64,
+}
 
 /// The demo stage of the embedded default city: its numbers and a map of buildings and streets.
 pub fn stage(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
@@ -76,17 +99,17 @@ pub fn stage(_args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let (lat0, lon0) = map.frame.origin();
     Ok(StageOutput {
         key: "city",
-        summary: json!({
-            "buildings": map.building_count(),
-            "highway_ways": map.highways.len(),
-            "segments": map.streets.segments.len(),
-            "intersections": map.streets.intersections.len(),
-            "neighbour_pairs": map.streets.neighbour_pairs.len(),
-            "street_length_m": street_m,
-            "frame_origin_lat_lon": [lat0, lon0],
-            "bbox_lonlat": map.bbox_lonlat,
-            "seconds_generate_and_parse": generate_s,
-        }),
+        summary: serde_json::to_value(CitySummary {
+            buildings: map.building_count(),
+            highway_ways: map.highways.len(),
+            segments: map.streets.segments.len(),
+            intersections: map.streets.intersections.len(),
+            neighbour_pairs: map.streets.neighbour_pairs.len(),
+            street_length_m: street_m,
+            frame_origin_lat_lon: [lat0, lon0],
+            bbox_lonlat: map.bbox_lonlat,
+            seconds_generate_and_parse: generate_s,
+        })?,
         title: "The embedded default city (procedural OSM map)",
         text_html: format!(
             "{} buildings, {} highway ways split into {} segments ({:.1} km of street), \

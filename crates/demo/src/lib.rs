@@ -3,7 +3,8 @@
 //!
 //! A harness above every crate of the pipeline, as `urbansem-bench` is: one module per
 //! crate's stage (`city`, `sim`, `pbo`, `mln`, `streets`, `localize`, `srtree`), each a
-//! [`Stage`] giving its summary entry and report section; [`run`] runs them in pipeline order
+//! [`Stage`] giving its summary entry (a typed value per stage, e.g.
+//! [`localize::TrackSummary`], serialised into `summary.json`) and report section; [`run`] runs them in pipeline order
 //! and writes the report. Like the binary, it reports errors with `anyhow`. The `urbansem`
 //! binary only parses `urbansem demo`'s options, shows progress and prints where the report is.
 

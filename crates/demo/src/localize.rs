@@ -5,18 +5,99 @@ use anyhow::Context;
 use localize::eval::{Accuracy, SimDataset};
 use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::Pose2;
-use serde_json::{json, Value};
+use serde::Serialize;
 use std::time::Instant;
 
-/// An HTML table of JSON rows: one column per (header, key, decimals).
-fn rows_table(rows: &[Value], columns: &[(&str, &str, usize)]) -> String {
+/// One scan of the single-scan stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScanRow {
+    /// Scan number.
+    pub scan: usize,
+    /// Points in the scan.
+    pub points: usize,
+    /// Wall segments extracted.
+    pub segments: usize,
+    /// Candidates returned.
+    pub candidates: usize,
+    /// Top-1 position error, metres (NaN without a candidate).
+    pub error_m: f64,
+    /// Top-1 heading error, degrees.
+    pub error_deg: f64,
+    /// Confidence of the top-1 candidate.
+    pub confidence: f64,
+    /// Seconds to localize the scan.
+    pub seconds: f64,
+}
+
+/// The single-scan stage's summary entry (`localize` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct LocalizeSummary {
+    /// Scans localized.
+    pub scans: usize,
+    /// Scans with an accurate top-1 pose (4 m, 0.2 rad).
+    #[serde(rename = "top1_accurate_4m_0.2rad")]
+    pub top1_accurate: usize,
+    /// Seconds building the distance-transform tensor.
+    pub tensor_seconds: f64,
+    /// Per scan.
+    pub per_scan: Vec<ScanRow>,
+}
+
+/// One scan of the track stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrackRow {
+    /// Scan number along the drive.
+    pub scan: usize,
+    /// Wall segments extracted.
+    pub segments: usize,
+    /// Candidates kept.
+    pub candidates: usize,
+    /// Top-1 position error, metres.
+    pub error_m: f64,
+    /// Top-1 heading error, degrees.
+    pub error_deg: f64,
+    /// Confidence of the top-1 candidate.
+    pub confidence: f64,
+    /// Whether the top-1 pose is within 2 m and 3°.
+    pub top1_within_2m_3deg: bool,
+}
+
+/// The track stage's summary entry (`localize_track` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct TrackSummary {
+    /// Sensor model simulated.
+    pub sensor: &'static str,
+    /// Scans along the drive.
+    pub scans: usize,
+    /// Track window.
+    pub window: usize,
+    /// Scans from the first full window on.
+    pub scans_after_first_window: usize,
+    /// Of those, scans with an accurate top-1 pose (2 m, 3°).
+    pub top1_within_2m_3deg: usize,
+    /// Of those, scans with an accurate pose among the top 10.
+    pub top10_within_2m_3deg: usize,
+    /// Per scan.
+    pub per_scan: Vec<TrackRow>,
+    /// Seconds simulating the drive.
+    pub simulate_seconds: f64,
+    /// Seconds localizing the track.
+    pub track_seconds: f64,
+}
+
+/// An HTML table of rows: one column per (header, key, decimals).
+fn rows_table<R: Serialize>(rows: &[R], columns: &[(&str, &str, usize)]) -> String {
     let cells: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {
+            let r = serde_json::to_value(r).unwrap_or_default();
             columns
                 .iter()
                 .map(|&(_, key, decimals)| {
-                    let v = r.get(key).and_then(Value::as_f64).unwrap_or(f64::NAN);
+                    let v = r
+                        .get(key)
+                        .and_then(serde_json::Value::as_f64)
+                        .unwrap_or(f64::NAN);
                     format!("{v:.decimals$}")
                 })
                 .collect()
@@ -92,16 +173,16 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         {
             accurate += 1;
         }
-        rows.push(json!({
-            "scan": i,
-            "points": cloud.len(),
-            "segments": result.segments.len(),
-            "candidates": result.candidates.len(),
-            "error_m": e_m,
-            "error_deg": e_deg,
-            "confidence": result.confidence,
-            "seconds": result.seconds.total,
-        }));
+        rows.push(ScanRow {
+            scan: i,
+            points: cloud.len(),
+            segments: result.segments.len(),
+            candidates: result.candidates.len(),
+            error_m: e_m,
+            error_deg: e_deg,
+            confidence: result.confidence,
+            seconds: result.seconds.total,
+        });
         if i == 0 {
             let svg = localize::figure::result_svg(&localizer, &result, Some(truth), 90.0);
             files.push(("localize.svg", svg.clone().into_bytes()));
@@ -120,20 +201,21 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             ("s", "seconds", 2),
         ],
     );
+    let scans = rows.len();
     Ok(StageOutput {
         key: "localize",
-        summary: json!({
-            "scans": rows.len(),
-            "top1_accurate_4m_0.2rad": accurate,
-            "tensor_seconds": localizer.seconds.distance_transform,
-            "per_scan": rows,
-        }),
+        summary: serde_json::to_value(LocalizeSummary {
+            scans,
+            top1_accurate: accurate,
+            tensor_seconds: localizer.seconds.distance_transform,
+            per_scan: rows,
+        })?,
         title: "localize: global localization on building outlines (FDCM + visibility-aware reverse cost)",
         text_html: format!(
             "{} simulated scans of the default city (OSM map-error model on) localized on the whole map without a prior; \
              {accurate} of them have an accurate top-1 pose (4 m, 0.2 rad). Figure: map outlines (grey), edges visible from \
              the chosen pose (black), scan segments at the chosen pose (red), other candidates (light blue), truth (green ring).{table}",
-            rows.len()
+            scans
         ),
         figures,
         files,
@@ -222,15 +304,15 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
                 c.pose.yaw_error_to(truth).to_degrees(),
             )
         });
-        rows.push(json!({
-            "scan": i,
-            "segments": extracted[i].segments.len(),
-            "candidates": r.candidates.len(),
-            "error_m": e_m,
-            "error_deg": e_deg,
-            "confidence": r.confidence,
-            "top1_within_2m_3deg": ok1,
-        }));
+        rows.push(TrackRow {
+            scan: i,
+            segments: extracted[i].segments.len(),
+            candidates: r.candidates.len(),
+            error_m: e_m,
+            error_deg: e_deg,
+            confidence: r.confidence,
+            top1_within_2m_3deg: ok1,
+        });
     }
     let svg = localize::figure::track_svg(&map, &truths, &results, &strict, WINDOW);
     let table = rows_table(
@@ -245,17 +327,17 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     );
     Ok(StageOutput {
         key: "localize_track",
-        summary: json!({
-            "sensor": "hdl64",
-            "scans": truths.len(),
-            "window": WINDOW,
-            "scans_after_first_window": after_window,
-            "top1_within_2m_3deg": top1,
-            "top10_within_2m_3deg": top10,
-            "per_scan": rows,
-            "simulate_seconds": simulate_s,
-            "track_seconds": track_s,
-        }),
+        summary: serde_json::to_value(TrackSummary {
+            sensor: "hdl64",
+            scans: truths.len(),
+            window: WINDOW,
+            scans_after_first_window: after_window,
+            top1_within_2m_3deg: top1,
+            top10_within_2m_3deg: top10,
+            per_scan: rows,
+            simulate_seconds: simulate_s,
+            track_seconds: track_s,
+        })?,
         title: "localize track: a car-mounted HDL-64 drive localized along its track",
         text_html: format!(
             "{} simulated HDL-64 scans (1.73 m above the road, heading along it) of a drive through the default city, \

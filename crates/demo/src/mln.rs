@@ -3,8 +3,37 @@
 use crate::pbo::image_png;
 use crate::report::Html;
 use crate::{DemoArgs, StageOutput};
-use serde_json::{json, Map, Value};
+use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Instant;
+
+/// One inference method's result on one problem.
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodResult {
+    /// Cost of the MAP state found.
+    pub cost: f64,
+    /// Lower bound, where the method has one.
+    pub lower_bound: Option<f64>,
+    /// Share of atoms fixed persistently (QPBO).
+    pub persistent_fraction: f64,
+    /// Seconds of inference.
+    pub seconds: f64,
+}
+
+/// One problem of the MLN stage (the stage's summary maps problem names to these).
+#[derive(Debug, Clone, Serialize)]
+pub struct ProblemSummary {
+    /// Ground atoms.
+    pub ground_atoms: usize,
+    /// Ground factors.
+    pub ground_factors: usize,
+    /// Factors of degree above two.
+    pub higher_order_factors: usize,
+    /// Seconds grounding.
+    pub seconds_ground: f64,
+    /// Per method name.
+    pub methods: BTreeMap<String, MethodResult>,
+}
 
 /// Grounds a generated MLN problem.
 fn ground_generated(
@@ -48,14 +77,14 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         ),
     ];
     let mut rows = Vec::new();
-    let mut per_problem = Map::new();
+    let mut per_problem = BTreeMap::new();
     let mut figures = Vec::new();
     let mut files = Vec::new();
     for (name, generated) in &problems {
         let t = Instant::now();
         let (program, problem) = ground_generated(generated, name)?;
         let ground_s = t.elapsed().as_secs_f64();
-        let mut methods = Map::new();
+        let mut methods = BTreeMap::new();
         for method in [
             Method::Qpbo,
             Method::MaxWalkSat,
@@ -86,8 +115,12 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             ]);
             methods.insert(
                 method.name().into(),
-                json!({"cost": r.scores.cost, "lower_bound": r.lower_bound,
-                       "persistent_fraction": r.persistent_fraction, "seconds": secs}),
+                MethodResult {
+                    cost: r.scores.cost,
+                    lower_bound: r.lower_bound,
+                    persistent_fraction: r.persistent_fraction,
+                    seconds: secs,
+                },
             );
             if method == Method::Qpbo && name.starts_with("ID") {
                 // Observed image and MAP image side by side.
@@ -124,9 +157,13 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         }
         per_problem.insert(
             name.to_string(),
-            json!({"ground_atoms": problem.atoms.len(), "ground_factors": problem.factors.len(),
-                   "higher_order_factors": problem.higher_order_factors(),
-                   "seconds_ground": ground_s, "methods": methods}),
+            ProblemSummary {
+                ground_atoms: problem.atoms.len(),
+                ground_factors: problem.factors.len(),
+                higher_order_factors: problem.higher_order_factors(),
+                seconds_ground: ground_s,
+                methods,
+            },
         );
     }
     figures.insert(
@@ -147,7 +184,7 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     );
     Ok(StageOutput {
         key: "mln",
-        summary: Value::Object(per_problem),
+        summary: serde_json::to_value(per_problem)?,
         title: "Markov logic: MAP by QSSR (ASM, auto representation) and MaxWalkSAT",
         text_html: "The thesis' synthetic problems generated with the demo seed: image denoising \
                     (ID, 90×90 random image, triple smoothing rules) and Friends & Smokers with 200 \

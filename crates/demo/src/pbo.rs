@@ -8,8 +8,60 @@ use pbo::qssr::{solve, QssrOptions};
 use pbo::quadratize::Quadratizer;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde_json::{json, Map};
+use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Instant;
+
+/// The denoising stage's summary entry (`pbo_denoise` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct DenoiseSummary {
+    /// Pixels (variables).
+    pub pixels: usize,
+    /// Energy of the minimiser.
+    pub energy: i32,
+    /// QPBO's lower bound.
+    pub lower_bound: i32,
+    /// Share of pixels QPBO labelled.
+    pub labelled_fraction: f64,
+    /// Wrong pixels in the noisy image.
+    pub wrong_pixels_noisy: usize,
+    /// Wrong pixels after denoising.
+    pub wrong_pixels_denoised: usize,
+    /// Seconds building the graph.
+    pub seconds_build: f64,
+    /// Seconds solving.
+    pub seconds_solve: f64,
+}
+
+/// One quadratizer's row of the higher-order stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodRow {
+    /// Share labelled by the first QPBO.
+    pub labelled_first_round: f64,
+    /// Share labelled after QSSR.
+    pub labelled_fraction: f64,
+    /// QSSR rounds.
+    pub rounds: usize,
+    /// Energy found.
+    pub energy: f64,
+    /// Lower bound.
+    pub lower_bound: f64,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+/// The higher-order stage's summary entry (`pbo_higher_order` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct HigherOrderSummary {
+    /// Variables of the function.
+    pub variables: usize,
+    /// Terms.
+    pub terms: usize,
+    /// Terms of degree three.
+    pub higher_order_terms: usize,
+    /// Per quadratizer (and `+probe`).
+    pub methods: BTreeMap<String, MethodRow>,
+}
 
 /// A seeded binary image of discs and bars, and a copy with a share of pixels flipped.
 pub fn synthetic_image(side: usize, noise: f64, seed: u64) -> (Vec<bool>, Vec<bool>) {
@@ -96,16 +148,16 @@ pub fn denoise_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         .collect();
     Ok(StageOutput {
         key: "pbo_denoise",
-        summary: json!({
-            "pixels": side * side,
-            "energy": energy,
-            "lower_bound": q.lower_bound(),
-            "labelled_fraction": labelled as f64 / (side * side) as f64,
-            "wrong_pixels_noisy": errors_before,
-            "wrong_pixels_denoised": errors_after,
-            "seconds_build": build_s,
-            "seconds_solve": solve_s,
-        }),
+        summary: serde_json::to_value(DenoiseSummary {
+            pixels: side * side,
+            energy,
+            lower_bound: q.lower_bound(),
+            labelled_fraction: labelled as f64 / (side * side) as f64,
+            wrong_pixels_noisy: errors_before,
+            wrong_pixels_denoised: errors_after,
+            seconds_build: build_s,
+            seconds_solve: solve_s,
+        })?,
         title: "Binary denoising by QPBO (submodular: solved exactly)",
         text_html: format!(
             "A {side}×{side} image, 15 % of its pixels flipped, denoised on a 4-connected grid \
@@ -141,7 +193,7 @@ fn random_higher_order(vars: u32, terms: usize, seed: u64) -> Polynomial {
 pub fn higher_order_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let f = random_higher_order(2000, 5000, args.seed);
     let mut rows = Vec::new();
-    let mut per_method = Map::new();
+    let mut per_method = BTreeMap::new();
     for quadratizer in Quadratizer::ALL {
         for probe in [false, true] {
             let t = Instant::now();
@@ -173,14 +225,14 @@ pub fn higher_order_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             ]);
             per_method.insert(
                 name,
-                json!({
-                    "labelled_first_round": first as f64 / f.num_vars() as f64,
-                    "labelled_fraction": r.labelled_fraction,
-                    "rounds": r.rounds.len(),
-                    "energy": r.energy,
-                    "lower_bound": r.lower_bound,
-                    "seconds": secs,
-                }),
+                MethodRow {
+                    labelled_first_round: first as f64 / f.num_vars() as f64,
+                    labelled_fraction: r.labelled_fraction,
+                    rounds: r.rounds.len(),
+                    energy: r.energy,
+                    lower_bound: r.lower_bound,
+                    seconds: secs,
+                },
             );
         }
     }
@@ -198,12 +250,12 @@ pub fn higher_order_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     );
     Ok(StageOutput {
         key: "pbo_higher_order",
-        summary: json!({
-            "variables": f.num_vars(),
-            "terms": f.num_terms(),
-            "higher_order_terms": f.num_higher_order_terms(),
-            "methods": per_method,
-        }),
+        summary: serde_json::to_value(HigherOrderSummary {
+            variables: f.num_vars(),
+            terms: f.num_terms(),
+            higher_order_terms: f.num_higher_order_terms(),
+            methods: per_method,
+        })?,
         title: "Higher-order minimisation: quadratize → QPBO → fix → repeat (QSSR)",
         text_html: format!(
             "A seeded random function of {} variables and {} terms ({} cubic), of mixed signs. \

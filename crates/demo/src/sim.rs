@@ -4,14 +4,47 @@ use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
 use geosim::scene::{MapErrorOptions, Scene, SceneOptions};
 use geosim::sensor::{scan_with, ScanFrame, SensorOptions};
+use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Instant;
+
+/// What the OSM map-error model did to the map.
+#[derive(Debug, Clone, Serialize)]
+pub struct MapErrorSummary {
+    /// Map buildings removed from the world.
+    pub removed_buildings: usize,
+    /// World buildings the map does not have.
+    pub extra_buildings: usize,
+    /// Mean displacement of the map's outlines, metres.
+    pub mean_shift_m: f64,
+}
+
+/// The simulator stage's summary entry (`simulator` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SimSummary {
+    /// Scans simulated.
+    pub scans: usize,
+    /// Rays cast.
+    pub rays: usize,
+    /// Labelled points.
+    pub points: usize,
+    /// Seconds ray casting.
+    pub cast_seconds: f64,
+    /// Rays per second.
+    pub rays_per_second: f64,
+    /// Clutter objects in the world.
+    pub objects: usize,
+    /// The map-error model's changes.
+    pub map_error: MapErrorSummary,
+    /// Points per class name.
+    pub points_per_class: BTreeMap<String, usize>,
+}
 
 /// The demo's simulator stage: scans on the embedded default city, a map and a scan top view.
 pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     use crate::report::{encode_png_rgb, Html};
     use geodata::classes::Class;
     use geodata::topview::TopView;
-    use serde_json::json;
 
     let map = geosim::city::default_city_map().context("generating the embedded default city")?;
     let options = SceneOptions {
@@ -83,26 +116,26 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         })
         .collect();
     let rays_per_second = rays as f64 / cast_seconds.max(1e-9);
-    let class_counts: serde_json::Map<String, serde_json::Value> = Class::ALL
+    let class_counts: BTreeMap<String, usize> = Class::ALL
         .iter()
-        .map(|c| (c.name().to_string(), json!(histogram[c.id() as usize])))
+        .map(|c| (c.name().to_string(), histogram[c.id() as usize]))
         .collect();
     Ok(StageOutput {
         key: "simulator",
-        summary: json!({
-            "scans": clouds.len(),
-            "rays": rays,
-            "points": points,
-            "cast_seconds": cast_seconds,
-            "rays_per_second": rays_per_second,
-            "objects": scene.objects.len(),
-            "map_error": {
-                "removed_buildings": scene.map_error.removed.len(),
-                "extra_buildings": scene.map_error.extra,
-                "mean_shift_m": scene.map_error.mean_shift_m,
+        summary: serde_json::to_value(SimSummary {
+            scans: clouds.len(),
+            rays,
+            points,
+            cast_seconds,
+            rays_per_second,
+            objects: scene.objects.len(),
+            map_error: MapErrorSummary {
+                removed_buildings: scene.map_error.removed.len(),
+                extra_buildings: scene.map_error.extra,
+                mean_shift_m: scene.map_error.mean_shift_m,
             },
-            "points_per_class": class_counts,
-        }),
+            points_per_class: class_counts,
+        })?,
         title: "geodata: simulated laser scans with ground truth",
         text_html: format!(
             "The world built from the map: true street areas (dark: driving area, light: \

@@ -2,14 +2,56 @@
 
 use crate::{DemoArgs, StageOutput};
 use anyhow::Context;
-use serde_json::json;
+use serde::Serialize;
 use srtree::dataset::RelationsDataset;
 use srtree::features::ViewObject;
 use srtree::graph::Relation;
 use srtree::io::write_map;
 use srtree::map::{MapOptions, SrMap};
 use srtree::objects::{extract_objects, ObjectOptions};
-use srtree::relations::{evaluate, relation_graph, train, TrainOptions};
+use srtree::relations::{evaluate, relation_graph, train, EvalReport, TrainOptions};
+
+/// Scenes used for training and testing.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneCounts {
+    /// Training scenes.
+    pub train: usize,
+    /// Test scenes.
+    pub test: usize,
+}
+
+/// Relation edges of the drawn scene, per relation.
+#[derive(Debug, Clone, Serialize)]
+#[serde(rename_all = "PascalCase")]
+pub struct EdgeCounts {
+    /// On edges.
+    pub on: usize,
+    /// LeftOf edges.
+    pub left_of: usize,
+    /// Behind edges.
+    pub behind: usize,
+}
+
+/// The srtree stage's summary entry (`srtree` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SrtreeSummary {
+    /// Scenes of the dataset.
+    pub scenes: SceneCounts,
+    /// Seconds simulating the dataset.
+    pub sim_seconds: f64,
+    /// The Table 3.6 analogue.
+    pub evaluation: EvalReport,
+    /// The test scene drawn.
+    pub scene: usize,
+    /// Cells of its map.
+    pub cells: usize,
+    /// Bytes per cell of its map.
+    pub bytes_per_cell: f64,
+    /// Objects near the viewpoint.
+    pub objects: usize,
+    /// Relation edges of its graph.
+    pub edges: EdgeCounts,
+}
 use srtree::semantic::SemanticMap;
 use std::time::Instant;
 
@@ -190,16 +232,23 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let mem = m.memory();
     Ok(StageOutput {
         key: "srtree",
-        summary: json!({
-            "scenes": {"train": ds.train.len(), "test": ds.test.len()},
-            "sim_seconds": sim_s,
-            "evaluation": ev.report(),
-            "scene": scene.index,
-            "cells": m.len(),
-            "bytes_per_cell": mem.bytes_per_cell,
-            "objects": objects.len(),
-            "edges": {"On": counts(Relation::On), "LeftOf": counts(Relation::LeftOf), "Behind": counts(Relation::Behind)},
-        }),
+        summary: serde_json::to_value(SrtreeSummary {
+            scenes: SceneCounts {
+                train: ds.train.len(),
+                test: ds.test.len(),
+            },
+            sim_seconds: sim_s,
+            evaluation: ev.report(),
+            scene: scene.index,
+            cells: m.len(),
+            bytes_per_cell: mem.bytes_per_cell,
+            objects: objects.len(),
+            edges: EdgeCounts {
+                on: counts(Relation::On),
+                left_of: counts(Relation::LeftOf),
+                behind: counts(Relation::Behind),
+            },
+        })?,
         title: "srtree: semantic R-tree map and spatial relations (SVM + MLN)",
         text_html: format!(
             "{} simulated viewpoint scenes of the default city (5 % annotator noise); linear SVMs and the relation MLN \

@@ -2,10 +2,23 @@
 
 use crate::{DemoArgs, StageOutput};
 use anyhow::{bail, Context};
-use serde_json::json;
+use serde::Serialize;
 use std::time::Instant;
 use streets::dataset::StreetsDataset;
-use streets::eval::{evaluate, EvalOptions, Scores};
+use streets::eval::{evaluate, EvalOptions, EvalReport, Scores};
+
+/// The streets stage's summary entry (`streets` in `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct StreetsSummary {
+    /// Segments evaluated.
+    pub segments: usize,
+    /// Street length evaluated, metres.
+    pub street_m: f64,
+    /// Seconds simulating the dataset.
+    pub simulate_seconds: f64,
+    /// The Table 4.1 analogue.
+    pub eval: EvalReport,
+}
 use streets::model::ClassifierOptions;
 
 /// The demo stage: a small simulated streets dataset on the embedded city, the evaluation
@@ -139,12 +152,12 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     );
     Ok(StageOutput {
         key: "streets",
-        summary: json!({
-            "segments": report.segments,
-            "street_m": report.street_m,
-            "simulate_seconds": sim_s,
-            "eval": report,
-        }),
+        summary: serde_json::to_value(StreetsSummary {
+            segments: report.segments,
+            street_m: report.street_m,
+            simulate_seconds: sim_s,
+            eval: report,
+        })?,
         title: "streets: street width and offset per OSM segment",
         text_html,
         figures: vec![figure.clone()],
