@@ -13,6 +13,7 @@
 //! - [`datasets`]: readers for the real labelled scans in `../shared/data/lidar/`.
 //! - [`sensors`]: named LiDAR models (beam elevations, azimuth step, range, mount height).
 //! - [`simfiles`]: serde types of the simulated datasets' files (truth poses, map outlines).
+//! - [`geojson`]: RFC 7946 output with the OSM attribution, and its validator.
 //! - [`topview`]: a top-view raster of coloured points (highest point per pixel).
 //! - [`svg`]: an SVG canvas in the local frame for pictures of maps and results.
 //! - [`fsio`]: atomic output files (written beside the target, renamed into place).
@@ -23,6 +24,7 @@ pub mod cloud;
 pub mod context;
 pub mod datasets;
 pub mod fsio;
+pub mod geojson;
 pub mod georef;
 pub mod mercator;
 pub mod osm;

@@ -221,24 +221,36 @@ pub fn result_text(
     query: &[Atom],
     assignment: &[bool],
 ) -> String {
-    let query_preds: Vec<usize> = query.iter().map(|a| a.predicate).collect();
-    let mut lines: Vec<String> = (0..problem.atoms.len())
-        .filter(|&i| query_preds.contains(&problem.atoms[i].predicate))
-        .map(|i| {
-            format!(
-                "{} {}",
-                problem.atom_name(program, i),
-                u8::from(assignment.get(i).copied().unwrap_or(false))
-            )
-        })
-        .collect();
-    lines.sort();
     let mut text = String::new();
-    for l in lines {
-        text.push_str(&l);
+    for (atom, value) in query_values(program, problem, query, assignment) {
+        text.push_str(&atom);
+        text.push(' ');
+        text.push(if value { '1' } else { '0' });
         text.push('\n');
     }
     text
+}
+
+/// Every ground atom of a query predicate with its truth value in `assignment`, sorted by
+/// name (atoms written as in evidence files).
+pub fn query_values(
+    program: &Program,
+    problem: &GroundProblem,
+    query: &[Atom],
+    assignment: &[bool],
+) -> Vec<(String, bool)> {
+    let query_preds: Vec<usize> = query.iter().map(|a| a.predicate).collect();
+    let mut values: Vec<(String, bool)> = (0..problem.atoms.len())
+        .filter(|&i| query_preds.contains(&problem.atoms[i].predicate))
+        .map(|i| {
+            (
+                problem.atom_name(program, i),
+                assignment.get(i).copied().unwrap_or(false),
+            )
+        })
+        .collect();
+    values.sort();
+    values
 }
 
 /// A benchmark problem of the thesis that [`benchmark_problem`] generates.

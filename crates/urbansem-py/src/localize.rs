@@ -1,0 +1,8 @@
+//! The localize bindings (see the package's docs).
+
+use pyo3::prelude::*;
+
+/// Adds the localize bindings to the module.
+pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+    Ok(())
+}

@@ -1,0 +1,99 @@
+//! `mln.infer`: MAP inference on a Markov logic network from its files, returning every
+//! query atom's value and the report `urbansem mln infer --json` prints.
+
+use crate::error::raise;
+use mln::files::{load_and_ground, query_values, InferReport, ProblemFiles, QuerySource};
+use mln::infer::{map_inference, InferOptions, Method, Representation};
+use pbo::quadratize::Quadratizer;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Adds the mln functions to the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(mln_infer, m)?)
+}
+
+/// MAP inference: `(values, report)`, values mapping each query atom (as written in
+/// evidence files) to 0 or 1, report the dict of `urbansem mln infer --json`.
+#[pyfunction]
+#[pyo3(name = "mln_infer", signature = (program, evidence, queries = None, *, query_file = None,
+    method = "qpbo", quadratize = "asm", representation = "auto", probe = false, improve = 0,
+    tabu = 20_000, polish = 0, flips = 1_000_000, chains = 2, seed = 0))]
+#[allow(clippy::too_many_arguments)]
+fn mln_infer<'py>(
+    py: Python<'py>,
+    program: PathBuf,
+    evidence: Vec<PathBuf>,
+    queries: Option<Vec<String>>,
+    query_file: Option<PathBuf>,
+    method: &str,
+    quadratize: &str,
+    representation: &str,
+    probe: bool,
+    improve: usize,
+    tabu: usize,
+    polish: usize,
+    flips: usize,
+    chains: usize,
+    seed: u64,
+) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
+    let query = match (queries, query_file) {
+        (Some(_), Some(_)) => {
+            return Err(PyValueError::new_err(
+                "give the query as predicates or as a query file, not both",
+            ))
+        }
+        (Some(list), None) => QuerySource::Predicates(list.join(",")),
+        (None, Some(f)) => QuerySource::File(f),
+        (None, None) => {
+            return Err(PyValueError::new_err(
+                "no query: give query predicates or query_file",
+            ))
+        }
+    };
+    let method: Method = method.parse().map_err(PyValueError::new_err)?;
+    let quadratizer: Quadratizer = quadratize.parse().map_err(PyValueError::new_err)?;
+    let representation: Representation = representation.parse().map_err(PyValueError::new_err)?;
+    let mut options = InferOptions {
+        method,
+        quadratizer,
+        representation,
+        probe,
+        improve_rounds: improve,
+        polish_flips: polish,
+        tabu_moves: tabu,
+        ..InferOptions::default()
+    };
+    options.walksat.seed = seed;
+    options.walksat.max_flips = flips;
+    options.walksat.chains = chains;
+    let files = ProblemFiles {
+        program: program.clone(),
+        evidence,
+        query,
+    };
+    let (values, report) = py
+        .detach(|| {
+            let t0 = Instant::now();
+            let loaded = load_and_ground(&files)?;
+            let r = map_inference(&loaded.problem, &options);
+            let report =
+                InferReport::new(&loaded, &program, &options, &r, t0.elapsed().as_secs_f64());
+            let values = query_values(
+                &loaded.program,
+                &loaded.problem,
+                &loaded.query,
+                &r.assignment,
+            );
+            Ok::<_, mln::files::FilesError>((values, report))
+        })
+        .map_err(raise!(MlnError))?;
+    let d = PyDict::new(py);
+    for (atom, value) in values {
+        d.set_item(atom, u8::from(value))?;
+    }
+    Ok((d, pythonize::pythonize(py, &report)?))
+}

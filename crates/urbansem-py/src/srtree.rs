@@ -1,0 +1,8 @@
+//! The srtree bindings (see the package's docs).
+
+use pyo3::prelude::*;
+
+/// Adds the srtree bindings to the module.
+pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+    Ok(())
+}

@@ -1,0 +1,42 @@
+"""urbansem: semantic maps for robots in cities.
+
+A thin Python layer over the urbansem Rust libraries: point clouds and ROS 2 bags as NumPy
+arrays, OpenStreetMap maps, the semantic R-tree map, global localization on building
+outlines, street geometry, Markov logic and pseudo-Boolean optimization. Long calls release
+the GIL; errors are :class:`UrbansemError` subclasses carrying the Rust message.
+"""
+
+from . import mln, pbo
+from ._urbansem import (
+    CloudError,
+    LocalizeError,
+    MapError,
+    MlnError,
+    OsmError,
+    OsmMap,
+    PboError,
+    StreetsError,
+    UrbansemError,
+    __version__,
+    bag_topics,
+    read_cloud,
+    write_cloud,
+)
+
+__all__ = [
+    "CloudError",
+    "LocalizeError",
+    "MapError",
+    "MlnError",
+    "OsmError",
+    "OsmMap",
+    "PboError",
+    "StreetsError",
+    "UrbansemError",
+    "__version__",
+    "bag_topics",
+    "mln",
+    "pbo",
+    "read_cloud",
+    "write_cloud",
+]

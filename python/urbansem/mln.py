@@ -1,0 +1,72 @@
+"""Markov logic networks: MAP inference from Alchemy/Tuffy-style files.
+
+    >>> from urbansem import mln
+    >>> values = mln.infer("prog.mln", ["evidence.db"], ["Smokes", "Cancer"])
+    >>> values["Smokes(Anna)"]
+    1
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Dict, Optional, Sequence, Tuple, Union
+
+from ._urbansem import mln_infer as _infer
+
+__all__ = ["infer", "infer_report"]
+
+PathLike = Union[str, os.PathLike]
+
+
+def infer_report(
+    program: PathLike,
+    evidence: Sequence[PathLike] = (),
+    queries: Optional[Union[str, Sequence[str]]] = None,
+    *,
+    query_file: Optional[PathLike] = None,
+    method: str = "qpbo",
+    quadratize: str = "asm",
+    representation: str = "auto",
+    probe: bool = False,
+    improve: int = 0,
+    tabu: int = 20_000,
+    polish: int = 0,
+    flips: int = 1_000_000,
+    chains: int = 2,
+    seed: int = 0,
+) -> Tuple[Dict[str, int], Dict[str, Any]]:
+    """MAP inference: ``(values, report)``.
+
+    ``values`` maps every ground atom of the query predicates (written as in evidence files,
+    e.g. ``"Smokes(Anna)"``) to 0 or 1; ``report`` is the dict ``urbansem mln infer --json``
+    prints (cost, lower bound, ground size, seconds). The options are the CLI's:
+    ``method`` is ``qpbo``, ``maxwalksat`` or ``maxwalksat-monomials``.
+    """
+    if isinstance(queries, str):
+        queries = [q.strip() for q in queries.split(",") if q.strip()]
+    return _infer(
+        os.fspath(program),
+        [os.fspath(e) for e in evidence],
+        list(queries) if queries is not None else None,
+        query_file=os.fspath(query_file) if query_file is not None else None,
+        method=method,
+        quadratize=quadratize,
+        representation=representation,
+        probe=probe,
+        improve=improve,
+        tabu=tabu,
+        polish=polish,
+        flips=flips,
+        chains=chains,
+        seed=seed,
+    )
+
+
+def infer(
+    program: PathLike,
+    evidence: Sequence[PathLike] = (),
+    queries: Optional[Union[str, Sequence[str]]] = None,
+    **options: Any,
+) -> Dict[str, int]:
+    """MAP inference: each query atom → 0 or 1 (see :func:`infer_report` for the options)."""
+    return infer_report(program, evidence, queries, **options)[0]
