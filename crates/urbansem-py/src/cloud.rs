@@ -2,12 +2,14 @@
 //! KITTI `.bin`, ROS 2 bags) as a dict of NumPy arrays.
 
 use crate::arrays::{rows, to_array, to_rows, values};
-use crate::error::raise;
+use crate::error::{raise, CloudError};
+use geodata::cloud::kitti::read_label_file;
 use geodata::cloud::mcap::{bag_info, read_bag_cloud};
 use geodata::cloud::{
     read_cloud_with, write_cloud_with, Encoding, Format, PointCloud, Precision, ReadOptions,
     WriteOptions,
 };
+use geodata::datasets::LabelSet;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -44,16 +46,32 @@ pub fn cloud_to_dict<'py>(py: Python<'py>, cloud: PointCloud) -> PyResult<Bound<
     Ok(d)
 }
 
-/// Reads a point cloud file (format from the extension) into a dict of arrays.
+/// Reads a point cloud file (format from the extension) into a dict of arrays; `labels` is a
+/// per-point uint32 label file, its ids mapped to urbansem classes by `label_set`.
 #[pyfunction]
-#[pyo3(signature = (path, *, drop_non_finite = false, topic = None, index = 0))]
+#[pyo3(signature = (path, *, drop_non_finite = false, topic = None, index = 0, labels = None,
+    label_set = None))]
 fn read_cloud(
     py: Python<'_>,
     path: PathBuf,
     drop_non_finite: bool,
     topic: Option<String>,
     index: usize,
+    labels: Option<PathBuf>,
+    label_set: Option<String>,
 ) -> PyResult<Bound<'_, PyDict>> {
+    let label_set = label_set
+        .map(|name| {
+            LabelSet::from_name(&name).ok_or_else(|| {
+                PyValueError::new_err(format!("unknown label_set {name:?}; use mcd or kitti360"))
+            })
+        })
+        .transpose()?;
+    if label_set.is_some() && labels.is_none() {
+        return Err(PyValueError::new_err(
+            "label_set names the ids of a label file: give labels too",
+        ));
+    }
     let options = ReadOptions { drop_non_finite };
     let is_bag = Format::from_path(&path).ok() == Some(Format::Mcap);
     if !is_bag && (topic.is_some() || index != 0) {
@@ -62,7 +80,7 @@ fn read_cloud(
             path.display()
         )));
     }
-    let (cloud, _) = py
+    let (mut cloud, report) = py
         .detach(|| {
             if is_bag {
                 read_bag_cloud(&path, topic.as_deref(), index, &options)
@@ -71,6 +89,23 @@ fn read_cloud(
             }
         })
         .map_err(raise!(CloudError))?;
+    if let Some(label_path) = labels {
+        if report.dropped_non_finite > 0 {
+            return Err(CloudError::new_err(format!(
+                "cannot attach {} to {}: {} points were dropped, so labels no longer line up",
+                label_path.display(),
+                path.display(),
+                report.dropped_non_finite
+            )));
+        }
+        let raw = py
+            .detach(|| read_label_file(&label_path, Some(cloud.len())))
+            .map_err(raise!(CloudError))?;
+        match label_set {
+            Some(set) => set.attach(&mut cloud, raw),
+            None => cloud.raw_label = Some(raw),
+        }
+    }
     cloud_to_dict(py, cloud)
 }
 
@@ -135,9 +170,11 @@ fn write_cloud(
         "binary" | "binary_little_endian" => Encoding::BinaryLittleEndian,
         "binary_big_endian" => Encoding::BinaryBigEndian,
         "binary_compressed" => Encoding::BinaryCompressed,
-        other => return Err(PyValueError::new_err(format!(
+        other => {
+            return Err(PyValueError::new_err(format!(
             "unknown encoding {other:?}: use ascii, binary, binary_big_endian or binary_compressed"
-        ))),
+        )))
+        }
     };
     let cloud = cloud_from_arrays(
         &xyz,
