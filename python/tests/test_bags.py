@@ -1,0 +1,117 @@
+"""ROS 2 bags written by another library (the `mcap` and `mcap-ros2-support` Python packages)
+read by urbansem exactly as the scans they were made from."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import urbansem
+from conftest import kitti_scans
+
+mcap_ros2_writer = pytest.importorskip(
+    "mcap_ros2.writer", reason="pip install mcap mcap-ros2-support (.ci/run installs them)"
+)
+from mcap.writer import CompressionType  # noqa: E402
+
+POINT_CLOUD2 = """std_msgs/Header header
+uint32 height
+uint32 width
+PointField[] fields
+bool    is_bigendian
+uint32  point_step
+uint32  row_step
+uint8[] data
+bool is_dense
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: sensor_msgs/PointField
+uint8 INT8    = 1
+uint8 UINT8   = 2
+uint8 INT16   = 3
+uint8 UINT16  = 4
+uint8 INT32   = 5
+uint8 UINT32  = 6
+uint8 FLOAT32 = 7
+uint8 FLOAT64 = 8
+string name
+uint32 offset
+uint8  datatype
+uint32 count
+"""
+
+FLOAT32, FLOAT64, UINT16 = 7, 8, 4
+
+
+def message(points: np.ndarray, fields, stamp: int):
+    """A PointCloud2 dict of a structured array `points`."""
+    return {
+        "header": {"stamp": {"sec": stamp, "nanosec": 0}, "frame_id": "velodyne"},
+        "height": 1,
+        "width": len(points),
+        "fields": [
+            {"name": n, "offset": o, "datatype": t, "count": 1} for n, o, t in fields
+        ],
+        "is_bigendian": False,
+        "point_step": points.dtype.itemsize,
+        "row_step": points.dtype.itemsize * len(points),
+        "data": points.tobytes(),
+        "is_dense": True,
+    }
+
+
+def kitti_layout(raw: np.ndarray):
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
+    pts = np.zeros(len(raw), dtype)
+    for i, n in enumerate(("x", "y", "z", "intensity")):
+        pts[n] = raw[:, i]
+    return pts, [("x", 0, FLOAT32), ("y", 4, FLOAT32), ("z", 8, FLOAT32), ("intensity", 12, FLOAT32)]
+
+
+def ouster_layout(raw: np.ndarray):
+    # float64 positions, uint16 ring, 6 bytes of padding: another driver's layout.
+    dtype = np.dtype(
+        {"names": ["x", "y", "z", "ring"], "formats": ["<f8", "<f8", "<f8", "<u2"],
+         "offsets": [0, 8, 16, 24], "itemsize": 32}
+    )
+    pts = np.zeros(len(raw), dtype)
+    for i, n in enumerate(("x", "y", "z")):
+        pts[n] = raw[:, i].astype(np.float64)
+    pts["ring"] = np.arange(len(raw)) % 64
+    return pts, [("x", 0, FLOAT64), ("y", 8, FLOAT64), ("z", 16, FLOAT64), ("ring", 24, UINT16)]
+
+
+@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD, CompressionType.LZ4])
+@pytest.mark.parametrize("layout", [kitti_layout, ouster_layout])
+def test_bag_from_python_reads_as_the_scans(data: Path, tmp_path: Path, compression, layout) -> None:
+    scans = kitti_scans(data)[:3]
+    bag = tmp_path / "drive.mcap"
+    with open(bag, "wb") as f:
+        w = mcap_ros2_writer.Writer(f, compression=compression, chunk_size=256 * 1024)
+        schema = w.register_msgdef("sensor_msgs/msg/PointCloud2", POINT_CLOUD2)
+        for i, scan in enumerate(scans):
+            raw = np.fromfile(scan, dtype=np.float32).reshape(-1, 4)
+            pts, fields = layout(raw)
+            t = (1_000 + i) * 10**9
+            w.write_message("/points", schema, message(pts, fields, 1_000 + i), log_time=t, publish_time=t)
+        w.finish()
+    info = urbansem.bag_topics(bag)
+    topics = {t["topic"]: t for t in info["topics"]}
+    assert topics["/points"]["messages"] == len(scans)
+    for i, scan in enumerate(scans):
+        want = urbansem.read_cloud(scan)
+        got = urbansem.read_cloud(bag, topic="/points", index=i)
+        assert np.array_equal(got["xyz"], want["xyz"])
+        if layout is kitti_layout:
+            assert np.array_equal(got["intensity"], want["intensity"])
+    with pytest.raises(urbansem.CloudError, match="index|message"):
+        urbansem.read_cloud(bag, topic="/points", index=len(scans))
