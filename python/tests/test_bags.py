@@ -115,3 +115,90 @@ def test_bag_from_python_reads_as_the_scans(data: Path, tmp_path: Path, compress
             assert np.array_equal(got["intensity"], want["intensity"])
     with pytest.raises(urbansem.CloudError, match="index|message"):
         urbansem.read_cloud(bag, topic="/points", index=len(scans))
+
+
+ODOMETRY = """std_msgs/Header header
+string child_frame_id
+geometry_msgs/PoseWithCovariance pose
+geometry_msgs/TwistWithCovariance twist
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: geometry_msgs/PoseWithCovariance
+Pose pose
+float64[36] covariance
+================================================================================
+MSG: geometry_msgs/Pose
+Point position
+Quaternion orientation
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x 0
+float64 y 0
+float64 z 0
+float64 w 1
+================================================================================
+MSG: geometry_msgs/TwistWithCovariance
+Twist twist
+float64[36] covariance
+================================================================================
+MSG: geometry_msgs/Twist
+Vector3  linear
+Vector3  angular
+================================================================================
+MSG: geometry_msgs/Vector3
+float64 x
+float64 y
+float64 z
+"""
+
+
+def test_odometry_and_time_pick_from_a_python_bag(data: Path, tmp_path: Path) -> None:
+    scans = kitti_scans(data)[:3]
+    bag = tmp_path / "odom.mcap"
+    yaws = [0.0, 0.3, -1.2]
+    with open(bag, "wb") as f:
+        w = mcap_ros2_writer.Writer(f)
+        cloud_schema = w.register_msgdef("sensor_msgs/msg/PointCloud2", POINT_CLOUD2)
+        odom_schema = w.register_msgdef("nav_msgs/msg/Odometry", ODOMETRY)
+        for i, scan in enumerate(scans):
+            t = (1_000 + i) * 10**9
+            raw = np.fromfile(scan, dtype=np.float32).reshape(-1, 4)
+            pts, fields = kitti_layout(raw)
+            w.write_message("/points", cloud_schema, message(pts, fields, 1_000 + i), log_time=t, publish_time=t)
+            odom = {
+                "header": {"stamp": {"sec": 1_000 + i, "nanosec": 500}, "frame_id": "odom"},
+                "child_frame_id": "base_link",
+                "pose": {
+                    "pose": {
+                        "position": {"x": 2.0 * i, "y": -1.0, "z": 0.5},
+                        "orientation": {"x": 0.0, "y": 0.0, "z": np.sin(yaws[i] / 2), "w": np.cos(yaws[i] / 2)},
+                    },
+                    "covariance": [0.0] * 36,
+                },
+                "twist": {"twist": {"linear": {"x": 0.0, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}, "covariance": [0.0] * 36},
+            }
+            w.write_message("/odom", odom_schema, odom, log_time=t + 1, publish_time=t + 1)
+        w.finish()
+    p = urbansem.bag_poses(bag, "/odom")
+    assert p["stamp_ns"].tolist() == [(1_000 + i) * 10**9 + 500 for i in range(3)]
+    assert np.allclose(p["translation"], [[2.0 * i, -1.0, 0.5] for i in range(3)])
+    assert np.allclose(p["yaw"], yaws)
+    assert p["child_frame_id"] == ["base_link"] * 3
+    got = urbansem.read_cloud(bag, topic="/points", time=1_001.4)
+    assert np.array_equal(got["xyz"], urbansem.read_cloud(scans[1])["xyz"])
+    with pytest.raises(urbansem.CloudError, match="holds no poses"):
+        urbansem.bag_poses(bag, "/points")
+    with pytest.raises(ValueError, match="not both"):
+        urbansem.read_cloud(bag, topic="/points", time=1.0, index=0)

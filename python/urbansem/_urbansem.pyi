@@ -41,12 +41,21 @@ class StreetsError(UrbansemError):
 # --- point clouds -----------------------------------------------------------------------
 
 def read_cloud(
-    path: _Path, *, drop_non_finite: bool = False, topic: Optional[str] = None, index: int = 0
+    path: _Path,
+    *,
+    drop_non_finite: bool = False,
+    topic: Optional[str] = None,
+    index: Optional[int] = None,
+    time: Optional[float] = None,
+    labels: Optional[_Path] = None,
+    label_set: Optional[str] = None,
 ) -> Dict[str, np.ndarray]:
     """Reads a point cloud (.ply, .pcd, .las, .laz, KITTI .bin, or one PointCloud2 message of a
-    ROS 2 .mcap bag) as a dict: ``xyz`` (n, 3) float64 and the columns the file has
-    (``intensity`` float32, ``rgb`` (n, 3) uint8, ``label`` uint8, ``raw_label`` uint32,
-    ``object`` uint32)."""
+    ROS 2 .mcap bag, chosen by ``topic`` and ``index`` or by ``time`` in seconds since the
+    epoch) as a dict: ``xyz`` (n, 3) float64 and the columns the file has (``intensity``
+    float32, ``rgb`` (n, 3) uint8, ``label`` uint8, ``raw_label`` uint32, ``object`` uint32).
+    ``labels`` attaches a per-point uint32 label file; ``label_set`` (``mcd``, ``kitti360``)
+    maps its ids to urbansem classes in ``label``."""
 
 def write_cloud(
     path: _Path,
@@ -66,6 +75,11 @@ def write_cloud(
 
 def bag_topics(path: _Path) -> Dict[str, Any]:
     """A ROS 2 bag's topics, message counts and point fields (``urbansem cloud info --json``)."""
+
+def bag_poses(path: _Path, topic: str, *, child_frame: Optional[str] = None) -> Dict[str, Any]:
+    """Every pose on an Odometry, PoseStamped or TF topic: ``stamp_ns``, ``log_time_ns``,
+    ``translation`` (n, 3), ``rotation`` (n, 4) ``[x, y, z, w]``, ``yaw`` (n,), ``frame_id``,
+    ``child_frame_id``; ``child_frame`` keeps one child frame of a TF topic."""
 
 # --- OpenStreetMap ----------------------------------------------------------------------
 

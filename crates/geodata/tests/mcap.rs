@@ -6,7 +6,10 @@
 
 use geodata::cloud::error::MessageProblem;
 use geodata::cloud::kitti::read_kitti_bin;
-use geodata::cloud::mcap::{bag_info, read_bag_cloud, POINT_CLOUD2};
+use geodata::cloud::mcap::{
+    bag_info, read_bag_cloud, read_bag_cloud_at, read_bag_poses, Pick, ODOMETRY, POINT_CLOUD2,
+    TF_MESSAGE,
+};
 use geodata::cloud::{
     read_cloud, read_cloud_with, CloudError, Columns, PointCloud, PointRecord, Precision,
     ReadOptions,
@@ -192,6 +195,28 @@ impl Cdr {
         self.u32(s.len() as u32 + 1);
         self.buf.extend_from_slice(s.as_bytes());
         self.buf.push(0);
+    }
+    fn f64(&mut self, v: f64) {
+        self.align(8);
+        let b = if self.big_endian {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        };
+        self.buf.extend_from_slice(&b);
+    }
+    fn header(&mut self, stamp_s: u32, frame: &str) {
+        self.u32(stamp_s);
+        self.u32(0);
+        self.string(frame);
+    }
+    fn pose(&mut self, xyz: [f64; 3], yaw: f64) {
+        for v in xyz {
+            self.f64(v);
+        }
+        for v in [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()] {
+            self.f64(v);
+        }
     }
 }
 
@@ -761,4 +786,147 @@ fn malformed_point_cloud_messages_are_clear_errors() {
     );
     let e = bag_info(&dir.join("huge.mcap")).unwrap_err();
     assert!(matches!(e, CloudError::BadMessage { .. }), "{e}");
+}
+
+/// An Odometry message (`odom` → `base_link`) at `stamp_s` seconds, big- or little-endian CDR.
+fn encode_odometry(stamp_s: u32, xyz: [f64; 3], yaw: f64, big_endian: bool) -> Vec<u8> {
+    let mut w = Cdr::new(big_endian);
+    w.header(stamp_s, "odom");
+    w.string("base_link");
+    w.pose(xyz, yaw);
+    for _ in 0..36 {
+        w.f64(0.01); // pose covariance
+    }
+    for _ in 0..(6 + 36) {
+        w.f64(0.0); // twist and its covariance
+    }
+    w.buf
+}
+
+/// A TFMessage with `odom → base_link` and `base_link → velodyne`.
+fn encode_tf(stamp_s: u32, x: f64) -> Vec<u8> {
+    let mut w = Cdr::new(false);
+    w.u32(2);
+    w.header(stamp_s, "odom");
+    w.string("base_link");
+    w.pose([x, 0.0, 0.0], 0.25);
+    w.header(stamp_s, "base_link");
+    w.string("velodyne");
+    w.pose([0.0, 0.0, 1.73], 0.0);
+    w.buf
+}
+
+#[test]
+fn poses_from_odometry_and_tf_and_clouds_picked_by_time() {
+    let dir = tmp_dir("poses");
+    let scans = [
+        kitti360_scan(2000),
+        kitti360_scan(2040),
+        kitti360_scan(2080),
+    ];
+    let mut messages = Vec::new();
+    for (i, scan) in scans.iter().enumerate() {
+        messages.push(Message {
+            topic: "/velodyne_points",
+            schema: POINT_CLOUD2,
+            data: encode(scan, &kitti_layout(), None),
+        });
+        messages.push(Message {
+            topic: "/odom",
+            schema: ODOMETRY,
+            data: encode_odometry(
+                100 + i as u32,
+                [i as f64 * 2.0, 1.0, 0.0],
+                0.1 * i as f64,
+                i == 1,
+            ),
+        });
+        messages.push(Message {
+            topic: "/tf",
+            schema: TF_MESSAGE,
+            data: encode_tf(100 + i as u32, i as f64),
+        });
+    }
+    let bag = dir.join("drive.mcap");
+    write_bag(&bag, &messages, Some(Compression::Zstd));
+
+    let odom = read_bag_poses(&bag, "/odom", None).unwrap();
+    assert_eq!(odom.len(), 3);
+    for (i, p) in odom.iter().enumerate() {
+        assert_eq!(p.stamp_ns, (100 + i as i64) * 1_000_000_000);
+        assert_eq!(p.log_time_ns, 1_000 + 3 * i as u64 + 1);
+        assert_eq!(p.translation, [i as f64 * 2.0, 1.0, 0.0]);
+        assert!(
+            (p.yaw() - 0.1 * i as f64).abs() < 1e-12,
+            "big-endian message {i}"
+        );
+        assert_eq!(
+            (p.frame_id.as_str(), p.child_frame_id.as_str()),
+            ("odom", "base_link")
+        );
+    }
+    let tf = read_bag_poses(&bag, "/tf", None).unwrap();
+    assert_eq!(tf.len(), 6);
+    let base = read_bag_poses(&bag, "/tf", Some("base_link")).unwrap();
+    assert_eq!(base.len(), 3);
+    assert!(base
+        .iter()
+        .enumerate()
+        .all(|(i, p)| p.translation[0] == i as f64));
+
+    // Log times of the clouds are 1000, 1003, 1006: each time picks the nearest.
+    for (at, want) in [
+        (0, 0),
+        (1_001, 0),
+        (1_002, 1),
+        (1_004, 1),
+        (1_005, 2),
+        (u64::MAX, 2),
+    ] {
+        let (c, _) = read_bag_cloud_at(
+            &bag,
+            Some("/velodyne_points"),
+            Pick::Time(at),
+            &ReadOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(c.positions, scans[want].positions, "time {at}");
+    }
+    let (c, _) = read_bag_cloud_at(&bag, None, Pick::Index(2), &ReadOptions::default()).unwrap();
+    assert_eq!(c.positions, scans[2].positions);
+
+    // Wrong topics name the pose topics; clouds are not poses and poses not clouds.
+    for (topic, what) in [
+        ("/nope", "no topic"),
+        ("/velodyne_points", "holds no poses"),
+    ] {
+        let e = read_bag_poses(&bag, topic, None).unwrap_err().to_string();
+        assert!(
+            e.contains(what) && e.contains("/odom, /tf") && e.contains("drive.mcap"),
+            "{e}"
+        );
+    }
+    let e = read_bag_cloud(&bag, Some("/odom"), 0, &ReadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains(ODOMETRY), "{e}");
+
+    // A truncated odometry message is an error naming the topic and message.
+    let mut short = encode_odometry(1, [0.0; 3], 0.0, false);
+    short.truncate(40);
+    let broken = dir.join("broken.mcap");
+    write_bag(
+        &broken,
+        &[Message {
+            topic: "/odom",
+            schema: ODOMETRY,
+            data: short,
+        }],
+        None,
+    );
+    let e = read_bag_poses(&broken, "/odom", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("broken.mcap") && e.contains("/odom") && e.contains("ends inside"),
+        "{e}"
+    );
 }

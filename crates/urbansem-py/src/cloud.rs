@@ -4,7 +4,7 @@
 use crate::arrays::{rows, to_array, to_rows, values};
 use crate::error::{raise, CloudError};
 use geodata::cloud::kitti::read_label_file;
-use geodata::cloud::mcap::{bag_info, read_bag_cloud};
+use geodata::cloud::mcap::{bag_info, read_bag_cloud_at, read_bag_poses, Pick};
 use geodata::cloud::{
     read_cloud_with, write_cloud_with, Encoding, Format, PointCloud, Precision, ReadOptions,
     WriteOptions,
@@ -21,6 +21,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(write_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(bag_topics, m)?)?;
+    m.add_function(wrap_pyfunction!(bag_poses, m)?)?;
     Ok(())
 }
 
@@ -49,14 +50,16 @@ pub fn cloud_to_dict<'py>(py: Python<'py>, cloud: PointCloud) -> PyResult<Bound<
 /// Reads a point cloud file (format from the extension) into a dict of arrays; `labels` is a
 /// per-point uint32 label file, its ids mapped to urbansem classes by `label_set`.
 #[pyfunction]
-#[pyo3(signature = (path, *, drop_non_finite = false, topic = None, index = 0, labels = None,
-    label_set = None))]
+#[pyo3(signature = (path, *, drop_non_finite = false, topic = None, index = None, time = None,
+    labels = None, label_set = None))]
+#[allow(clippy::too_many_arguments)]
 fn read_cloud(
     py: Python<'_>,
     path: PathBuf,
     drop_non_finite: bool,
     topic: Option<String>,
-    index: usize,
+    index: Option<usize>,
+    time: Option<f64>,
     labels: Option<PathBuf>,
     label_set: Option<String>,
 ) -> PyResult<Bound<'_, PyDict>> {
@@ -74,16 +77,30 @@ fn read_cloud(
     }
     let options = ReadOptions { drop_non_finite };
     let is_bag = Format::from_path(&path).ok() == Some(Format::Mcap);
-    if !is_bag && (topic.is_some() || index != 0) {
+    if !is_bag && (topic.is_some() || index.is_some() || time.is_some()) {
         return Err(PyValueError::new_err(format!(
-            "topic and index select a message of a ROS 2 bag (.mcap); {} is not one",
+            "topic, index and time select a message of a ROS 2 bag (.mcap); {} is not one",
             path.display()
         )));
     }
+    let pick = match (index, time) {
+        (Some(_), Some(_)) => {
+            return Err(PyValueError::new_err(
+                "give index or time, not both: each picks one message",
+            ))
+        }
+        (_, Some(t)) if !(t.is_finite() && t >= 0.0) => {
+            return Err(PyValueError::new_err(format!(
+                "time {t} is not a time in seconds since the epoch"
+            )))
+        }
+        (_, Some(t)) => Pick::Time((t * 1e9).round() as u64),
+        (index, None) => Pick::Index(index.unwrap_or(0)),
+    };
     let (mut cloud, report) = py
         .detach(|| {
             if is_bag {
-                read_bag_cloud(&path, topic.as_deref(), index, &options)
+                read_bag_cloud_at(&path, topic.as_deref(), pick, &options)
             } else {
                 read_cloud_with(&path, &options)
             }
@@ -114,6 +131,52 @@ fn read_cloud(
 fn bag_topics(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAny>> {
     let info = py.detach(|| bag_info(&path)).map_err(raise!(CloudError))?;
     Ok(pythonize::pythonize(py, &info)?)
+}
+
+/// Every pose on a bag's Odometry, PoseStamped or TF topic as a dict of arrays: `stamp_ns`
+/// (n,) int64, `log_time_ns` (n,) uint64, `translation` (n, 3), `rotation` (n, 4) `[x, y, z,
+/// w]`, `yaw` (n,), `frame_id` and `child_frame_id` lists.
+#[pyfunction]
+#[pyo3(signature = (path, topic, *, child_frame = None))]
+fn bag_poses<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    topic: String,
+    child_frame: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let poses = py
+        .detach(|| read_bag_poses(&path, &topic, child_frame.as_deref()))
+        .map_err(raise!(CloudError))?;
+    let d = PyDict::new(py);
+    d.set_item(
+        "stamp_ns",
+        to_array(py, poses.iter().map(|p| p.stamp_ns).collect()),
+    )?;
+    d.set_item(
+        "log_time_ns",
+        to_array(py, poses.iter().map(|p| p.log_time_ns).collect()),
+    )?;
+    d.set_item(
+        "translation",
+        to_rows(py, poses.iter().map(|p| p.translation).collect()),
+    )?;
+    d.set_item(
+        "rotation",
+        to_rows(py, poses.iter().map(|p| p.rotation).collect()),
+    )?;
+    d.set_item("yaw", to_array(py, poses.iter().map(|p| p.yaw()).collect()))?;
+    d.set_item(
+        "frame_id",
+        poses.iter().map(|p| p.frame_id.clone()).collect::<Vec<_>>(),
+    )?;
+    d.set_item(
+        "child_frame_id",
+        poses
+            .into_iter()
+            .map(|p| p.child_frame_id)
+            .collect::<Vec<_>>(),
+    )?;
+    Ok(d)
 }
 
 /// A cloud from arrays: `xyz` (n, 3) float64 plus optional columns of n values each.

@@ -168,6 +168,16 @@ pub enum CloudError {
         /// Its message encoding.
         encoding: String,
     },
+    /// A topic read as poses is missing or is not Odometry, PoseStamped or TFMessage in CDR.
+    #[error("{path}: {problem}; pose topics (nav_msgs/msg/Odometry, geometry_msgs/msg/PoseStamped, tf2_msgs/msg/TFMessage) in this bag: {}", list_or_none(.pose_topics))]
+    PoseTopic {
+        /// The bag.
+        path: PathBuf,
+        /// What is wrong with the topic.
+        problem: String,
+        /// The bag's pose topics.
+        pose_topics: Vec<String>,
+    },
     /// A topic has fewer messages than the index asked for.
     #[error("{path}: topic {topic} has {messages} messages, so there is no message {index} (indices start at 0)")]
     NoMessage {

@@ -4,7 +4,7 @@ use anyhow::{bail, Context};
 use clap::Subcommand;
 use geodata::cloud::info::CloudInfo;
 use geodata::cloud::kitti::read_label_file;
-use geodata::cloud::mcap::{bag_info, read_bag_cloud};
+use geodata::cloud::mcap::{bag_info, read_bag_cloud_at, Pick};
 use geodata::cloud::{
     read_cloud_with, write_cloud_with, Encoding, Format, ReadOptions, WriteOptions,
 };
@@ -57,8 +57,11 @@ pub enum CloudCommand {
         #[arg(long)]
         topic: Option<String>,
         /// Which message of the topic to read, 0-based in file order (.mcap input only; default 0).
-        #[arg(long)]
+        #[arg(long, conflicts_with = "time")]
         index: Option<usize>,
+        /// Read the message logged nearest to this time, seconds since the epoch (.mcap input only).
+        #[arg(long, value_name = "SECONDS")]
+        time: Option<f64>,
     },
 }
 
@@ -81,6 +84,7 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
             drop_non_finite,
             topic,
             index,
+            time,
         } => {
             let encoding = if ascii {
                 Encoding::Ascii
@@ -92,13 +96,20 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
                 Encoding::BinaryLittleEndian
             };
             let is_bag = Format::from_path(&input).ok() == Some(Format::Mcap);
-            if !is_bag && (topic.is_some() || index.is_some()) {
+            if !is_bag && (topic.is_some() || index.is_some() || time.is_some()) {
                 super::usage!(
-                    "--topic and --index select a message of a ROS 2 bag (.mcap); {} is not one",
+                    "--topic, --index and --time select a message of a ROS 2 bag (.mcap); {} is not one",
                     input.display()
                 );
             }
-            let message = is_bag.then(|| (topic.as_deref(), index.unwrap_or(0)));
+            let pick = match time {
+                Some(t) if !(t.is_finite() && t >= 0.0) => {
+                    super::usage!("--time {t} is not a time in seconds since the epoch")
+                }
+                Some(t) => Pick::Time((t * 1e9).round() as u64),
+                None => Pick::Index(index.unwrap_or(0)),
+            };
+            let message = is_bag.then_some((topic.as_deref(), pick));
             convert(
                 &input,
                 &output,
@@ -158,13 +169,13 @@ fn convert(
     labels: Option<&Path>,
     label_set: Option<&str>,
     drop_non_finite: bool,
-    bag_message: Option<(Option<&str>, usize)>,
+    bag_message: Option<(Option<&str>, Pick)>,
 ) -> anyhow::Result<()> {
     Format::from_path(output)?;
     let start = Instant::now();
     let options = ReadOptions { drop_non_finite };
     let (mut cloud, report) = match bag_message {
-        Some((topic, index)) => read_bag_cloud(input, topic, index, &options),
+        Some((topic, pick)) => read_bag_cloud_at(input, topic, pick, &options),
         None => read_cloud_with(input, &options),
     }
     .with_context(|| format!("reading point cloud {}", input.display()))?;

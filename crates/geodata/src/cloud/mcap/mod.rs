@@ -33,9 +33,12 @@
 //! match the data's length, so a header claiming 4 G points is a [`MessageProblem::DataLength`]
 //! error, not an allocation.
 
+mod cdr;
 mod point_cloud2;
+mod poses;
 
 pub use point_cloud2::{CloudLayout, PointFieldInfo};
+pub use poses::{BagPose, ODOMETRY, POSE_SCHEMAS, POSE_STAMPED, TF_MESSAGE};
 
 use super::error::MessageProblem;
 use super::{io_err, path_buf, CloudError, Location, PointCloud, ReadOptions, ReadReport, Result};
@@ -144,6 +147,8 @@ struct TopicScan {
     messages: usize,
     /// The bytes of the picked message, when the topic was wanted and has it.
     picked: Option<Vec<u8>>,
+    /// The picked message's number in the topic (0-based, file order).
+    picked_index: usize,
 }
 
 /// Largest record the MCAP reader may buffer: `RECORD_LIMIT_PER_BYTE` times the file's size,
@@ -155,14 +160,22 @@ const RECORD_LIMIT_MIN: u64 = 256 << 20;
 /// Bytes handed to the MCAP reader at a time.
 const READ_BLOCK: usize = 1 << 20;
 
-/// One pass over a bag: per topic, its schema, encoding and message count, and for each topic
-/// that `wanted(topic, schema)` accepts, the bytes of its message number `index`. With
-/// `stop_early` the pass ends as soon as one wanted message is picked.
+/// What [`scan`] does with one message.
+enum Visit {
+    /// Count it and go on.
+    Skip,
+    /// Keep its bytes as the topic's picked message (replacing an earlier one) and go on.
+    Keep,
+    /// Keep its bytes and end the pass.
+    KeepAndStop,
+}
+
+/// One pass over a bag: per topic, its schema, encoding and message count; `visit(topic,
+/// seen, log_time, bytes)` decides for each message (with `seen` its topic's state before
+/// it) whether it becomes the topic's picked message or ends the pass.
 fn scan(
     path: &Path,
-    wanted: impl Fn(&str, &str) -> bool,
-    index: usize,
-    stop_early: bool,
+    mut visit: impl FnMut(&str, &TopicScan, u64, &[u8]) -> Result<Visit>,
 ) -> Result<BTreeMap<String, TopicScan>> {
     use ::mcap::records::Record;
     use ::mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -212,6 +225,7 @@ fn scan(
                             encoding: c.message_encoding.clone(),
                             messages: 0,
                             picked: None,
+                            picked_index: 0,
                         });
                         channels.insert(c.id, c.topic);
                     }
@@ -222,12 +236,14 @@ fn scan(
                         let Some(t) = topics.get_mut(topic) else {
                             continue;
                         };
-                        if t.messages == index && wanted(topic, &t.schema) {
+                        let visit = visit(topic, t, header.log_time, &data[..])?;
+                        if matches!(visit, Visit::Keep | Visit::KeepAndStop) {
                             t.picked = Some(data.into_owned());
-                            if stop_early {
-                                t.messages += 1;
-                                return Ok(topics);
-                            }
+                            t.picked_index = t.messages;
+                        }
+                        if matches!(visit, Visit::KeepAndStop) {
+                            t.messages += 1;
+                            return Ok(topics);
                         }
                         t.messages += 1;
                     }
@@ -244,7 +260,13 @@ fn scan(
 pub fn bag_info(path: &Path) -> Result<BagInfo> {
     let bytes = std::fs::metadata(path).map_err(io_err(path))?.len();
     let topics = guarded(path, || {
-        scan(path, |_, schema| schema == POINT_CLOUD2, 0, false)
+        scan(path, |_, t, _, _| {
+            Ok(if t.messages == 0 && t.schema == POINT_CLOUD2 {
+                Visit::Keep
+            } else {
+                Visit::Skip
+            })
+        })
     })?;
     let mut out = Vec::new();
     for (topic, t) in topics {
@@ -277,6 +299,16 @@ pub fn bag_info(path: &Path) -> Result<BagInfo> {
     })
 }
 
+/// Which message of a topic to read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pick {
+    /// Message number `n` (0-based, in file order).
+    Index(usize),
+    /// The message whose log time is nearest to this time (nanoseconds since the epoch; the
+    /// earlier one on a tie).
+    Time(u64),
+}
+
 /// Reads message `index` (0-based, in file order) of a PointCloud2 `topic` of a bag as a
 /// cloud. Without a topic the bag must have exactly one PointCloud2 topic.
 ///
@@ -288,9 +320,43 @@ pub fn read_bag_cloud(
     index: usize,
     options: &ReadOptions,
 ) -> Result<(PointCloud, ReadReport)> {
-    let topics = guarded(path, || match topic {
-        Some(name) => scan(path, |t, _| t == name, index, true),
-        None => scan(path, |_, schema| schema == POINT_CLOUD2, index, false),
+    read_bag_cloud_at(path, topic, Pick::Index(index), options)
+}
+
+/// Reads one PointCloud2 message of a bag, chosen by number or by time, as a cloud (see
+/// [`read_bag_cloud`]). A pick by time reads the whole topic once.
+pub fn read_bag_cloud_at(
+    path: &Path,
+    topic: Option<&str>,
+    pick: Pick,
+    options: &ReadOptions,
+) -> Result<(PointCloud, ReadReport)> {
+    let mut best: HashMap<String, u64> = HashMap::new();
+    let topics = guarded(path, || {
+        scan(path, |name, t, log_time, _| {
+            let wanted = match topic {
+                Some(want) => name == want,
+                None => t.schema == POINT_CLOUD2,
+            };
+            if !wanted {
+                return Ok(Visit::Skip);
+            }
+            Ok(match pick {
+                Pick::Index(n) if t.messages == n && topic.is_some() => Visit::KeepAndStop,
+                Pick::Index(n) if t.messages == n => Visit::Keep,
+                Pick::Index(_) => Visit::Skip,
+                Pick::Time(at) => {
+                    let d = log_time.abs_diff(at);
+                    match best.get(name) {
+                        Some(&b) if b <= d => Visit::Skip,
+                        _ => {
+                            best.insert(name.to_owned(), d);
+                            Visit::Keep
+                        }
+                    }
+                }
+            })
+        })
     })?;
     let cloud_topics: Vec<String> = topics
         .iter()
@@ -330,10 +396,14 @@ pub fn read_bag_cloud(
         return Err(CloudError::NoMessage {
             path: path_buf(path),
             topic: name,
-            index,
+            index: match pick {
+                Pick::Index(n) => n,
+                Pick::Time(_) => 0,
+            },
             messages: t.messages,
         });
     };
+    let index = t.picked_index;
     let bad = |(offset, problem): (u64, MessageProblem)| CloudError::BadMessage {
         path: path_buf(path),
         topic: name.clone(),
@@ -360,5 +430,54 @@ fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
             at: Location::Byte(0),
             message: "the MCAP reader failed on this bag's records".into(),
         })
+    })
+}
+
+/// Every pose on a topic of a bag (Odometry, PoseStamped or TFMessage; see [`poses`]), in
+/// file order. With `child_frame`, only transforms of that child frame are kept (for `/tf`).
+pub fn read_bag_poses(path: &Path, topic: &str, child_frame: Option<&str>) -> Result<Vec<BagPose>> {
+    let mut out = Vec::new();
+    let topics = guarded(path, || {
+        scan(path, |name, t, log_time, bytes| {
+            if name != topic || t.encoding != CDR {
+                return Ok(Visit::Skip);
+            }
+            let poses =
+                poses::decode_poses(&t.schema, bytes, log_time).map_err(|(offset, problem)| {
+                    CloudError::BadMessage {
+                        path: path_buf(path),
+                        topic: name.to_owned(),
+                        index: t.messages,
+                        offset,
+                        problem: Box::new(problem),
+                    }
+                })?;
+            if let Some(poses) = poses {
+                out.extend(
+                    poses
+                        .into_iter()
+                        .filter(|p| child_frame.is_none_or(|c| p.child_frame_id == c)),
+                );
+            }
+            Ok(Visit::Skip)
+        })
+    })?;
+    let pose_topics: Vec<String> = topics
+        .iter()
+        .filter(|(_, t)| POSE_SCHEMAS.contains(&t.schema.as_str()))
+        .map(|(name, _)| name.clone())
+        .collect();
+    let problem = match topics.get(topic) {
+        None => format!("no topic {topic:?}"),
+        Some(t) if !POSE_SCHEMAS.contains(&t.schema.as_str()) || t.encoding != CDR => format!(
+            "topic {topic}: schema {:?} with encoding {:?} holds no poses",
+            t.schema, t.encoding
+        ),
+        Some(_) => return Ok(out),
+    };
+    Err(CloudError::PoseTopic {
+        path: path_buf(path),
+        problem,
+        pose_topics,
     })
 }

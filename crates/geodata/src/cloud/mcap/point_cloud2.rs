@@ -1,6 +1,7 @@
 //! Decoding `sensor_msgs/msg/PointCloud2` from its CDR bytes: the layout (size, point fields)
 //! checked against the data, then the points into a [`PointCloud`].
 
+use super::cdr::{Cdr, CdrResult};
 use crate::cloud::error::MessageProblem;
 use crate::cloud::ply::{assign, Role, Scalar};
 use crate::cloud::{Columns, Location, PointCloud, PointRecord};
@@ -66,98 +67,6 @@ pub(super) struct PointCloud2<'a> {
     data: &'a [u8],
     /// Byte offset of `data` within the message.
     data_offset: u64,
-}
-
-/// A cursor over CDR bytes; offsets count from the start of the message.
-struct Cdr<'a> {
-    /// The bytes after the 4-byte encapsulation header.
-    body: &'a [u8],
-    pos: usize,
-    big_endian: bool,
-}
-
-/// A decoding problem and the byte of the message where it was found.
-pub(super) type CdrResult<T> = std::result::Result<T, (u64, MessageProblem)>;
-
-impl<'a> Cdr<'a> {
-    /// Reads the encapsulation header of `message`.
-    fn new(message: &'a [u8]) -> CdrResult<Self> {
-        let Some((head, body)) = message.split_first_chunk::<4>() else {
-            return Err((
-                0,
-                MessageProblem::Truncated {
-                    field: "the encapsulation header",
-                    need: 4,
-                    left: message.len() as u64,
-                },
-            ));
-        };
-        let id = u16::from_be_bytes([head[0], head[1]]);
-        let big_endian = match id {
-            0 => true,
-            1 => false,
-            _ => return Err((0, MessageProblem::Encapsulation { id })),
-        };
-        Ok(Self {
-            body,
-            pos: 0,
-            big_endian,
-        })
-    }
-
-    /// Byte offset within the message of the cursor.
-    fn offset(&self) -> u64 {
-        self.pos as u64 + 4
-    }
-
-    /// `n` bytes aligned to `align`, advancing past them.
-    fn take(&mut self, n: usize, align: usize, field: &'static str) -> CdrResult<&'a [u8]> {
-        let start = self.pos.next_multiple_of(align);
-        let left = self.body.len().saturating_sub(start);
-        match self.body.get(start..).and_then(|b| b.get(..n)) {
-            Some(bytes) => {
-                self.pos = start + n;
-                Ok(bytes)
-            }
-            None => Err((
-                self.offset(),
-                MessageProblem::Truncated {
-                    field,
-                    need: n as u64,
-                    left: left as u64,
-                },
-            )),
-        }
-    }
-
-    fn u8(&mut self, field: &'static str) -> CdrResult<u8> {
-        Ok(self.take(1, 1, field)?.first().copied().unwrap_or(0))
-    }
-
-    fn u32(&mut self, field: &'static str) -> CdrResult<u32> {
-        let b = self.take(4, 4, field)?;
-        let a = [b[0], b[1], b[2], b[3]];
-        Ok(if self.big_endian {
-            u32::from_be_bytes(a)
-        } else {
-            u32::from_le_bytes(a)
-        })
-    }
-
-    /// A CDR string: u32 length including the NUL, the bytes, the NUL.
-    fn string(&mut self, field: &'static str) -> CdrResult<String> {
-        let len = self.u32(field)?;
-        let at = self.offset();
-        let bytes = self.take(len as usize, 1, field)?;
-        let text = match bytes.split_last() {
-            Some((0, text)) => std::str::from_utf8(text).ok(),
-            // A zero length is not CDR, but some writers emit it for the empty string.
-            None => Some(""),
-            Some(_) => None,
-        };
-        text.map(str::to_owned)
-            .ok_or((at, MessageProblem::BadString { field }))
-    }
 }
 
 /// Decodes the CDR bytes of a `sensor_msgs/msg/PointCloud2` message and checks that its
