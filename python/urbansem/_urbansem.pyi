@@ -164,6 +164,149 @@ def mln_infer(
 
 # --- semantic map (srtree) ----------------------------------------------------------------
 
+#: What every cell query of :class:`SemanticMap` returns, one row per cell in the query's
+#: order: ``centre`` (n, 3) float64 metres, ``label`` (n,) uint8 class id (see
+#: :meth:`SemanticMap.class_names`), ``object`` (n,) uint32 majority object id (0: none),
+#: ``hits`` (n,) uint32 points that fell in the cell, ``occupancy`` (n,) float64
+#: probability, ``rgb`` (n, 3) uint8 mean colour (128 grey without colours), ``counts``
+#: (n, 10) uint16 class histogram.
+Cells = Dict[str, np.ndarray]
+
+class SemanticMap:
+    """The semantic R-tree map: fixed-size occupancy cells kept where occupied (class
+    histogram, colour, object per cell) under an R-tree, the objects of the cells and the
+    spatial relation graph between them; saved as ``.srt`` files. Long calls release the
+    GIL; queries from several threads run in parallel."""
+
+    def __init__(
+        self,
+        resolution: float = 0.1,
+        *,
+        ray_casting: bool = False,
+        log_odds_hit: float = 0.85,
+        log_odds_miss: float = -0.4,
+        log_odds_min: float = -2.0,
+        log_odds_max: float = 3.5,
+        max_ray: float = 100.0,
+        dirichlet: Optional[Union[Dict[str, Any], _Path]] = None,
+    ) -> None:
+        """An empty map: ``resolution`` is the cell edge (m); ``ray_casting`` marks the
+        cells between a sensor origin and its points as free; ``dirichlet`` a label model
+        (dict or JSON file of ``urbansem map eval-labels --model-out``)."""
+    @staticmethod
+    def build(
+        xyz: npt.ArrayLike,
+        label: Optional[npt.ArrayLike] = None,
+        *,
+        rgb: Optional[npt.ArrayLike] = None,
+        object: Optional[npt.ArrayLike] = None,
+        sensor_origin: Optional[Sequence[float]] = None,
+        resolution: float = 0.1,
+        ray_casting: Optional[bool] = None,
+        dirichlet: Optional[Union[Dict[str, Any], _Path]] = None,
+        objects: bool = True,
+    ) -> "SemanticMap":
+        """A map of one cloud given as arrays (``xyz`` (n, 3), ``label`` class ids 0–9,
+        ``rgb`` (n, 3) uint8, ``object`` ids), with its objects, as ``urbansem map build``;
+        ray casting from ``sensor_origin`` unless ``ray_casting=False``."""
+    @staticmethod
+    def from_cloud(
+        path: _Path,
+        *,
+        labels: Optional[_Path] = None,
+        label_set: Optional[str] = None,
+        sensor_origin: Optional[Sequence[float]] = None,
+        resolution: float = 0.1,
+        ray_casting: Optional[bool] = None,
+        dirichlet: Optional[Union[Dict[str, Any], _Path]] = None,
+        objects: bool = True,
+    ) -> "SemanticMap":
+        """A map of a cloud file (.ply, .pcd, .las, .laz, KITTI .bin) as ``urbansem map
+        build --cloud`` writes it; ``labels`` attaches a per-point uint32 label file whose ids
+        ``label_set`` (``kitti360`` or ``mcd``) maps onto the classes."""
+    @staticmethod
+    def load(path: _Path) -> "SemanticMap":
+        """Reads a ``.srt`` map file (cells, objects, relations)."""
+    def save(self, path: _Path) -> None:
+        """Writes the map as a ``.srt`` file."""
+    def insert(
+        self,
+        xyz: npt.ArrayLike,
+        label: Optional[npt.ArrayLike] = None,
+        *,
+        rgb: Optional[npt.ArrayLike] = None,
+        object: Optional[npt.ArrayLike] = None,
+        origin: Optional[Sequence[float]] = None,
+    ) -> Dict[str, Any]:
+        """Inserts a batch of points (ray casting from ``origin`` if the map casts rays),
+        extracts the objects anew and drops the relation edges; returns the statistics
+        (``points``, ``new_cells``, ``touched_cells``, ``rays``, ``misses``,
+        ``bulk_loaded``)."""
+    def extract_objects(
+        self,
+        *,
+        min_cells: int = 5,
+        normal_radius: float = 0.3,
+        yaw_bins: int = 45,
+        shrink_percentile: float = 2.0,
+    ) -> int:
+        """Extracts the objects anew with these options (drops the relation edges); returns
+        their number."""
+    def query_box(self, min: Sequence[float], max: Sequence[float]) -> Cells:
+        """Occupied cells intersecting the box ``[min, max]`` (m), in cell order."""
+    def query_radius(self, centre: Sequence[float], radius: float) -> Cells:
+        """Occupied cells whose centre lies within ``radius`` m of ``centre``, in cell order."""
+    def knn(self, point: Sequence[float], k: int) -> Cells:
+        """The ``k`` occupied cells with centres nearest to ``point``, nearest first."""
+    def cells_of_class(self, cls: Union[str, int]) -> Cells:
+        """Occupied cells of a class (name such as ``"car"``, or id), in cell order."""
+    def cells_of_object(self, object: int) -> Cells:
+        """Occupied cells whose majority object is ``object``, in cell order."""
+    def cells(self, *, occupied_only: bool = True) -> Cells:
+        """Every stored cell (by default only the occupied ones), in cell order."""
+    @staticmethod
+    def class_names() -> List[str]:
+        """The class names indexed by class id (``unlabelled``, ``car``, ``building``, …)."""
+    def __len__(self) -> int:
+        """Number of stored cells (free cells kept by ray casting included)."""
+    @property
+    def resolution(self) -> float:
+        """Cell edge length, metres."""
+    @property
+    def options(self) -> Dict[str, Any]:
+        """``resolution``, ``ray_casting``, ``log_odds_*``, ``max_ray``."""
+    @property
+    def tree_height(self) -> int:
+        """Height of the R-tree."""
+    def memory(self) -> Dict[str, Any]:
+        """Bytes held by part (``cells``, ``cell_bytes``, …, ``total_bytes``,
+        ``bytes_per_cell``), as ``urbansem map build --json``'s ``memory``."""
+    def objects(self) -> Dict[str, np.ndarray]:
+        """The objects: ``id`` uint32, ``label`` uint8, ``cells`` uint64, ``centroid`` (m, 3),
+        oriented box ``box_centre`` (m, 3), ``half_extents`` (m, 3), ``yaw`` (radians)."""
+    def relations(self, *, base_only: bool = False) -> List[Tuple[int, str, int]]:
+        """``(subject_id, relation, object_id)`` triples: ``On``, ``LeftOf``, ``Behind`` and
+        (unless ``base_only``) the converses ``RightOf``, ``InFrontOf``."""
+    def relation_graph(self) -> Dict[str, Any]:
+        """The relation graph as ``urbansem relations infer --json`` prints it."""
+    def to_dot(self) -> str:
+        """The relation graph in Graphviz DOT (``urbansem relations infer --dot``)."""
+    def infer_relations(
+        self,
+        model: _Path,
+        viewpoint: Tuple[float, float, float],
+        *,
+        osm: Optional[OsmMap] = None,
+        cloud_frame: str = "local",
+        seed: int = 1,
+    ) -> List[Tuple[int, str, int]]:
+        """Infers the relations between the objects seen from ``(x, y, yaw)`` with a model
+        of ``urbansem relations train`` (SVMs + MLN), as ``urbansem relations infer``;
+        ``osm`` outlines complete the buildings. Stores and returns the triples."""
+    @property
+    def viewpoint(self) -> Optional[Tuple[float, float, float, float]]:
+        """``(x, y, z, yaw)`` the relations were inferred for, or None."""
+
 # --- localization -----------------------------------------------------------------------
 
 # --- streets ----------------------------------------------------------------------------

@@ -11,7 +11,7 @@ use pyo3::prelude::*;
 use std::borrow::Cow;
 
 /// An `(n, K)` array's rows as `[T; K]`: borrowed when the array is C-contiguous, copied
-/// otherwise. `what` names the argument in the error.
+/// otherwise (Fortran order and strided views included). `what` names the argument in the error.
 pub fn rows<'a, T: Element + Copy, const K: usize>(
     array: &'a PyReadonlyArray2<'_, T>,
     what: &str,
@@ -23,7 +23,14 @@ pub fn rows<'a, T: Element + Copy, const K: usize>(
             shape[0], shape[1]
         )));
     }
-    if let Ok(flat) = array.as_slice() {
+    // `as_slice` also accepts Fortran-ordered arrays, whose flat order is column by column.
+    if let Ok(flat) = array.as_slice().map_err(drop).and_then(|f| {
+        if array.is_c_contiguous() {
+            Ok(f)
+        } else {
+            Err(())
+        }
+    }) {
         let n = flat.len() / K;
         // SAFETY: `[T; K]` has the size of K consecutive `T`s and the alignment of `T`;
         // `flat` holds exactly n·K initialised elements (C order, K columns), borrowed for 'a.
