@@ -467,7 +467,48 @@ def test_relations_equal_the_cli(cli, relations_setup, tmp_path):
     for k in om:
         # The file keeps the graph as JSON, whose floats may come back 1 ulp off.
         np.testing.assert_allclose(ob[k], om[k], rtol=1e-15, atol=0, err_msg=k)
+    # With the OSM outlines completing the buildings, as `relations infer --osm`.
+    osm_graph = json.loads(
+        run(
+            cli, "relations", "infer", "--map", cli_srt, "--model", model,
+            "--viewpoint", ",".join(map(repr, viewpoint)), "--json", "--osm", ds / "city.osm",
+        )
+    )
+    with_osm = m.infer_relations(model, viewpoint, osm=urbansem.OsmMap.load(ds / "city.osm"))
+    assert json.loads(json.dumps(m.relation_graph())) == osm_graph
+    assert len(with_osm) > 0
+    with pytest.raises(ValueError):
+        m.infer_relations(model, viewpoint, cloud_frame="mars:1")
     # Inserting drops the edges (they described the old cells) but keeps objects.
     back.insert(np.array([[vp["x"], vp["y"], 0.05]]))
     assert back.relations() == [] and back.viewpoint is None
     assert len(back.objects()["id"]) == len(om["id"])
+
+
+def test_dirichlet_labels_equal_the_cli(cli, scan_paths, data_dir, tmp_path):
+    model = tmp_path / "dirichlet.json"
+    run(cli, "map", "eval-labels", "--data", data_dir / "lidar", "--max-scans", "8", "--model-out", model)
+    assert any(c is not None for c in json.loads(model.read_text())["classes"])
+    bin_, labels = scan_paths
+    ply = tmp_path / "scan.ply"
+    run(cli, "cloud", "convert", bin_, ply, "--labels", labels, "--label-set", "kitti360")
+    cli_srt = tmp_path / "cli.srt"
+    run(cli, "map", "build", "--cloud", ply, "--out", cli_srt, "--dirichlet", model)
+    by_path = SemanticMap.from_cloud(bin_, labels=labels, label_set="kitti360", dirichlet=model)
+    py_srt = tmp_path / "py.srt"
+    by_path.save(py_srt)
+    assert py_srt.read_bytes() == cli_srt.read_bytes()
+    by_dict = SemanticMap.from_cloud(
+        bin_, labels=labels, label_set="kitti360", dirichlet=json.loads(model.read_text())
+    )
+    assert_cells_equal(by_dict.cells(), by_path.cells())
+    # The model travels with the file: an insertion after loading labels the same way.
+    back = SemanticMap.load(py_srt)
+    empty = SemanticMap(0.1, dirichlet=model)
+    cloud = urbansem.read_cloud(ply)
+    empty.insert(cloud["xyz"], cloud["label"])
+    assert_cells_equal(sort_rows(empty.cells()), sort_rows(back.cells()))
+    with pytest.raises(ValueError, match="Dirichlet"):
+        SemanticMap(0.1, dirichlet={"smoothing": "much"})
+    with pytest.raises(MapError, match="nope.json"):
+        SemanticMap(0.1, dirichlet=tmp_path / "nope.json")

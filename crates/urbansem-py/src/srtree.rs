@@ -378,6 +378,7 @@ fn triples(graph: &RelationGraph, base_only: bool) -> Vec<(u32, &'static str, u3
 }
 
 impl PySemanticMap {
+    /// A Python map holding `map`.
     fn wrap(map: SemanticMap) -> Self {
         PySemanticMap {
             map: RwLock::new(map),
@@ -828,6 +829,7 @@ impl PySemanticMap {
         })
     }
 
+    /// Cells, resolution, objects and relation edges in one line.
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
         py.detach(|| {
             let map = self.read()?;
