@@ -178,3 +178,143 @@ impl EvalRun {
         )
     }
 }
+
+/// `urbansem map build` from a ROS 2 bag: every scan of a point cloud topic placed by the
+/// pose of an odometry/TF topic at its stamp.
+#[derive(Debug, Clone)]
+pub struct BagBuildJob {
+    /// The bag (.mcap).
+    pub bag: PathBuf,
+    /// Its `sensor_msgs/msg/PointCloud2` topic.
+    pub cloud_topic: String,
+    /// Its Odometry, PoseStamped or TF topic giving the sensor's pose in the map frame.
+    pub pose_topic: String,
+    /// For a TF topic: the child frame whose transform places the scans.
+    pub child_frame: Option<String>,
+    /// Use every n-th scan (1: all).
+    pub every: usize,
+    /// A scan more than this many seconds from both poses around it is skipped.
+    pub max_gap_s: f64,
+    /// Scans inserted per batch (the batch's new cells are indexed once).
+    pub batch: usize,
+    /// The map's options.
+    pub options: MapOptions,
+}
+
+/// What [`build_from_bag`] did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BagBuild {
+    /// Scans on the cloud topic.
+    pub scans: usize,
+    /// Scans inserted.
+    pub inserted: usize,
+    /// Scans skipped: no pose within `max_gap_s` of their stamp.
+    pub skipped_without_pose: usize,
+    /// Poses on the pose topic.
+    pub poses: usize,
+    /// Summed insertion statistics.
+    #[serde(skip)]
+    pub stats: crate::map::InsertStats,
+    /// Seconds reading and decoding the bag (poses and scans).
+    pub seconds_read: f64,
+    /// Seconds inserting.
+    pub seconds_insert: f64,
+}
+
+/// Builds a map from a bag's scans placed by its poses (sensor origin = the pose's
+/// translation, so ray casting clears the space each scan saw). The map frame is the pose
+/// topic's parent frame. A scan's time is its `header.stamp` (its log time when unstamped).
+pub fn build_from_bag(job: &BagBuildJob) -> Result<(crate::map::SrMap, BagBuild)> {
+    use geodata::cloud::mcap::{for_each_bag_cloud, interpolate, read_bag_poses, Next};
+    use geodata::cloud::{PointCloud, ReadOptions};
+    if job.every == 0 || job.batch == 0 || job.max_gap_s.is_nan() || job.max_gap_s < 0.0 {
+        return Err(SrtreeError::InvalidOption {
+            name: "every/batch/max_gap_s",
+            value: job.max_gap_s,
+            expected: "every ≥ 1, batch ≥ 1 and a gap ≥ 0 s",
+        });
+    }
+    let t0 = Instant::now();
+    let mut poses = read_bag_poses(&job.bag, &job.pose_topic, job.child_frame.as_deref())?;
+    let time = |stamp: i64, log: u64| {
+        if stamp != 0 {
+            stamp
+        } else {
+            i64::try_from(log).unwrap_or(i64::MAX)
+        }
+    };
+    for p in &mut poses {
+        p.stamp_ns = time(p.stamp_ns, p.log_time_ns);
+    }
+    poses.sort_by_key(|p| p.stamp_ns);
+    let max_gap_ns = (job.max_gap_s * 1e9).min(i64::MAX as f64) as i64;
+    let mut map = crate::map::SrMap::new(job.options.clone())?;
+    let mut report = BagBuild {
+        scans: 0,
+        inserted: 0,
+        skipped_without_pose: 0,
+        poses: poses.len(),
+        stats: crate::map::InsertStats::default(),
+        seconds_read: 0.0,
+        seconds_insert: 0.0,
+    };
+    let mut pending: Vec<(PointCloud, [f64; 3])> = Vec::new();
+    let mut failure: Option<SrtreeError> = None;
+    let mut insert_s = 0.0;
+    let mut flush = |map: &mut crate::map::SrMap,
+                     pending: &mut Vec<(PointCloud, [f64; 3])>,
+                     report: &mut BagBuild|
+     -> Result<()> {
+        let t = Instant::now();
+        let scans: Vec<(&PointCloud, Option<[f64; 3]>)> =
+            pending.iter().map(|(c, o)| (c, Some(*o))).collect();
+        let s = map.insert_scans(&scans)?;
+        report.stats.points += s.points;
+        report.stats.new_cells += s.new_cells;
+        report.stats.touched_cells += s.touched_cells;
+        report.stats.rays += s.rays;
+        report.stats.misses += s.misses;
+        report.stats.bulk_loaded |= s.bulk_loaded;
+        report.inserted += pending.len();
+        pending.clear();
+        insert_s += t.elapsed().as_secs_f64();
+        Ok(())
+    };
+    let scans = for_each_bag_cloud(
+        &job.bag,
+        &job.cloud_topic,
+        &ReadOptions::default(),
+        |scan| {
+            if scan.index % job.every != 0 {
+                return Next::Continue;
+            }
+            let at = time(scan.stamp_ns, scan.log_time_ns);
+            let Some(pose) = interpolate(&poses, at, max_gap_ns) else {
+                report.skipped_without_pose += 1;
+                return Next::Continue;
+            };
+            let mut cloud = scan.cloud;
+            for p in &mut cloud.positions {
+                *p = pose.apply(*p);
+            }
+            pending.push((cloud, pose.translation));
+            if pending.len() >= job.batch {
+                if let Err(e) = flush(&mut map, &mut pending, &mut report) {
+                    failure = Some(e);
+                    return Next::Stop;
+                }
+            }
+            Next::Continue
+        },
+    )?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if !pending.is_empty() {
+        flush(&mut map, &mut pending, &mut report)?;
+    }
+    report.scans = scans;
+    report.seconds_insert = insert_s;
+    report.seconds_read = t0.elapsed().as_secs_f64() - insert_s;
+    Ok((map, report))
+}

@@ -31,6 +31,9 @@ pub struct BuildReport {
     pub points_per_second: f64,
     /// The map file written.
     pub out: String,
+    /// For a map built from a ROS 2 bag: its scans and poses.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bag: Option<crate::jobs::BagBuild>,
 }
 
 impl BuildReport {
@@ -55,12 +58,20 @@ impl BuildReport {
             seconds_insert,
             points_per_second: stats.points as f64 / seconds_insert.max(1e-9),
             out: out.display().to_string(),
+            bag: None,
         }
     }
 
-    /// One line: points, cells, objects, speed, bytes per cell, tree height.
+    /// One line: points, cells, objects, speed, bytes per cell, tree height (and for a bag,
+    /// a line on its scans).
     pub fn text(&self) -> String {
-        format!(
+        let bag = self.bag.as_ref().map_or_else(String::new, |b| {
+            format!(
+                "{} of {} scans inserted ({} without a pose within the allowed gap), placed by {} poses\n",
+                b.inserted, b.scans, b.skipped_without_pose, b.poses
+            )
+        });
+        bag + &format!(
             "{}: {} points → {} cells ({} objects) in {:.2} s ({:.1} M points/s); {:.0} bytes per cell; R-tree height {}\n",
             self.out,
             self.points,

@@ -19,9 +19,26 @@ use std::time::Instant;
 pub enum MapCommand {
     /// Insert a labelled cloud into a new SRTree map and save it (.srt).
     Build {
-        /// The cloud (.ply, .pcd, .las, .laz, .bin) in the map frame.
+        /// The cloud (.ply, .pcd, .las, .laz, .bin) in the map frame, or a ROS 2 bag (.mcap):
+        /// one message of --topic, or with --poses every scan placed by its pose.
         #[arg(long)]
         cloud: PathBuf,
+        /// The bag's PointCloud2 topic (needed when it has several).
+        #[arg(long)]
+        topic: Option<String>,
+        /// The bag's Odometry, PoseStamped or TF topic placing each scan (sensor pose in the map
+        /// frame): builds the map from every scan of --topic.
+        #[arg(long, value_name = "TOPIC", requires = "topic")]
+        poses: Option<String>,
+        /// With a TF topic in --poses: the child frame whose transform places the scans.
+        #[arg(long, requires = "poses")]
+        child_frame: Option<String>,
+        /// With --poses: use every n-th scan.
+        #[arg(long, default_value_t = 1, requires = "poses")]
+        every: usize,
+        /// With --poses: skip a scan more than this many seconds from both poses around it.
+        #[arg(long, default_value_t = 0.5, requires = "poses")]
+        max_gap: f64,
         /// Sensor origin `x,y,z` (for free-space ray casting).
         #[arg(long)]
         origin: Option<String>,
@@ -31,8 +48,9 @@ pub enum MapCommand {
         /// Cell size, metres.
         #[arg(long, default_value_t = 0.1)]
         resolution: f64,
-        /// Cast rays from --origin to every point (OctoMap-like free-space updates).
-        #[arg(long, requires = "origin")]
+        /// Cast rays from --origin (or each scan's pose, with --poses) to every point
+        /// (OctoMap-like free-space updates).
+        #[arg(long)]
         ray_casting: bool,
         /// A Dirichlet label model (JSON, as written by `urbansem map dirichlet`) for the cell labels.
         #[arg(long)]
@@ -178,6 +196,11 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
     match command {
         MapCommand::Build {
             cloud,
+            topic,
+            poses,
+            child_frame,
+            every,
+            max_gap,
             origin,
             out,
             resolution,
@@ -188,30 +211,75 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             let origin = origin
                 .map(|s| parse_floats::<3>(&s, "--origin"))
                 .transpose()?;
-            let t = Instant::now();
-            let c = geodata::cloud::read_cloud(&cloud)
-                .with_context(|| format!("reading {}", cloud.display()))?;
-            let read_s = t.elapsed().as_secs_f64();
-            let mut map = SrMap::new(MapOptions {
+            let is_bag = geodata::cloud::Format::from_path(&cloud).ok()
+                == Some(geodata::cloud::Format::Mcap);
+            if topic.is_some() && !is_bag {
+                super::usage!(
+                    "--topic selects a topic of a ROS 2 bag (.mcap); {} is not one",
+                    cloud.display()
+                );
+            }
+            if ray_casting && origin.is_none() && poses.is_none() {
+                super::usage!("--ray-casting casts rays from the sensor: give --origin (or --poses for a bag)");
+            }
+            if poses.is_some() && origin.is_some() {
+                super::usage!("--origin and --poses: with --poses each scan's origin is its pose");
+            }
+            let options = MapOptions {
                 resolution_m: resolution,
                 ray_casting,
                 ..MapOptions::default()
-            })?;
-            if let Some(p) = dirichlet {
-                let text = std::fs::read_to_string(&p)
-                    .with_context(|| format!("reading {}", p.display()))?;
-                let model = serde_json::from_str(&text)
-                    .with_context(|| format!("{}: not a Dirichlet model", p.display()))?;
-                map.set_dirichlet(Some(model));
-            }
-            let t = Instant::now();
-            let stats = map
-                .insert_cloud(&c, origin)
-                .with_context(|| format!("inserting {}", cloud.display()))?;
-            let insert_s = t.elapsed().as_secs_f64();
+            };
+            let dirichlet = dirichlet
+                .map(|p| -> anyhow::Result<_> {
+                    let text = std::fs::read_to_string(&p)
+                        .with_context(|| format!("reading {}", p.display()))?;
+                    serde_json::from_str(&text)
+                        .with_context(|| format!("{}: not a Dirichlet model", p.display()))
+                })
+                .transpose()?;
+            let (map, stats, read_s, insert_s, bag) = if let Some(pose_topic) = poses {
+                let job = srtree::jobs::BagBuildJob {
+                    bag: cloud.clone(),
+                    cloud_topic: topic.clone().unwrap_or_default(),
+                    pose_topic,
+                    child_frame,
+                    every,
+                    max_gap_s: max_gap,
+                    batch: 16,
+                    options: options.clone(),
+                };
+                let (mut map, b) = srtree::jobs::build_from_bag(&job)
+                    .with_context(|| format!("building a map from {}", cloud.display()))?;
+                // The Dirichlet model picks labels from the histograms when they are read.
+                map.set_dirichlet(dirichlet);
+                (map, b.stats, b.seconds_read, b.seconds_insert, Some(b))
+            } else {
+                let t = Instant::now();
+                let c = match &topic {
+                    Some(name) => geodata::cloud::mcap::read_bag_cloud(
+                        &cloud,
+                        Some(name),
+                        0,
+                        &Default::default(),
+                    )
+                    .map(|(c, _)| c),
+                    None => geodata::cloud::read_cloud(&cloud),
+                }
+                .with_context(|| format!("reading {}", cloud.display()))?;
+                let read_s = t.elapsed().as_secs_f64();
+                let mut map = SrMap::new(options)?;
+                map.set_dirichlet(dirichlet);
+                let t = Instant::now();
+                let stats = map
+                    .insert_cloud(&c, origin)
+                    .with_context(|| format!("inserting {}", cloud.display()))?;
+                (map, stats, read_s, t.elapsed().as_secs_f64(), None)
+            };
             let semantic = SemanticMap::with_objects(map, &ObjectOptions::default());
             write_map(&out, &semantic).with_context(|| format!("writing {}", out.display()))?;
-            let report = BuildReport::new(&semantic, &stats, read_s, insert_s, &out);
+            let mut report = BuildReport::new(&semantic, &stats, read_s, insert_s, &out);
+            report.bag = bag;
             if json {
                 super::print_json(&report)?;
             } else {

@@ -38,7 +38,7 @@ mod point_cloud2;
 mod poses;
 
 pub use point_cloud2::{CloudLayout, PointFieldInfo};
-pub use poses::{BagPose, ODOMETRY, POSE_SCHEMAS, POSE_STAMPED, TF_MESSAGE};
+pub use poses::{interpolate, BagPose, ODOMETRY, POSE_SCHEMAS, POSE_STAMPED, TF_MESSAGE};
 
 use super::error::MessageProblem;
 use super::{io_err, path_buf, CloudError, Location, PointCloud, ReadOptions, ReadReport, Result};
@@ -168,6 +168,8 @@ enum Visit {
     Keep,
     /// Keep its bytes and end the pass.
     KeepAndStop,
+    /// End the pass.
+    Stop,
 }
 
 /// One pass over a bag: per topic, its schema, encoding and message count; `visit(topic,
@@ -240,6 +242,9 @@ fn scan(
                         if matches!(visit, Visit::Keep | Visit::KeepAndStop) {
                             t.picked = Some(data.into_owned());
                             t.picked_index = t.messages;
+                        }
+                        if matches!(visit, Visit::Stop) {
+                            return Ok(topics);
                         }
                         if matches!(visit, Visit::KeepAndStop) {
                             t.messages += 1;
@@ -480,4 +485,92 @@ pub fn read_bag_poses(path: &Path, topic: &str, child_frame: Option<&str>) -> Re
         problem,
         pose_topics,
     })
+}
+
+/// One point cloud message of a bag, decoded.
+#[derive(Debug, Clone)]
+pub struct BagScan {
+    /// Its number in the topic (0-based, file order).
+    pub index: usize,
+    /// Its log time in the bag, nanoseconds since the epoch.
+    pub log_time_ns: u64,
+    /// Its `header.stamp`, nanoseconds since the epoch.
+    pub stamp_ns: i64,
+    /// Its `header.frame_id`.
+    pub frame_id: String,
+    /// The points.
+    pub cloud: PointCloud,
+}
+
+/// Whether [`for_each_bag_cloud`] goes on after a scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Next {
+    /// Read the next scan.
+    Continue,
+    /// End the pass.
+    Stop,
+}
+
+/// Decodes every message of a PointCloud2 `topic` in one pass over the bag, in file order,
+/// handing each to `f` (memory: one scan at a time). Returns the number of messages handed
+/// over.
+pub fn for_each_bag_cloud(
+    path: &Path,
+    topic: &str,
+    options: &ReadOptions,
+    mut f: impl FnMut(BagScan) -> Next,
+) -> Result<usize> {
+    let mut handed = 0;
+    let topics = guarded(path, || {
+        scan(path, |name, t, log_time, bytes| {
+            if name != topic || t.schema != POINT_CLOUD2 || t.encoding != CDR {
+                return Ok(Visit::Skip);
+            }
+            let bad = |(offset, problem): (u64, MessageProblem)| CloudError::BadMessage {
+                path: path_buf(path),
+                topic: name.to_owned(),
+                index: t.messages,
+                offset,
+                problem: Box::new(problem),
+            };
+            let msg = decode_point_cloud2(bytes).map_err(bad)?;
+            let (cloud, _) = points_of(path, &msg, options)
+                .map_err(bad)?
+                .map_err(|source| CloudError::InMessage {
+                    topic: name.to_owned(),
+                    index: t.messages,
+                    source: Box::new(source),
+                })?;
+            handed += 1;
+            let next = f(BagScan {
+                index: t.messages,
+                log_time_ns: log_time,
+                stamp_ns: msg.stamp_ns,
+                frame_id: msg.layout.frame_id.clone(),
+                cloud,
+            });
+            Ok(match next {
+                Next::Continue => Visit::Skip,
+                Next::Stop => Visit::Stop,
+            })
+        })
+    })?;
+    match topics.get(topic) {
+        Some(t) if t.schema == POINT_CLOUD2 && t.encoding == CDR => Ok(handed),
+        Some(t) => Err(CloudError::WrongSchema {
+            path: path_buf(path),
+            topic: topic.to_owned(),
+            schema: t.schema.clone(),
+            encoding: t.encoding.clone(),
+        }),
+        None => Err(CloudError::Topic {
+            path: path_buf(path),
+            problem: format!("no topic {topic:?}"),
+            point_cloud_topics: topics
+                .iter()
+                .filter(|(_, t)| t.schema == POINT_CLOUD2)
+                .map(|(name, _)| name.clone())
+                .collect(),
+        }),
+    }
 }

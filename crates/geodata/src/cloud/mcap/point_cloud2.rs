@@ -61,6 +61,8 @@ pub struct CloudLayout {
 pub(super) struct PointCloud2<'a> {
     /// Size, fields and frame.
     pub(super) layout: CloudLayout,
+    /// `header.stamp`, nanoseconds since the epoch.
+    pub(super) stamp_ns: i64,
     /// Bytes per row.
     row_step: u32,
     /// The point data, `height × row_step` bytes.
@@ -73,8 +75,7 @@ pub(super) struct PointCloud2<'a> {
 /// fields fit its points and its data holds `width × height` points.
 pub(super) fn decode_point_cloud2(message: &[u8]) -> CdrResult<PointCloud2<'_>> {
     let mut c = Cdr::new(message)?;
-    c.u32("header.stamp.sec")?;
-    c.u32("header.stamp.nanosec")?;
+    let stamp_ns = c.time_ns("header.stamp")?;
     let frame_id = c.string("header.frame_id")?;
     let height = c.u32("height")?;
     let width = c.u32("width")?;
@@ -144,6 +145,7 @@ pub(super) fn decode_point_cloud2(message: &[u8]) -> CdrResult<PointCloud2<'_>> 
         ));
     }
     Ok(PointCloud2 {
+        stamp_ns,
         layout: CloudLayout {
             width,
             height,

@@ -48,6 +48,84 @@ impl BagPose {
     }
 }
 
+/// The pose at `t_ns` (a stamp) on a track sorted by stamp: linear in the translation and
+/// spherical-linear in the rotation between the two stamps around it; `None` outside the
+/// track, or more than `max_gap_ns` from both neighbours.
+pub fn interpolate(track: &[BagPose], t_ns: i64, max_gap_ns: i64) -> Option<BagPose> {
+    let after = track.partition_point(|p| p.stamp_ns < t_ns);
+    let b = track.get(after)?;
+    if b.stamp_ns == t_ns {
+        return Some(b.clone());
+    }
+    let a = track.get(after.checked_sub(1)?)?;
+    if t_ns - a.stamp_ns > max_gap_ns && b.stamp_ns - t_ns > max_gap_ns {
+        return None;
+    }
+    let s = (t_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
+    let lerp = |x: f64, y: f64| x + s * (y - x);
+    Some(BagPose {
+        stamp_ns: t_ns,
+        log_time_ns: a.log_time_ns,
+        frame_id: a.frame_id.clone(),
+        child_frame_id: a.child_frame_id.clone(),
+        translation: std::array::from_fn(|i| lerp(a.translation[i], b.translation[i])),
+        rotation: slerp(a.rotation, b.rotation, s),
+    })
+}
+
+/// Spherical linear interpolation of unit quaternions (the shorter arc).
+fn slerp(a: [f64; 4], b: [f64; 4], s: f64) -> [f64; 4] {
+    let mut dot: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+    let b = if dot < 0.0 {
+        dot = -dot;
+        b.map(|v| -v)
+    } else {
+        b
+    };
+    let (wa, wb) = if dot > 0.9995 {
+        (1.0 - s, s)
+    } else {
+        let theta = dot.clamp(-1.0, 1.0).acos();
+        let sin = theta.sin();
+        (((1.0 - s) * theta).sin() / sin, (s * theta).sin() / sin)
+    };
+    let q: [f64; 4] = std::array::from_fn(|i| wa * a[i] + wb * b[i]);
+    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    q.map(|v| v / norm)
+}
+
+impl BagPose {
+    /// The rotation as a row-major 3×3 matrix.
+    pub fn matrix(&self) -> [[f64; 3]; 3] {
+        let [x, y, z, w] = self.rotation;
+        [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - z * w),
+                2.0 * (x * z + y * w),
+            ],
+            [
+                2.0 * (x * y + z * w),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - x * w),
+            ],
+            [
+                2.0 * (x * z - y * w),
+                2.0 * (y * z + x * w),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ]
+    }
+
+    /// A point of the child frame in the parent frame.
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let m = self.matrix();
+        std::array::from_fn(|i| {
+            m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + self.translation[i]
+        })
+    }
+}
+
 fn header(c: &mut Cdr<'_>) -> CdrResult<(i64, String)> {
     let stamp = c.time_ns("header.stamp")?;
     let frame = c.string("header.frame_id")?;
@@ -189,6 +267,38 @@ mod tests {
         assert!(decode_poses("std_msgs/msg/String", &w.0, 0)
             .unwrap()
             .is_none());
+    }
+
+    fn at(stamp_ns: i64, x: f64, yaw: f64) -> BagPose {
+        BagPose {
+            stamp_ns,
+            log_time_ns: 0,
+            frame_id: "odom".into(),
+            child_frame_id: "base_link".into(),
+            translation: [x, 2.0 * x, 0.0],
+            rotation: quat(yaw),
+        }
+    }
+
+    #[test]
+    fn interpolation_and_transforms() {
+        let track = [at(0, 0.0, 0.0), at(10, 1.0, 1.0), at(20, 3.0, -3.0)];
+        let p = interpolate(&track, 5, 100).unwrap();
+        assert!((p.translation[0] - 0.5).abs() < 1e-12 && (p.translation[1] - 1.0).abs() < 1e-12);
+        assert!((p.yaw() - 0.5).abs() < 1e-12);
+        // −3 rad and 1 rad are 2.28 rad apart the short way round (through ±π).
+        let q = interpolate(&track, 15, 100).unwrap();
+        let mid = 1.0 + 0.5 * (2.0 * std::f64::consts::PI - 4.0);
+        assert!((q.yaw() - mid).abs() < 1e-9, "{}", q.yaw());
+        assert_eq!(interpolate(&track, 10, 100).unwrap(), track[1]);
+        assert!(interpolate(&track, -1, 100).is_none());
+        assert!(interpolate(&track, 21, 100).is_none());
+        assert!(interpolate(&track, 5, 4).is_none());
+        let r = at(0, 1.0, std::f64::consts::FRAC_PI_2);
+        let p = r.apply([1.0, 0.0, 0.5]);
+        assert!(
+            (p[0] - 1.0).abs() < 1e-12 && (p[1] - 3.0).abs() < 1e-12 && (p[2] - 0.5).abs() < 1e-12
+        );
     }
 
     #[test]
