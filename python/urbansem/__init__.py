@@ -6,7 +6,7 @@ outlines, street geometry, Markov logic and pseudo-Boolean optimization. Long ca
 the GIL; errors are :class:`UrbansemError` subclasses carrying the Rust message.
 """
 
-from . import mln, pbo
+from . import localize, mln, pbo, streets
 from ._urbansem import (
     CloudError,
     LocalizeError,
@@ -24,23 +24,32 @@ from ._urbansem import (
     read_cloud,
     write_cloud,
 )
+from .localize import Candidate, LocalizeResult, Localizer, McdScan, Sensor, TrackRow
 
 __all__ = [
+    "Candidate",
     "CloudError",
     "LocalizeError",
+    "LocalizeResult",
+    "Localizer",
     "MapError",
+    "McdScan",
     "MlnError",
     "OsmError",
     "OsmMap",
     "PboError",
     "SemanticMap",
+    "Sensor",
     "StreetsError",
+    "TrackRow",
     "UrbansemError",
     "__version__",
     "bag_poses",
     "bag_topics",
+    "localize",
     "mln",
     "pbo",
     "read_cloud",
+    "streets",
     "write_cloud",
 ]

@@ -309,4 +309,80 @@ class SemanticMap:
 
 # --- localization -----------------------------------------------------------------------
 
+class _Localizer:
+    """A map prepared once for global localization (``urbansem.Localizer`` wraps it)."""
+
+    def __init__(
+        self,
+        map: Union[OsmMap, str],
+        *,
+        sensor: str = "auto",
+        cost: str = "reverse",
+        grid_m: float = 0.5,
+        yaw_step_deg: float = 0.5,
+        clearance_m: Optional[float] = None,
+        voxel_m: Optional[float] = None,
+        max_range_m: Optional[float] = None,
+        min_range_m: Optional[float] = None,
+        min_z_m: Optional[float] = None,
+        max_z_m: Optional[float] = None,
+        ground_cell_m: Optional[float] = None,
+        column_radius_m: Optional[float] = None,
+        max_flatness: Optional[float] = None,
+        min_columns: Optional[int] = None,
+        max_see_through: Optional[float] = None,
+        min_cell_count: Optional[int] = None,
+        min_segment_m: Optional[float] = None,
+    ) -> None:
+        """Prepares an OsmMap, an .osm/.osm.pbf map or a .uloc index with the CLI's options."""
+    def localize(self, points: np.ndarray, *, top: int = 10, name: str = "<array>") -> Dict[str, Any]:
+        """Localizes an (n, 3) float64 levelled scan: the dict ``urbansem localize --json`` prints."""
+    def track(
+        self,
+        scans: Sequence[np.ndarray],
+        odometry: np.ndarray,
+        *,
+        window: int = 5,
+        top: int = 5,
+        names: Optional[Sequence[str]] = None,
+    ) -> List[Dict[str, Any]]:
+        """Localizes scans tied by (m, 3) odometry poses: the rows of ``localize track --json``."""
+    def scan_segments(self, points: np.ndarray) -> Tuple[np.ndarray, Optional[Dict[str, Any]]]:
+        """A scan's wall segments (k, 4) in the sensor frame and the sensor it was processed as."""
+    @property
+    def map(self) -> OsmMap:
+        """The map the localizer was prepared on."""
+    @property
+    def map_path(self) -> str:
+        """The map (or index) file, as the reports name it."""
+    @property
+    def uses_index(self) -> bool:
+        """Whether the map was read from a .uloc index."""
+    @property
+    def cost(self) -> str:
+        """The cost that ranks the candidates."""
+    @property
+    def edges(self) -> np.ndarray:
+        """Building outline edges, (m, 4) float64 ``[ax, ay, bx, by]``."""
+    @property
+    def seconds(self) -> Dict[str, float]:
+        """Seconds of reading and preparing the map."""
+
+def localize_mcd_frames(folder: _Path) -> List[int]:
+    """The frame numbers of an MCD sequence folder that have a scan, sorted."""
+
+def localize_mcd_scan(folder: _Path, map: OsmMap, frame: int) -> Dict[str, Any]:
+    """An MCD scan levelled as the evaluation does: ``name``, ``frame``, ``points`` (n, 3),
+    ``truth`` (x, y, yaw) and ``levelling`` (3, 3)."""
+
 # --- streets ----------------------------------------------------------------------------
+
+def streets_estimate(
+    map: Union[OsmMap, str],
+    cloud: Union[str, Dict[str, np.ndarray]],
+    *,
+    model_path: Optional[_Path] = None,
+    model_json: Optional[bytes] = None,
+    cloud_frame: str = "local",
+) -> Dict[str, Any]:
+    """Street offset and width per drivable segment: the GeoJSON ``urbansem streets estimate`` writes."""

@@ -6,7 +6,7 @@
 use crate::extract_eval::{evaluate, labelled_scans, ExtractEval};
 use crate::figure::result_svg;
 use crate::index::{load_map_or_index, PreparedMap};
-use crate::pipeline::{LocalizeOptions, Localizer};
+use crate::pipeline::{LocalizeOptions, Localizer, ScanSegments};
 use crate::report::{LocalizeReport, TrackReport, TrackRow, TrackSeconds};
 use crate::sensor::{ExtractOverrides, SensorKind};
 use crate::track::{read_odometry, TrackOptions};
@@ -210,29 +210,46 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
                 .context_with(|| format!("extracting walls from {}", f.display()))?,
         );
     }
-    let options = TrackOptions {
-        window: job.window,
-        ..Default::default()
-    };
-    let results = localizer.localize_track(&extracted, &odometry, &options)?;
+    let scans = track_rows(
+        &localizer, &names, &extracted, &odometry, job.window, job.top,
+    )?;
     let seconds = t.elapsed().as_secs_f64();
     Ok(TrackReport {
         map: job.map.display().to_string(),
         scans_dir: job.scans.display().to_string(),
         odometry: job.odometry.display().to_string(),
         window: job.window,
-        cost: results.first().map_or("reverse", |r| r.rank_by.name()),
-        scans: names
-            .iter()
-            .zip(&results)
-            .zip(&extracted)
-            .map(|((name, r), e)| TrackRow::new(&map, name, r, e, job.top))
-            .collect(),
+        cost: job.options.rank_by.name(),
+        scans,
         seconds: TrackSeconds {
             total: seconds,
             per_scan: seconds / files.len() as f64,
         },
     })
+}
+
+/// The rows of a track ([`track_folder`] and the Python package): the scans' extracted walls
+/// (`extracted`, named `names`) localized with the window of `window` scans ending at each,
+/// tied by `odometry` (one pose per scan in any odometry frame); `top` candidates per row.
+pub fn track_rows(
+    localizer: &Localizer<'_>,
+    names: &[String],
+    extracted: &[ScanSegments],
+    odometry: &[crate::Pose2],
+    window: usize,
+    top: usize,
+) -> Result<Vec<TrackRow>> {
+    let options = TrackOptions {
+        window,
+        ..Default::default()
+    };
+    let results = localizer.localize_track(extracted, odometry, &options)?;
+    Ok(names
+        .iter()
+        .zip(&results)
+        .zip(extracted)
+        .map(|((name, r), e)| TrackRow::new(localizer.map, name, r, e, top))
+        .collect())
 }
 
 /// Seconds of `localize extract-eval`.

@@ -1,8 +1,133 @@
-//! The streets bindings (see the package's docs).
+//! `streets_estimate`: street offset and width per OSM segment from a point cloud and a
+//! trained model, as the GeoJSON `urbansem streets estimate` writes.
 
+use crate::cloud::cloud_from_arrays;
+use crate::error::{chain, raise, StreetsError};
+use crate::osm::PyOsmMap;
+use geodata::cloud::{read_cloud, PointCloud};
+use geodata::georef::CloudFrame;
+use geodata::osm::OsmMap;
+use numpy::{PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use std::sync::Arc;
+use streets::model::StreetModel;
 
-/// Adds the streets bindings to the module.
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+/// Adds the streets functions to the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(streets_estimate, m)?)?;
     Ok(())
+}
+
+/// An optional column of the cloud dict.
+fn column<'py, T: numpy::Element>(
+    d: &Bound<'py, PyDict>,
+    key: &str,
+) -> PyResult<Option<PyReadonlyArray1<'py, T>>> {
+    d.get_item(key)?.map(|v| v.extract()).transpose()
+}
+
+/// The cloud of a dict as `urbansem.read_cloud` returns it.
+fn cloud_of_dict(d: &Bound<'_, PyDict>) -> PyResult<PointCloud> {
+    let xyz: PyReadonlyArray2<'_, f64> = d
+        .get_item("xyz")?
+        .ok_or_else(|| PyValueError::new_err("the cloud dict has no \"xyz\" array"))?
+        .extract()?;
+    let rgb: Option<PyReadonlyArray2<'_, u8>> =
+        d.get_item("rgb")?.map(|v| v.extract()).transpose()?;
+    cloud_from_arrays(
+        &xyz,
+        column::<f32>(d, "intensity")?.as_ref(),
+        rgb.as_ref(),
+        column::<u8>(d, "label")?.as_ref(),
+        column::<u32>(d, "raw_label")?.as_ref(),
+        column::<u32>(d, "object")?.as_ref(),
+        true,
+    )
+}
+
+/// Estimates offset and width per drivable OSM segment from a cloud (a path, or a dict of
+/// arrays as `read_cloud` returns) and a model (`urbansem streets train`'s JSON, as a path or
+/// as bytes): the RFC 7946 FeatureCollection `urbansem streets estimate` writes, as a dict.
+#[pyfunction]
+#[pyo3(name = "streets_estimate", signature = (map, cloud, *, model_path = None,
+    model_json = None, cloud_frame = "local"))]
+fn streets_estimate<'py>(
+    py: Python<'py>,
+    map: &Bound<'py, PyAny>,
+    cloud: &Bound<'py, PyAny>,
+    model_path: Option<PathBuf>,
+    model_json: Option<Vec<u8>>,
+    cloud_frame: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let frame: CloudFrame = cloud_frame
+        .parse()
+        .map_err(|e| PyValueError::new_err(chain(&e)))?;
+    let (bytes, model_name) = match (model_path, model_json) {
+        (Some(p), None) => {
+            let bytes = std::fs::read(&p).map_err(|e| {
+                StreetsError::new_err(format!("reading the model {}: {e}", p.display()))
+            })?;
+            (bytes, p)
+        }
+        (None, Some(b)) => (b, PathBuf::from("<model>")),
+        _ => {
+            return Err(PyValueError::new_err(
+                "give the model as model_path or model_json (exactly one)",
+            ))
+        }
+    };
+    let model = StreetModel::from_json(&bytes, &model_name).map_err(raise!(StreetsError))?;
+    let (osm, map_name): (Arc<OsmMap>, String) = match map.cast::<PyOsmMap>() {
+        Ok(m) => {
+            let m = m.get();
+            (m.map.clone(), m.path.display().to_string())
+        }
+        Err(_) => {
+            let path: PathBuf = map.extract().map_err(|_| {
+                PyValueError::new_err("map must be an urbansem.OsmMap or an .osm/.osm.pbf path")
+            })?;
+            let loaded = py.detach(|| OsmMap::load(&path)).map_err(|e| {
+                crate::error::OsmError::new_err(format!(
+                    "loading {}: {}",
+                    path.display(),
+                    chain(&e)
+                ))
+            })?;
+            (Arc::new(loaded), path.display().to_string())
+        }
+    };
+    let (mut pc, cloud_name) = match cloud.cast::<PyDict>() {
+        Ok(d) => (cloud_of_dict(d)?, "<arrays>".to_string()),
+        Err(_) => {
+            let path: PathBuf = cloud.extract().map_err(|_| {
+                PyValueError::new_err(
+                    "cloud must be a point cloud path or a dict of arrays as urbansem.read_cloud returns",
+                )
+            })?;
+            let pc = py.detach(|| read_cloud(&path)).map_err(|e| {
+                crate::error::CloudError::new_err(format!(
+                    "reading {}: {}",
+                    path.display(),
+                    chain(&e)
+                ))
+            })?;
+            (pc, path.display().to_string())
+        }
+    };
+    let fc = py.detach(|| {
+        frame
+            .into_map_frame(&mut pc, &osm.frame)
+            .map_err(|e| format!("moving {cloud_name} into the map's frame: {}", chain(&e)))?;
+        let est = model
+            .estimate(&osm, &pc, &map_name, &cloud_name)
+            .map_err(|e| chain(&e))?;
+        let fc = streets::geojson::feature_collection(&osm, &est.segments);
+        streets::geojson::validate(&fc).map_err(|e| format!("internal: {e}"))?;
+        Ok::<_, String>(fc)
+    });
+    let fc = fc.map_err(StreetsError::new_err)?;
+    Ok(pythonize::pythonize(py, &fc)?)
 }

@@ -153,34 +153,75 @@ pub fn sequence_scans(
     stride: usize,
 ) -> Result<Vec<EvalScan>> {
     let frames = seq.frames()?;
-    let mut out = Vec::new();
-    for f in frames.into_iter().step_by(stride.max(1)) {
-        let scan = seq.load_scan(f)?;
-        let iso = scan.local_from_sensor(&map.frame);
-        let (_, _, yaw) = iso.rotation.euler_angles();
-        let t = iso.translation.vector;
-        let mut cloud = scan.cloud.clone();
-        cloud.transform(&iso);
-        let (s, c) = yaw.sin_cos();
-        let points = cloud
-            .positions
-            .iter()
-            .map(|p| {
-                let (dx, dy, dz) = (p[0] - t.x, p[1] - t.y, p[2] - t.z);
-                [c * dx + s * dy, -s * dx + c * dy, dz]
-            })
-            .collect();
-        out.push(EvalScan {
-            name: format!("{f:010}"),
+    frames
+        .into_iter()
+        .step_by(stride.max(1))
+        .map(|f| level_scan(seq, map, f).map(|l| l.scan))
+        .collect()
+}
+
+/// One real scan levelled into the sensor frame ([`level_scan`]).
+#[derive(Debug, Clone)]
+pub struct LevelledScan {
+    /// The scan: name, true pose in the map's local frame, levelled points.
+    pub scan: EvalScan,
+    /// Its frame number in the sequence.
+    pub frame: u64,
+    /// The rotation (row-major) from the raw sensor frame into the levelled one: roll and
+    /// pitch removed, heading kept at 0 (levelled = `levelling` · raw, up to rounding).
+    pub levelling: [[f64; 3]; 3],
+}
+
+/// The scan `frame` of a LiDAR sequence levelled into the sensor frame (x forward, z up,
+/// origin at the sensor), with its dataset pose in the map's local frame as truth.
+pub fn level_scan(seq: &dyn LidarSequence, map: &OsmMap, frame: u64) -> Result<LevelledScan> {
+    let scan = seq.load_scan(frame)?;
+    let iso = scan.local_from_sensor(&map.frame);
+    let (_, _, yaw) = iso.rotation.euler_angles();
+    let t = iso.translation.vector;
+    let mut cloud = scan.cloud.clone();
+    cloud.transform(&iso);
+    let (s, c) = yaw.sin_cos();
+    let points = cloud
+        .positions
+        .iter()
+        .map(|p| {
+            let (dx, dy, dz) = (p[0] - t.x, p[1] - t.y, p[2] - t.z);
+            [c * dx + s * dy, -s * dx + c * dy, dz]
+        })
+        .collect();
+    let r = iso.rotation.to_rotation_matrix();
+    let r = r.matrix();
+    let levelling = std::array::from_fn(|i| {
+        std::array::from_fn(|j| match i {
+            0 => c * r[(0, j)] + s * r[(1, j)],
+            1 => -s * r[(0, j)] + c * r[(1, j)],
+            _ => r[(2, j)],
+        })
+    });
+    Ok(LevelledScan {
+        scan: EvalScan {
+            name: format!("{frame:010}"),
             truth: Pose2 {
                 x: t.x,
                 y: t.y,
                 yaw_rad: yaw.rem_euclid(std::f64::consts::TAU),
             },
             points,
-        });
-    }
-    Ok(out)
+        },
+        frame,
+        levelling,
+    })
+}
+
+/// The scan `frame` of the MCD sequence in `dir`, levelled ([`level_scan`]).
+pub fn mcd_scan(dir: &Path, map: &OsmMap, frame: u64) -> Result<LevelledScan> {
+    level_scan(SequenceKind::Mcd.open(dir)?.as_ref(), map, frame)
+}
+
+/// The frame numbers of the MCD sequence in `dir` that have a scan file, sorted.
+pub fn mcd_frames(dir: &Path) -> Result<Vec<u64>> {
+    Ok(SequenceKind::Mcd.open(dir)?.frames()?)
 }
 
 pub use crate::Accuracy;

@@ -1,0 +1,167 @@
+"""urbansem.Localizer on real MCD scans and the KTH campus map: the same answers as the CLI,
+accurate top candidates, tracks, and clear errors on bad input."""
+
+import json
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import urbansem
+from urbansem.localize import THESIS_MAX_M, THESIS_MAX_RAD, _odometry, load_mcd_scan, mcd_frames
+
+REPO = Path(__file__).resolve().parents[2]
+# Scans spread along the sequence (indices into its 30 frames).
+SCANS = (0, 6, 12)
+
+
+@pytest.fixture(scope="module")
+def data() -> Path:
+    """The shared data folder beside the repository (CI: X/main and X/shared/data)."""
+    root = REPO.parent / "shared" / "data"
+    if root.is_dir():
+        return root
+    pytest.fail(f"shared data not found beside {REPO} (expected ../shared/data)")
+
+
+@pytest.fixture(scope="module")
+def cli() -> Path:
+    """The urbansem command line, built by `cargo build --release -p urbansem`."""
+    exe = Path(os.environ.get("URBANSEM_CLI", REPO / "target" / "release" / "urbansem"))
+    if not exe.is_file():
+        pytest.fail(f"{exe} not found: build it with `cargo build --release -p urbansem`")
+    return exe
+
+
+@pytest.fixture(scope="module")
+def map_path(data: Path) -> str:
+    return str(data / "osm" / "kth_campus_stockholm.osm")
+
+
+@pytest.fixture(scope="module")
+def mcd(data: Path) -> Path:
+    return data / "lidar" / "mcd_kth_day_06"
+
+
+@pytest.fixture(scope="module")
+def localizer(map_path: str) -> urbansem.Localizer:
+    """The KTH map prepared once with the CLI's default options."""
+    return urbansem.Localizer(map_path)
+
+
+@pytest.fixture(scope="module")
+def scans(localizer, mcd, tmp_path_factory):
+    """A few levelled MCD scans, each also written as a PLY (float64) for the CLI."""
+    folder = tmp_path_factory.mktemp("scans")
+    out = []
+    for i in SCANS:
+        s = load_mcd_scan(mcd, localizer.map, index=i)
+        ply = folder / f"{s.name}.ply"
+        urbansem.write_cloud(ply, s.points, double=True)
+        out.append((s, ply))
+    return out
+
+
+@pytest.fixture(scope="module")
+def results(localizer, scans):
+    """The Python results of the scans, named by their PLY path as the CLI names them."""
+    return [localizer.localize(s.points, name=str(ply)) for s, ply in scans]
+
+
+def run_json(cli: Path, *args) -> dict:
+    done = subprocess.run([str(cli), *map(str, args)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def without_seconds(d: dict) -> dict:
+    return {k: v for k, v in d.items() if k != "seconds"}
+
+
+def test_candidates_equal_the_cli_json(cli, map_path, scans, results):
+    s, ply = scans[0]
+    expected = run_json(cli, "localize", "--map", map_path, "--scan", ply, "--json")
+    got = results[0]
+    assert without_seconds(got.report) == without_seconds(expected)
+    assert [c.to_dict() for c in got.candidates] == expected["candidates"]
+    assert got.sensor is not None and got.sensor.profile == expected["sensor"]["profile"]
+    assert got.segments == expected["segments"] > 0
+    assert got.cost == "reverse" and got.best.cost == got.best.reverse
+
+
+def test_top_candidate_is_within_the_thesis_threshold(scans, results):
+    for (s, _), r in zip(scans, results):
+        assert r.best is not None, (s.name, r.message)
+        x, y, yaw = s.truth
+        err_m = math.hypot(r.best.x - x, r.best.y - y)
+        err_rad = abs((r.best.yaw_grid - yaw + math.pi) % (2 * math.pi) - math.pi)
+        assert err_m <= THESIS_MAX_M and err_rad <= THESIS_MAX_RAD, (s.name, err_m, err_rad)
+        assert r.sensor is not None and r.sensor.detected
+
+
+def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path):
+    names = [ply.name for _, ply in scans]
+    odometry = np.array([s.truth for s, _ in scans])
+    rows = localizer.track([s.points for s, _ in scans], odometry, window=3, names=names)
+    assert len(rows) == len(scans)
+    assert [r.scan for r in rows] == names
+    odo_file = tmp_path / "odometry.txt"
+    odo_file.write_text("".join(f"{n} {float(x)!r} {float(y)!r} {float(yaw)!r}\n" for n, (x, y, yaw) in zip(names, odometry)))
+    expected = run_json(
+        cli, "localize", "track", "--map", map_path, "--scans", scans[0][1].parent,
+        "--odometry", odo_file, "--window", "3", "--json",
+    )
+    assert [r.report for r in rows] == expected["scans"]
+    for r, (s, _) in zip(rows, scans):
+        assert r.x is not None and math.hypot(r.x - s.truth[0], r.y - s.truth[1]) <= THESIS_MAX_M
+    # 4 × 4 odometry matrices are read as the same (x, y, yaw) rows.
+    mats = np.tile(np.eye(4), (len(scans), 1, 1))
+    for m, (x, y, yaw) in zip(mats, odometry):
+        m[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
+        m[:2, 3] = [x, y]
+    assert np.allclose(_odometry(mats), odometry, atol=1e-12)
+
+
+def test_index_and_osm_map_give_the_same_candidates(cli, map_path, scans, results, tmp_path):
+    index = tmp_path / "kth.uloc"
+    run_json(cli, "localize", "index", "--map", map_path, "--out", index, "--json")
+    from_index = urbansem.Localizer(index)
+    s, ply = scans[0]
+    r = from_index.localize(s.points, name=str(ply))
+    assert [c.to_dict() for c in r.candidates] == [c.to_dict() for c in results[0].candidates]
+    from_map = urbansem.Localizer(urbansem.OsmMap.load(map_path))
+    assert from_map.edges.shape == from_index.edges.shape and from_map.edges.shape[1] == 4
+
+
+def test_levelling_matrix_levels_the_raw_scan(mcd, scans):
+    s, _ = scans[0]
+    assert s.frame == mcd_frames(mcd)[SCANS[0]]
+    raw = np.fromfile(mcd / "lidar_bin" / f"{s.name}.bin", dtype=np.float32).reshape(-1, 4)[:, :3]
+    assert np.allclose(raw.astype(np.float64) @ s.levelling.T, s.points, atol=1e-6)
+
+
+def test_bad_input_is_a_clear_error(localizer, scans, tmp_path):
+    pts = scans[0][0].points
+    with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
+        localizer.localize(pts[:, :2])
+    with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
+        localizer.localize(pts[:, 0])
+    with pytest.raises(ValueError, match="empty"):
+        localizer.localize(np.zeros((0, 3)))
+    bad = pts[:1000].copy()
+    bad[7, 1] = np.nan
+    with pytest.raises(urbansem.LocalizeError, match="scan point 7 is not finite"):
+        localizer.localize(bad)
+    with pytest.raises(urbansem.LocalizeError, match="no-such-map.osm"):
+        urbansem.Localizer(tmp_path / "no-such-map.osm")
+    with pytest.raises(ValueError, match="unknown sensor"):
+        urbansem.Localizer(tmp_path / "no-such-map.osm", sensor="lidar9000")
+    with pytest.raises(ValueError, match="odometry has 1 poses for 2 scans"):
+        localizer.track([pts, pts], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="odometry must have shape"):
+        localizer.track([pts], np.zeros((1, 2)))
+    with pytest.raises(urbansem.LocalizeError, match="pose_inW.csv"):
+        load_mcd_scan(tmp_path, localizer.map, 11)

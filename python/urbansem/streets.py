@@ -1,0 +1,75 @@
+"""Street geometry: offset and width of every drivable OSM street segment estimated from a
+point cloud with a trained model (thesis ch. 4), as the GeoJSON ``urbansem streets estimate``
+writes::
+
+    >>> from urbansem import streets
+    >>> fc = streets.estimate("map.osm", "cloud.ply", "model.json")
+    >>> fc["features"][0]["properties"]["width"]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Dict, Mapping, Optional, Union
+
+import numpy as np
+
+from ._urbansem import OsmMap
+from ._urbansem import streets_estimate as _estimate
+
+__all__ = ["estimate"]
+
+PathLike = Union[str, os.PathLike]
+
+_COLUMNS = {
+    "xyz": np.float64,
+    "intensity": np.float32,
+    "rgb": np.uint8,
+    "label": np.uint8,
+    "raw_label": np.uint32,
+    "object": np.uint32,
+}
+
+
+def _cloud(cloud: Union[PathLike, Mapping[str, Any]]) -> Union[str, Dict[str, np.ndarray]]:
+    """A cloud path as a string, or a cloud dict with each column in its dtype."""
+    if isinstance(cloud, Mapping):
+        if "xyz" not in cloud:
+            raise ValueError('the cloud dict has no "xyz" array (see urbansem.read_cloud)')
+        return {
+            k: np.ascontiguousarray(np.asarray(v, dtype=_COLUMNS[k]))
+            for k, v in cloud.items()
+            if k in _COLUMNS and v is not None
+        }
+    return os.fspath(cloud)
+
+
+def estimate(
+    map: Union[OsmMap, PathLike],
+    cloud: Union[PathLike, Mapping[str, Any]],
+    model: Optional[Union[PathLike, Mapping[str, Any], bytes]] = None,
+    *,
+    cloud_frame: str = "local",
+) -> Dict[str, Any]:
+    """Estimates offset and width per drivable street segment of ``map`` from ``cloud`` (a
+    path, or a dict of arrays as :func:`urbansem.read_cloud` returns) with ``model`` (the JSON
+    of ``urbansem streets train``: a path, its parsed dict or its bytes).
+
+    ``cloud_frame`` is the cloud's frame as ``--cloud-frame`` takes it (``local``,
+    ``utm:32N``, ``enu:LAT,LON``). Returns the RFC 7946 FeatureCollection (a dict) that
+    ``urbansem streets estimate`` writes: one Polygon per segment with ``segment``,
+    ``osm_way``, ``highway``, ``width``, ``offset`` and ``bins``.
+    """
+    if model is None:
+        raise ValueError(
+            "a street model is needed (there is no built-in one): train one with "
+            "`urbansem streets train --dataset DIR --out model.json` and pass its path"
+        )
+    if not isinstance(map, OsmMap):
+        map = os.fspath(map)
+    if isinstance(model, Mapping):
+        return _estimate(map, _cloud(cloud), model_json=json.dumps(model).encode(), cloud_frame=cloud_frame)
+    if isinstance(model, (bytes, bytearray)):
+        return _estimate(map, _cloud(cloud), model_json=bytes(model), cloud_frame=cloud_frame)
+    return _estimate(map, _cloud(cloud), model_path=os.fspath(model), cloud_frame=cloud_frame)
