@@ -38,11 +38,13 @@ def cli() -> Path:
 
 @pytest.fixture(scope="module")
 def map_path(data: Path) -> str:
+    """The KTH campus OSM map."""
     return str(data / "osm" / "kth_campus_stockholm.osm")
 
 
 @pytest.fixture(scope="module")
 def mcd(data: Path) -> Path:
+    """The MCD kth_day_06 sequence folder."""
     return data / "lidar" / "mcd_kth_day_06"
 
 
@@ -72,12 +74,14 @@ def results(localizer, scans):
 
 
 def run_json(cli: Path, *args) -> dict:
+    """Runs the CLI and parses its JSON output (failing with its stderr)."""
     done = subprocess.run([str(cli), *map(str, args)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
 
 def without_seconds(d: dict) -> dict:
+    """A report without its timings (the only entry that differs between runs)."""
     return {k: v for k, v in d.items() if k != "seconds"}
 
 
@@ -123,6 +127,17 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
         m[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
         m[:2, 3] = [x, y]
     assert np.allclose(_odometry(mats), odometry, atol=1e-12)
+    # Relative steps chain into poses that differ from the absolute ones by one rigid motion.
+    steps = []
+    for (x0, y0, a0), (x1, y1, a1) in zip(odometry[:-1], odometry[1:]):
+        c, s = math.cos(a0), math.sin(a0)
+        steps.append((c * (x1 - x0) + s * (y1 - y0), -s * (x1 - x0) + c * (y1 - y0), a1 - a0))
+    chained = _odometry(steps, relative=True)
+    assert chained.shape == odometry.shape and np.allclose(chained[0], 0)
+    c, s = math.cos(odometry[0, 2]), math.sin(odometry[0, 2])
+    moved = chained[:, :2] @ np.array([[c, s], [-s, c]]) + odometry[0, :2]
+    assert np.allclose(moved, odometry[:, :2], atol=1e-9)
+    assert np.allclose(chained[:, 2] + odometry[0, 2], odometry[:, 2], atol=1e-12)
 
 
 def test_index_and_osm_map_give_the_same_candidates(cli, map_path, scans, results, tmp_path):

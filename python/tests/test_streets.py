@@ -25,6 +25,7 @@ def cli() -> Path:
 
 
 def run(cli: Path, *args) -> None:
+    """Runs the CLI (failing with its stderr)."""
     done = subprocess.run([str(cli), *map(str, args)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
 

@@ -239,8 +239,9 @@ def _points(points: Any, what: str = "points") -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _odometry(odometry: Any) -> np.ndarray:
-    """Odometry as (m, 3) ``x, y, yaw`` rows: from such rows or from (m, 4, 4) / (m, 3, 3) poses."""
+def _odometry(odometry: Any, relative: bool = False) -> np.ndarray:
+    """Odometry as (m, 3) ``x, y, yaw`` poses: from such rows or from (m, 4, 4) / (m, 3, 3)
+    matrices; ``relative`` steps (pose i+1 in the frame of pose i) are chained from the origin."""
     a = np.asarray(odometry, dtype=np.float64)
     if a.ndim == 3 and a.shape[1:] in ((4, 4), (3, 3)):
         t = a.shape[1] - 1
@@ -249,6 +250,13 @@ def _odometry(odometry: Any) -> np.ndarray:
         raise ValueError(
             f"odometry must have shape (m, 3) (x, y, yaw per scan) or (m, 4, 4); got {a.shape}"
         )
+    if relative:
+        poses = [(0.0, 0.0, 0.0)]
+        for dx, dy, dyaw in a:
+            x, y, yaw = poses[-1]
+            c, s = np.cos(yaw), np.sin(yaw)
+            poses.append((x + c * dx - s * dy, y + s * dx + c * dy, yaw + dyaw))
+        a = np.array(poses)
     return np.ascontiguousarray(a)
 
 
@@ -321,14 +329,17 @@ class Localizer:
         window: int = 5,
         top: int = 5,
         names: Optional[Sequence[str]] = None,
+        relative: bool = False,
     ) -> List[TrackRow]:
         """Localizes every scan with the window of ``window`` scans ending at it, tied by
         odometry: one pose per scan in any odometry frame, as (m, 3) ``x, y, yaw`` rows (the
-        lines of ``localize track --odometry``) or (m, 4, 4) matrices; one row per scan."""
+        lines of ``localize track --odometry``) or (m, 4, 4) matrices, or with ``relative``
+        the m − 1 steps between consecutive scans (each in the previous scan's frame); one
+        row per scan, as ``urbansem localize track --json`` lists them."""
         arrays = [_points(s, f"scans[{i}]") for i, s in enumerate(scans)]
         rows = self._native.track(
             arrays,
-            _odometry(odometry),
+            _odometry(odometry, relative),
             window=window,
             top=top,
             names=list(names) if names is not None else None,
