@@ -1,7 +1,7 @@
 //! The `urbansem` Python package's native module, `urbansem._urbansem`: a thin layer over the
 //! urbansem libraries. Arrays cross as NumPy arrays (inputs read in place when contiguous,
 //! outputs handed over without copying), reports as the libraries' typed values turned into
-//! Python dicts by `pythonize`, errors as the exceptions of [`error`]. Every long call
+//! Python dicts by `pythonize`, errors as the exceptions of the `error` module. Every long call
 //! releases the GIL. The Python side (`python/urbansem`) adds dataclasses, docstrings and
 //! type stubs.
 

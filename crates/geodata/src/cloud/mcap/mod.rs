@@ -438,7 +438,7 @@ fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
     })
 }
 
-/// Every pose on a topic of a bag (Odometry, PoseStamped or TFMessage; see [`poses`]), in
+/// Every pose on a topic of a bag (Odometry, PoseStamped or TFMessage; see [`BagPose`]), in
 /// file order. With `child_frame`, only transforms of that child frame are kept (for `/tf`).
 pub fn read_bag_poses(path: &Path, topic: &str, child_frame: Option<&str>) -> Result<Vec<BagPose>> {
     let mut out = Vec::new();
