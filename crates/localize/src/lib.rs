@@ -28,7 +28,9 @@
 //!   track), odometry files and simulated drift.
 //! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables;
 //!   [`extract_eval`]: extraction precision/recall on labelled real scans; [`report`]: the
-//!   answers in WGS84 as the command line prints them; [`figure`]: pictures of results;
+//!   answers in WGS84 as the command line prints them; [`geojson`]: candidates and tracks as
+//!   RFC 7946 GeoJSON; [`poses`]: track poses as TUM and KITTI trajectory files;
+//!   [`figure`]: pictures of results;
 //!   [`jobs`]: the command-line jobs (index, one scan file, a track folder, extraction
 //!   scores) as library calls.
 
@@ -40,6 +42,7 @@ pub mod eval;
 pub mod extract_eval;
 pub mod feasible;
 pub mod figure;
+pub mod geojson;
 pub mod hashing;
 pub mod index;
 pub mod jobs;

@@ -198,8 +198,10 @@ fn estimate_writes_valid_geojson_and_bad_inputs_are_named() {
         let t = &ds.segments[e.segment];
         assert!((e.width_m - t.width_m).abs() < 1.0, "{e:?} vs {t:?}");
     }
-    let fc = streets::geojson::feature_collection(&ds.map, &est.segments);
+    let fc = streets::geojson::feature_collection(&ds.map, &est.segments, model.target);
     streets::geojson::validate(&fc).unwrap();
+    assert_eq!(fc["attribution"], geodata::geojson::OSM_ATTRIBUTION);
+    assert_eq!(fc["features"][0]["properties"]["target"], "driving_area");
     let text = serde_json::to_string(&fc).unwrap();
     let back: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(back["features"].as_array().unwrap().len(), 11);

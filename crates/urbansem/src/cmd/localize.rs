@@ -1,16 +1,17 @@
 //! `urbansem localize …`: global localization of a scan on OSM building outlines (issue 6).
 //!
-//! - `urbansem localize --map MAP --scan SCAN [--cost dcm|forward|reverse|symmetric] [--top K] [--json] [--svg FILE]`
+//! - `urbansem localize --map MAP --scan SCAN [--cost dcm|forward|reverse|symmetric] [--top K] [--json] [--svg FILE] [--geojson FILE]`
 //! - `urbansem localize eval --dataset DIR [--map MAP] [--method …] [--json] [--figures DIR]`
 //!   (DIR: a simulated `localization` dataset, or an MCD sequence folder with `--map`).
 //! - `urbansem localize extract-eval --dataset DIR [--stride N] [--json]` (DIR: a labelled
 //!   KITTI-360 or MCD sequence): wall-extraction precision, recall, segments per scan.
-//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--json]`:
+//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--json] [--geojson FILE]`:
 //!   every scan of a folder with the window of K scans ending at it, tied by odometry.
 //!
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
 //! knobs of [`ExtractArgs`] (issue 15).
 
+use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use localize::distractors::DistractorOptions;
 use localize::eval::is_mcd;
@@ -94,6 +95,10 @@ pub struct TrackArgs {
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
+    /// Write the track as GeoJSON: a LineString of the best poses and one Point per scan
+    /// (RFC 7946, WGS84, with the OSM attribution).
+    #[arg(long)]
+    pub geojson: Option<PathBuf>,
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
@@ -299,6 +304,10 @@ pub struct RunArgs {
     /// Write a figure (extracted segments over the map at the chosen pose, candidates).
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// Write the listed candidates as GeoJSON Points with rank, headings and costs
+    /// (RFC 7946, WGS84, with the OSM attribution).
+    #[arg(long)]
+    pub geojson: Option<PathBuf>,
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
@@ -447,11 +456,24 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         &args.extract,
     )?;
     let done = localize_file(map_path, scan_path, options, args.top, args.svg.as_deref())?;
+    if let Some(path) = &args.geojson {
+        write_geojson(
+            path,
+            &localize::geojson::candidates_collection(&done.report),
+        )?;
+    }
     if args.json {
         return super::print_json(&done.report);
     }
     print!("{}", done.text());
     Ok(())
+}
+
+/// Writes a GeoJSON FeatureCollection after checking it against RFC 7946's rules.
+fn write_geojson(path: &std::path::Path, fc: &serde_json::Value) -> anyhow::Result<()> {
+    geodata::geojson::validate(fc).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
+    geodata::fsio::write_atomic(path, serde_json::to_vec_pretty(fc)?)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 fn track(args: TrackArgs) -> anyhow::Result<()> {
@@ -472,6 +494,9 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
         top: args.top,
     };
     let report = track_folder(&job)?;
+    if let Some(path) = &args.geojson {
+        write_geojson(path, &localize::geojson::track_collection(&report))?;
+    }
     if args.json {
         return super::print_json(&report);
     }
@@ -582,6 +607,7 @@ mod tests {
             top: 10,
             json: false,
             svg: None,
+            geojson: None,
             grid_m: 0.5,
             yaw_step_deg: 0.5,
             extract: ExtractArgs::default(),

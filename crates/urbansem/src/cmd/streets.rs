@@ -315,7 +315,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
                 &map.display().to_string(),
                 &cloud.display().to_string(),
             )?;
-            let fc = streets::geojson::feature_collection(&osm, &est.segments);
+            let fc = streets::geojson::feature_collection(&osm, &est.segments, model.target);
             streets::geojson::validate(&fc).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
             geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&fc)?)
                 .with_context(|| format!("writing {}", out.display()))?;
