@@ -47,6 +47,7 @@ pub mod hashing;
 pub mod index;
 pub mod jobs;
 pub mod pipeline;
+pub mod poses;
 pub mod rank;
 pub mod refine;
 pub mod report;

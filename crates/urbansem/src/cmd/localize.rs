@@ -5,7 +5,7 @@
 //!   (DIR: a simulated `localization` dataset, or an MCD sequence folder with `--map`).
 //! - `urbansem localize extract-eval --dataset DIR [--stride N] [--json]` (DIR: a labelled
 //!   KITTI-360 or MCD sequence): wall-extraction precision, recall, segments per scan.
-//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--json] [--geojson FILE]`:
+//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--json] [--geojson FILE] [--poses-tum FILE] [--poses-kitti FILE]`:
 //!   every scan of a folder with the window of K scans ending at it, tied by odometry.
 //!
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
@@ -99,6 +99,14 @@ pub struct TrackArgs {
     /// (RFC 7946, WGS84, with the OSM attribution).
     #[arg(long)]
     pub geojson: Option<PathBuf>,
+    /// Write the best pose of every localized scan as a TUM trajectory (`timestamp tx ty tz
+    /// qx qy qz qw`; timestamp: the scan's 0-based index; map frame east, north, up; z = 0).
+    #[arg(long)]
+    pub poses_tum: Option<PathBuf>,
+    /// Write the best pose of every localized scan as a KITTI trajectory (row-major 3×4
+    /// `[R|t]` per line, localized scans in order; map frame east, north, up; z = 0).
+    #[arg(long)]
+    pub poses_kitti: Option<PathBuf>,
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
@@ -480,6 +488,11 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     if args.window == 0 {
         super::usage!("--window 0: expected at least 1 scan per window");
     }
+    let writes_poses =
+        args.geojson.is_some() || args.poses_tum.is_some() || args.poses_kitti.is_some();
+    if args.top == 0 && writes_poses {
+        super::usage!("--top 0: --geojson, --poses-tum and --poses-kitti need --top 1 or more");
+    }
     let job = TrackJob {
         map: args.map.clone(),
         scans: args.scans.clone(),
@@ -496,6 +509,26 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     let report = track_folder(&job)?;
     if let Some(path) = &args.geojson {
         write_geojson(path, &localize::geojson::track_collection(&report))?;
+    }
+    let poses = localize::poses::track_poses(&report);
+    for (path, text) in [
+        (
+            &args.poses_tum,
+            localize::poses::tum_lines as fn(_) -> String,
+        ),
+        (&args.poses_kitti, localize::poses::kitti_lines),
+    ] {
+        if let Some(path) = path {
+            geodata::fsio::write_atomic(path, text(&poses))
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+    }
+    if writes_poses && poses.len() < report.scans.len() {
+        eprintln!(
+            "localize track: {} of {} scans not localized, left out of the pose files",
+            report.scans.len() - poses.len(),
+            report.scans.len()
+        );
     }
     if args.json {
         return super::print_json(&report);
