@@ -22,6 +22,7 @@
 //! - [`graph`]: the spatial relation graph and its queries.
 //! - [`semantic`]: the semantic map: the cells of [`map`] and the relation graph over their objects.
 //! - [`io`]: the documented binary `.srt` file of a semantic map.
+//! - [`export`]: the map as files other tools open (PLY and ROS 2 bags with class and object).
 //! - [`report`]: what `map build` and `map query` print, as typed values.
 //! - [`jobs`]: `relations train` and `relations eval` as library calls returning their results.
 //!
@@ -38,6 +39,7 @@ pub mod consistency;
 pub mod dataset;
 pub mod dirichlet;
 pub mod error;
+pub mod export;
 pub mod features;
 pub mod graph;
 pub mod io;

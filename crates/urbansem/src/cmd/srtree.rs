@@ -85,6 +85,14 @@ pub enum MapCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Export a map for other tools: one point per occupied cell with its class colour,
+    /// class id (`label`) and object id (`object`); the format by OUT's extension (`.ply`).
+    Export {
+        /// The map file (.srt).
+        map: PathBuf,
+        /// The file to write (.ply).
+        out: PathBuf,
+    },
     /// Dirichlet label choice vs majority vote on the real labelled scans (KITTI-360, MCD).
     EvalLabels {
         /// The folder holding `kitti360_2013_05_28_drive_0009/` and `mcd_kth_day_06/`.
@@ -191,6 +199,27 @@ fn parse_floats<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]>
     Ok(out)
 }
 
+/// `urbansem map export MAP OUT`: the format by OUT's extension.
+fn export(map: &Path, out: &Path) -> anyhow::Result<()> {
+    let ext = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext != "ply" {
+        super::usage!("{}: expected a .ply file to export to", out.display());
+    }
+    let m = read_map(map).with_context(|| format!("reading {}", map.display()))?;
+    let n =
+        srtree::export::write_ply(out, &m).with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{}: {n} occupied cells (class colour, label, object), {} objects",
+        out.display(),
+        m.relations.objects.len()
+    );
+    Ok(())
+}
+
 /// Runs one `urbansem map` subcommand.
 pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
     match command {
@@ -287,6 +316,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        MapCommand::Export { map, out } => export(&map, &out),
         MapCommand::Query {
             map,
             box_,
