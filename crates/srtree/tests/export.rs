@@ -154,3 +154,72 @@ fn ply_export_reads_back_with_class_colour_and_object() {
     assert!(objects.contains(&1) && objects.contains(&2));
     std::fs::remove_file(&path).ok();
 }
+
+#[test]
+fn mcap_export_reads_back_with_mcap_and_urbansem() {
+    use srtree::graph::{Relation, RelationEdge};
+    let mut map = scene();
+    map.relations.edges.push(RelationEdge {
+        a: 1,
+        b: 2,
+        bits: Relation::On.bit() | Relation::Behind.bit(),
+    });
+    let cloud = srtree::export::cells_cloud(&map);
+    let path = temp("map.mcap");
+    assert_eq!(
+        srtree::export::write_mcap(&path, &map).unwrap(),
+        cloud.len()
+    );
+
+    // urbansem's reader (the only PointCloud2 topic).
+    let back = geodata::cloud::read_cloud(&path).unwrap();
+    assert_eq!(back.positions, cloud.positions);
+    assert_eq!(back.rgb, cloud.rgb);
+    assert_eq!(back.label, cloud.label);
+    assert_eq!(back.object, cloud.object);
+
+    // The mcap crate's reader: the two topics, their encodings and the scene.
+    let bytes = std::fs::read(&path).unwrap();
+    let messages: Vec<_> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .collect();
+    assert_eq!(messages.len(), 2);
+    assert_eq!(messages[0].channel.topic, srtree::export::CELLS_TOPIC);
+    let schema = messages[0].channel.schema.as_ref().unwrap();
+    assert_eq!(
+        (schema.name.as_str(), schema.encoding.as_str()),
+        ("sensor_msgs/msg/PointCloud2", "ros2msg")
+    );
+    assert!(std::str::from_utf8(&schema.data)
+        .unwrap()
+        .contains("MSG: sensor_msgs/PointField"));
+    let s = &messages[1];
+    assert_eq!(s.channel.topic, srtree::export::SCENE_TOPIC);
+    assert_eq!(s.channel.message_encoding, "json");
+    let schema = s.channel.schema.as_ref().unwrap();
+    assert_eq!(
+        (schema.name.as_str(), schema.encoding.as_str()),
+        ("foxglove.SceneUpdate", "jsonschema")
+    );
+    let v: serde_json::Value = serde_json::from_slice(&s.data).unwrap();
+    let objects = &v["entities"][0];
+    assert_eq!(objects["frame_id"], "map");
+    let cubes = objects["cubes"].as_array().unwrap();
+    assert_eq!(cubes.len(), map.relations.objects.len());
+    assert!(cubes.len() >= 2);
+    for c in cubes {
+        assert!(c["size"]["x"].as_f64().unwrap() > 0.0);
+        let q = &c["pose"]["orientation"];
+        let norm: f64 = ["x", "y", "z", "w"]
+            .iter()
+            .map(|k| q[k].as_f64().unwrap().powi(2))
+            .sum();
+        assert!((norm - 1.0).abs() < 1e-9);
+    }
+    let lines = v["entities"][1]["lines"].as_array().unwrap();
+    assert_eq!(lines.len(), 1);
+    assert_eq!(lines[0]["points"].as_array().unwrap().len(), 2);
+    assert_eq!(v["entities"][1]["metadata"][0]["value"], "On,Behind");
+    std::fs::remove_file(&path).ok();
+}

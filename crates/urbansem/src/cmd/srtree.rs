@@ -86,11 +86,13 @@ pub enum MapCommand {
         json: bool,
     },
     /// Export a map for other tools: one point per occupied cell with its class colour,
-    /// class id (`label`) and object id (`object`); the format by OUT's extension (`.ply`).
+    /// class id (`label`) and object id (`object`); the format by OUT's extension: `.ply`,
+    /// or `.mcap` (ROS 2 bag: PointCloud2 on /semantic_map/cells, Foxglove SceneUpdate with
+    /// object boxes and relation lines on /semantic_map/objects).
     Export {
         /// The map file (.srt).
         map: PathBuf,
-        /// The file to write (.ply).
+        /// The file to write (.ply or .mcap).
         out: PathBuf,
     },
     /// Dirichlet label choice vs majority vote on the real labelled scans (KITTI-360, MCD).
@@ -206,16 +208,24 @@ fn export(map: &Path, out: &Path) -> anyhow::Result<()> {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    if ext != "ply" {
-        super::usage!("{}: expected a .ply file to export to", out.display());
+    if ext != "ply" && ext != "mcap" {
+        super::usage!(
+            "{}: expected a .ply or .mcap file to export to",
+            out.display()
+        );
     }
     let m = read_map(map).with_context(|| format!("reading {}", map.display()))?;
-    let n =
-        srtree::export::write_ply(out, &m).with_context(|| format!("writing {}", out.display()))?;
+    let n = if ext == "ply" {
+        srtree::export::write_ply(out, &m)
+    } else {
+        srtree::export::write_mcap(out, &m)
+    }
+    .with_context(|| format!("writing {}", out.display()))?;
     println!(
-        "{}: {n} occupied cells (class colour, label, object), {} objects",
+        "{}: {n} occupied cells (class colour, label, object), {} objects, {} related pairs",
         out.display(),
-        m.relations.objects.len()
+        m.relations.objects.len(),
+        m.relations.edges.len()
     );
     Ok(())
 }

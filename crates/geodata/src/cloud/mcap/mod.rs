@@ -1,5 +1,6 @@
 //! ROS 2 bags (rosbag2 MCAP files) without ROS: list a bag's topics and read one
-//! `sensor_msgs/msg/PointCloud2` message as a [`PointCloud`].
+//! `sensor_msgs/msg/PointCloud2` message as a [`PointCloud`]; [`write_bag_cloud`] writes
+//! one (with optional JSON messages beside it).
 //!
 //! The MCAP container (chunks, zstd or lz4 compression, schemas, channels) is read by the
 //! `mcap` crate's streaming reader; the PointCloud2 message is decoded from its CDR bytes
@@ -19,7 +20,8 @@
 //! Any field layout is read: `x y z` of any numeric datatype (FLOAT32 keeps
 //! [`Precision::F32`](super::Precision::F32), anything else gives F64) fill the positions; `intensity` (or
 //! `reflectance`), `label` (UINT8: urbansem's class id; wider: a dataset's id, kept in
-//! `raw_label`), `raw_label` and `object` fill their columns, as in the PCD reader. Other
+//! `raw_label`), `raw_label` and `object` fill their columns, as in the PCD reader, and
+//! `r g b` (or `red green blue`, all three) the colour column. Other
 //! fields (`ring`, `t`/`time`/`timestamp`, normals, padding) are listed by [`bag_info`] but not
 //! stored: [`PointCloud`] has no column for them. Big-endian point data (`is_bigendian`) and
 //! big-endian CDR are honoured. Points with a non-finite coordinate follow
@@ -36,9 +38,11 @@
 mod cdr;
 mod point_cloud2;
 mod poses;
+mod write;
 
 pub use point_cloud2::{CloudLayout, PointFieldInfo};
 pub use poses::{interpolate, BagPose, ODOMETRY, POSE_SCHEMAS, POSE_STAMPED, TF_MESSAGE};
+pub use write::{encode_point_cloud2, write_bag_cloud, JsonMessage, POINT_CLOUD2_DEFINITION};
 
 use super::error::MessageProblem;
 use super::{io_err, path_buf, CloudError, Location, PointCloud, ReadOptions, ReadReport, Result};

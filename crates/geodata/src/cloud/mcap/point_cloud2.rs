@@ -242,7 +242,7 @@ pub(super) fn points_of(
     let has = |role: Role| used.iter().any(|u| u.role == role);
     let columns = Columns {
         intensity: has(Role::Intensity),
-        rgb: false,
+        rgb: has(Role::Red) && has(Role::Green) && has(Role::Blue),
         label: has(Role::Label),
         raw_label: has(Role::RawLabel),
         object: has(Role::Object),
