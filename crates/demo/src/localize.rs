@@ -187,6 +187,11 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             let svg = localize::figure::result_svg(&localizer, &result, Some(truth), 90.0);
             files.push(("localize.svg", svg.clone().into_bytes()));
             figures.push(svg);
+            // The top 10 candidates as GeoJSON (issue 18).
+            let top = localize::report::GeoCandidate::top(&map, &result, 10);
+            let fc = localize::geojson::candidates_features(&top, result.rank_by.name());
+            geodata::geojson::validate(&fc).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
+            files.push(("localize.geojson", serde_json::to_vec_pretty(&fc)?));
         }
     }
     let table = rows_table(
@@ -315,6 +320,27 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         });
     }
     let svg = localize::figure::track_svg(&map, &truths, &results, &strict, WINDOW);
+    // The track as GeoJSON and its poses as TUM and KITTI trajectories (issue 18).
+    let report = localize::report::TrackReport {
+        map: "embedded default city".into(),
+        scans_dir: ".track-hdl64".into(),
+        odometry: "drifted truth".into(),
+        window: WINDOW,
+        cost: results.first().map_or("reverse", |r| r.rank_by.name()),
+        scans: results
+            .iter()
+            .zip(&extracted)
+            .enumerate()
+            .map(|(i, (r, e))| localize::report::TrackRow::new(&map, &format!("{i:06}"), r, e, 10))
+            .collect(),
+        seconds: localize::report::TrackSeconds {
+            total: 0.0,
+            per_scan: 0.0,
+        },
+    };
+    let track_geojson = localize::geojson::track_collection(&report);
+    geodata::geojson::validate(&track_geojson).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
+    let poses = localize::poses::track_poses(&report);
     let table = rows_table(
         &rows,
         &[
@@ -349,7 +375,21 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             truths.len()
         ),
         figures: vec![svg.clone()],
-        files: vec![("localize_track.svg", svg.into_bytes())],
+        files: vec![
+            ("localize_track.svg", svg.into_bytes()),
+            (
+                "localize_track.geojson",
+                serde_json::to_vec_pretty(&track_geojson)?,
+            ),
+            (
+                "track_tum.txt",
+                localize::poses::tum_lines(&poses).into_bytes(),
+            ),
+            (
+                "track_kitti.txt",
+                localize::poses::kitti_lines(&poses).into_bytes(),
+            ),
+        ],
     })
 }
 
@@ -375,7 +415,14 @@ mod tests {
             "{}",
             stage.summary
         );
-        assert_eq!(stage.files.len(), 1);
+        let names: Vec<&str> = stage.files.iter().map(|f| f.0).collect();
+        assert_eq!(names, ["localize.svg", "localize.geojson"]);
+        let fc: serde_json::Value = serde_json::from_slice(&stage.files[1].1).unwrap();
+        geodata::geojson::validate(&fc).unwrap();
+        let n = fc["features"].as_array().unwrap().len();
+        assert!((1..=10).contains(&n), "{n}");
+        assert_eq!(fc["features"][0]["properties"]["rank"], 1);
+        assert_eq!(fc["attribution"], geodata::geojson::OSM_ATTRIBUTION);
         assert!(stage.figures[0].starts_with("<svg"));
     }
 
@@ -389,9 +436,34 @@ mod tests {
         let stage = track_stage(&args).unwrap();
         assert_eq!(stage.key, "localize_track");
         assert_eq!(stage.summary["scans_after_first_window"], 8);
-        // The scans are removed again; the figure is the stage's one file.
+        // The scans are removed again; the stage's files are the figure, the GeoJSON track
+        // and the TUM and KITTI trajectories.
         assert!(!out.path().join(".track-hdl64").exists());
-        assert_eq!(stage.files.len(), 1);
+        let names: Vec<&str> = stage.files.iter().map(|f| f.0).collect();
+        assert_eq!(
+            names,
+            [
+                "localize_track.svg",
+                "localize_track.geojson",
+                "track_tum.txt",
+                "track_kitti.txt"
+            ]
+        );
+        let fc: serde_json::Value = serde_json::from_slice(&stage.files[1].1).unwrap();
+        geodata::geojson::validate(&fc).unwrap();
+        let text = |k: usize| String::from_utf8(stage.files[k].1.clone()).unwrap();
+        let (tum, kitti) = (text(2), text(3));
+        let scans = fc["features"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|f| f["properties"]["kind"] == "scan")
+            .count();
+        assert!(scans >= 10, "{scans}");
+        assert_eq!(tum.lines().count(), scans);
+        assert_eq!(kitti.lines().count(), scans);
+        assert!(tum.lines().all(|l| l.split_whitespace().count() == 8));
+        assert!(kitti.lines().all(|l| l.split_whitespace().count() == 12));
         assert!(stage.figures[0].starts_with("<svg"));
         let top1 = stage.summary["top1_within_2m_3deg"].as_u64().unwrap();
         assert!(top1 >= 6, "{}", stage.summary);

@@ -135,6 +135,17 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     };
     let map_path = args.out.join("relations-scene.srt");
     write_map(&map_path, &semantic).with_context(|| format!("writing {}", map_path.display()))?;
+    // The map for other tools (issue 18): PLY (CloudCompare, Rerun) and a ROS 2 bag (Foxglove).
+    for (name, write) in [
+        (
+            "semantic_map.ply",
+            srtree::export::write_ply as fn(&std::path::Path, &SemanticMap) -> _,
+        ),
+        ("semantic_map.mcap", srtree::export::write_mcap),
+    ] {
+        let path = args.out.join(name);
+        write(&path, &semantic).with_context(|| format!("writing {}", path.display()))?;
+    }
     let SemanticMap {
         cells: m,
         relations: graph,
@@ -290,6 +301,13 @@ mod tests {
         assert_eq!(stage.key, "srtree");
         assert!(stage.figures[1].contains("<polygon"));
         assert_eq!(stage.summary["evaluation"]["violations"]["mln"], 0);
+        // The map for other tools: the same points in the PLY and the bag.
+        let ply = geodata::cloud::read_cloud(out.join("semantic_map.ply")).unwrap();
+        let bag = geodata::cloud::read_cloud(out.join("semantic_map.mcap")).unwrap();
+        assert!(ply.len() > 100, "{}", ply.len());
+        assert_eq!(ply.positions, bag.positions);
+        assert_eq!(ply.label, bag.label);
+        assert_eq!(ply.object, bag.object);
         let _ = std::fs::remove_dir_all(out);
     }
 }

@@ -120,6 +120,30 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     }
     svg.scale_bar(50.0);
     let figure = svg.finish();
+    // The full-model estimates of both targets as GeoJSON (issue 18).
+    let estimates = |key: &str| -> Vec<streets::model::SegmentEstimate> {
+        report
+            .geometries
+            .get(key)
+            .map(|g| {
+                g.iter()
+                    .map(|g| streets::model::SegmentEstimate {
+                        segment: g.segment,
+                        offset_m: g.estimate.0,
+                        width_m: g.estimate.1,
+                        bins: 0,
+                    })
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let areas = streets::geojson::areas_collection(
+        &ds.map,
+        &estimates("driving_area"),
+        &estimates("with_sidewalk"),
+    );
+    streets::geojson::validate(&areas).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
+    let areas = serde_json::to_vec_pretty(&areas)?;
     let row = |name: &str, s: &Scores| {
         vec![
             name.to_string(),
@@ -161,7 +185,10 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         title: "streets: street width and offset per OSM segment",
         text_html,
         figures: vec![figure.clone()],
-        files: vec![("streets.svg", figure.into_bytes())],
+        files: vec![
+            ("streets.svg", figure.into_bytes()),
+            ("streets.geojson", areas),
+        ],
     })
 }
 
@@ -183,6 +210,20 @@ mod tests {
         eprintln!("demo stage: {:.1} s", t.elapsed().as_secs_f64());
         assert_eq!(stage.key, "streets");
         assert!(stage.figures[0].contains("<polygon"));
+        let fc: serde_json::Value = serde_json::from_slice(&stage.files[1].1).unwrap();
+        assert_eq!(stage.files[1].0, "streets.geojson");
+        streets::geojson::validate(&fc).unwrap();
+        assert_eq!(fc["attribution"], geodata::geojson::OSM_ATTRIBUTION);
+        let areas: std::collections::BTreeSet<&str> = fc["features"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f["properties"]["area"].as_str().unwrap())
+            .collect();
+        assert!(
+            areas.contains("driving area") && areas.contains("sidewalk"),
+            "{areas:?}"
+        );
         assert!(stage.text_html.contains("full model"));
         // Measured 2026-11-26 (seed 1): full-model F1 0.911 driving area, 0.990 with
         // sidewalk, above raw (0.856 / 0.970). Pinned 0.03 below.
