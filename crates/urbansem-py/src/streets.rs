@@ -124,7 +124,7 @@ fn streets_estimate<'py>(
         let est = model
             .estimate(&osm, &pc, &map_name, &cloud_name)
             .map_err(|e| chain(&e))?;
-        let fc = streets::geojson::feature_collection(&osm, &est.segments);
+        let fc = streets::geojson::feature_collection(&osm, &est.segments, model.target);
         streets::geojson::validate(&fc).map_err(|e| format!("internal: {e}"))?;
         Ok::<_, String>(fc)
     });
