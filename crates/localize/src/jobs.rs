@@ -228,6 +228,154 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
     })
 }
 
+/// `urbansem localize track --bag`: the scans of a ROS 2 bag's point cloud topic, levelled
+/// and tied by the poses of its odometry topic.
+#[derive(Debug, Clone)]
+pub struct BagTrackJob {
+    /// The map (OSM file or `.uloc` index).
+    pub map: PathBuf,
+    /// The bag (.mcap).
+    pub bag: PathBuf,
+    /// Its `sensor_msgs/msg/PointCloud2` topic (scans in the sensor frame).
+    pub cloud_topic: String,
+    /// Its Odometry, PoseStamped or TF topic: the sensor's pose in a gravity-aligned
+    /// odometry frame (roll and pitch level the scans; x, y, yaw tie them).
+    pub odometry_topic: String,
+    /// For a TF topic: the child frame of the sensor's transform.
+    pub child_frame: Option<String>,
+    /// Use every n-th scan (1: all).
+    pub every: usize,
+    /// A scan more than this many seconds from both poses around it is left out.
+    pub max_gap_s: f64,
+    /// Scans per window.
+    pub window: usize,
+    /// The localizer's options.
+    pub options: LocalizeOptions,
+    /// Candidates listed per scan.
+    pub top: usize,
+}
+
+/// Localizes the scans of a bag as [`track_folder`] does a folder's: each scan is levelled by
+/// its pose's roll and pitch (interpolated at its stamp, or its log time when unstamped),
+/// and the poses' x, y and yaw are the odometry. Rows are named `TOPIC#INDEX`. Also returns
+/// how many scans were left out for want of a pose.
+pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
+    use geodata::cloud::mcap::{for_each_bag_cloud, interpolate, read_bag_poses, Next};
+    if job.every == 0 || job.max_gap_s.is_nan() || job.max_gap_s < 0.0 {
+        return Err(LocalizeError::Dataset {
+            path: job.bag.clone(),
+            message: format!(
+                "every = {} and max gap = {} s: expected every ≥ 1 and a gap ≥ 0",
+                job.every, job.max_gap_s
+            ),
+        });
+    }
+    let (map, prepared) = load_map_or_index(&job.map)?;
+    let localizer = Localizer::prepared_or_new(&map, prepared, job.options.clone(), &job.map)?;
+    let t = Instant::now();
+    let time = |stamp: i64, log: u64| {
+        if stamp != 0 {
+            stamp
+        } else {
+            i64::try_from(log).unwrap_or(i64::MAX)
+        }
+    };
+    let mut poses = read_bag_poses(&job.bag, &job.odometry_topic, job.child_frame.as_deref())?;
+    for p in &mut poses {
+        p.stamp_ns = time(p.stamp_ns, p.log_time_ns);
+    }
+    poses.sort_by_key(|p| p.stamp_ns);
+    let max_gap_ns = (job.max_gap_s * 1e9).min(i64::MAX as f64) as i64;
+    let mut names = Vec::new();
+    let mut odometry = Vec::new();
+    let mut extracted = Vec::new();
+    let mut failure = None;
+    let mut without_pose = 0;
+    for_each_bag_cloud(
+        &job.bag,
+        &job.cloud_topic,
+        &geodata::cloud::ReadOptions::default(),
+        |scan| {
+            if scan.index % job.every != 0 {
+                return Next::Continue;
+            }
+            let Some(pose) = interpolate(&poses, time(scan.stamp_ns, scan.log_time_ns), max_gap_ns)
+            else {
+                without_pose += 1;
+                return Next::Continue;
+            };
+            // R = Rz(yaw)·R_level: turning the scan by Rz(−yaw)·R levels it and keeps its heading.
+            let yaw = pose.yaw();
+            let (s, c) = yaw.sin_cos();
+            let r = pose.matrix();
+            let level: [[f64; 3]; 3] = std::array::from_fn(|i| {
+                std::array::from_fn(|j| match i {
+                    0 => c * r[0][j] + s * r[1][j],
+                    1 => -s * r[0][j] + c * r[1][j],
+                    _ => r[2][j],
+                })
+            });
+            let points: Vec<[f64; 3]> = scan
+                .cloud
+                .positions
+                .iter()
+                .map(|p| {
+                    std::array::from_fn(|i| {
+                        level[i][0] * p[0] + level[i][1] * p[1] + level[i][2] * p[2]
+                    })
+                })
+                .collect();
+            let name = format!("{}#{}", job.cloud_topic, scan.index);
+            match localizer
+                .scan_segments(&points)
+                .context_with(|| format!("extracting walls from {name}"))
+            {
+                Ok(segments) => extracted.push(segments),
+                Err(e) => {
+                    failure = Some(e);
+                    return Next::Stop;
+                }
+            }
+            names.push(name);
+            odometry.push(crate::Pose2 {
+                x: pose.translation[0],
+                y: pose.translation[1],
+                yaw_rad: yaw,
+            });
+            Next::Continue
+        },
+    )?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if names.is_empty() {
+        return Err(LocalizeError::Dataset {
+            path: job.bag.clone(),
+            message: format!(
+                "no scan of {} has a pose of {} within {} s",
+                job.cloud_topic, job.odometry_topic, job.max_gap_s
+            ),
+        });
+    }
+    let scans = track_rows(
+        &localizer, &names, &extracted, &odometry, job.window, job.top,
+    )?;
+    let seconds = t.elapsed().as_secs_f64();
+    let report = TrackReport {
+        map: job.map.display().to_string(),
+        scans_dir: format!("{} {}", job.bag.display(), job.cloud_topic),
+        odometry: format!("{} {}", job.bag.display(), job.odometry_topic),
+        window: job.window,
+        cost: job.options.rank_by.name(),
+        seconds: TrackSeconds {
+            total: seconds,
+            per_scan: seconds / names.len() as f64,
+        },
+        scans,
+    };
+    Ok((report, without_pose))
+}
+
 /// The rows of a track ([`track_folder`] and the Python package): the scans' extracted walls
 /// (`extracted`, named `names`) localized with the window of `window` scans ending at each,
 /// tied by `odometry` (one pose per scan in any odometry frame); `top` candidates per row.

@@ -18,7 +18,10 @@ use localize::eval::is_mcd;
 use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
 use localize::index::is_index;
-use localize::jobs::{build_index, extract_eval_sequence, localize_file, track_folder, TrackJob};
+use localize::jobs::{
+    build_index, extract_eval_sequence, localize_file, track_bag, track_folder, BagTrackJob,
+    TrackJob,
+};
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
 use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
@@ -77,12 +80,31 @@ pub struct TrackArgs {
     pub map: PathBuf,
     /// Folder of gravity-levelled scans (any supported cloud format), taken in
     /// lexicographic file-name order.
-    #[arg(long)]
-    pub scans: PathBuf,
+    #[arg(long, required_unless_present = "bag", conflicts_with = "bag")]
+    pub scans: Option<PathBuf>,
     /// One line per scan, `x_m y_m yaw_rad` (optionally `scan x_m y_m yaw_rad`), in any
     /// local odometry frame; `#` starts a comment.
-    #[arg(long)]
-    pub odometry: PathBuf,
+    #[arg(long, required_unless_present = "bag", conflicts_with = "bag")]
+    pub odometry: Option<PathBuf>,
+    /// A ROS 2 bag (.mcap) instead of --scans/--odometry: the scans of --topic, levelled and
+    /// tied by the poses of --odometry-topic.
+    #[arg(long, requires_all = ["topic", "odometry_topic"])]
+    pub bag: Option<PathBuf>,
+    /// The bag's PointCloud2 topic.
+    #[arg(long, requires = "bag")]
+    pub topic: Option<String>,
+    /// The bag's Odometry, PoseStamped or TF topic (sensor pose in a gravity-aligned frame).
+    #[arg(long, requires = "bag")]
+    pub odometry_topic: Option<String>,
+    /// With a TF topic: the child frame of the sensor's transform.
+    #[arg(long, requires = "odometry_topic")]
+    pub child_frame: Option<String>,
+    /// With --bag: use every n-th scan.
+    #[arg(long, default_value_t = 1)]
+    pub every: usize,
+    /// With --bag: leave out a scan more than this many seconds from both poses around it.
+    #[arg(long, default_value_t = 0.5)]
+    pub max_gap: f64,
     /// Scans per window (the scan and the K−1 before it).
     #[arg(long, default_value_t = 5)]
     pub window: usize,
@@ -493,20 +515,47 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     if args.top == 0 && writes_poses {
         super::usage!("--top 0: --geojson, --poses-tum and --poses-kitti need --top 1 or more");
     }
-    let job = TrackJob {
-        map: args.map.clone(),
-        scans: args.scans.clone(),
-        odometry: args.odometry.clone(),
-        window: args.window,
-        options: options(
-            args.cost.kind(),
-            args.grid_m,
-            args.yaw_step_deg,
-            &args.extract,
-        )?,
-        top: args.top,
+    let options = options(
+        args.cost.kind(),
+        args.grid_m,
+        args.yaw_step_deg,
+        &args.extract,
+    )?;
+    let report = match (&args.bag, &args.scans, &args.odometry) {
+        (Some(bag), _, _) => {
+            let job = BagTrackJob {
+                map: args.map.clone(),
+                bag: bag.clone(),
+                cloud_topic: args.topic.clone().unwrap_or_default(),
+                odometry_topic: args.odometry_topic.clone().unwrap_or_default(),
+                child_frame: args.child_frame.clone(),
+                every: args.every,
+                max_gap_s: args.max_gap,
+                window: args.window,
+                options,
+                top: args.top,
+            };
+            let (report, without_pose) = track_bag(&job)?;
+            if without_pose > 0 {
+                eprintln!(
+                    "warning: {without_pose} scans of {} left out: no pose of {} within {} s",
+                    job.cloud_topic, job.odometry_topic, job.max_gap_s
+                );
+            }
+            report
+        }
+        (None, Some(scans), Some(odometry)) => track_folder(&TrackJob {
+            map: args.map.clone(),
+            scans: scans.clone(),
+            odometry: odometry.clone(),
+            window: args.window,
+            options,
+            top: args.top,
+        })?,
+        _ => {
+            super::usage!("give --scans and --odometry, or --bag with --topic and --odometry-topic")
+        }
     };
-    let report = track_folder(&job)?;
     if let Some(path) = &args.geojson {
         write_geojson(path, &localize::geojson::track_collection(&report))?;
     }
