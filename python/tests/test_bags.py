@@ -262,6 +262,8 @@ def test_map_build_from_a_bag_places_scans_by_their_poses(data: Path, tmp_path: 
     # A scan far from every pose is skipped, and a missing pose topic is a clear error.
     far = cli("map", "build", "--cloud", bag, "--topic", "/points", "--poses", "/odom", "--max-gap", "0", "--every", "2", "--out", tmp_path / "b.srt", "--json", json_out=True)
     assert far["bag"]["inserted"] == 2  # stamps of scans and poses coincide: gap 0 is enough
+    rays = cli("map", "build", "--cloud", bag, "--topic", "/points", "--poses", "/odom", "--ray-casting", "--out", tmp_path / "r.srt", "--json", json_out=True)
+    assert rays["rays"] == report["points"] and rays["misses"] > 0
     with pytest.raises(subprocess.CalledProcessError) as e:
         cli("map", "build", "--cloud", bag, "--topic", "/points", "--poses", "/tf", "--out", tmp_path / "c.srt")
     assert "no topic" in e.value.stderr and "/odom" in e.value.stderr
