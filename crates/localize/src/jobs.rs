@@ -125,24 +125,52 @@ pub fn localize_file(
     top: usize,
     svg: Option<&Path>,
 ) -> Result<FileLocalization> {
+    localize_scan(map_path, ScanInput::File(scan_path), options, top, svg)
+}
+
+/// Where [`localize_scan`] takes the scan from.
+#[derive(Debug, Clone, Copy)]
+pub enum ScanInput<'a> {
+    /// A cloud file, read here.
+    File(&'a Path),
+    /// A cloud already read (e.g. a message of a bag), with the name the report gives it and
+    /// the seconds reading it took.
+    Cloud(&'a geodata::cloud::PointCloud, &'a str, f64),
+}
+
+/// Localizes one scan (a file or a cloud in memory) on the map (or index) `map_path`, listing
+/// the `top` best candidates; draws the result to `svg` when given.
+pub fn localize_scan(
+    map_path: &Path,
+    scan: ScanInput<'_>,
+    options: LocalizeOptions,
+    top: usize,
+    svg: Option<&Path>,
+) -> Result<FileLocalization> {
     let t = Instant::now();
     let (map, prepared) = load_map_or_index(map_path)?;
     let load_map_s = t.elapsed().as_secs_f64();
     let localizer = Localizer::prepared_or_new(&map, prepared, options, map_path)?;
     let t = Instant::now();
-    let cloud = geodata::cloud::read_cloud(scan_path)
-        .context_with(|| format!("reading the scan {}", scan_path.display()))?;
-    let read_scan_s = t.elapsed().as_secs_f64();
+    let read;
+    let (cloud, name, read_scan_s) = match scan {
+        ScanInput::File(path) => {
+            read = geodata::cloud::read_cloud(path)
+                .context_with(|| format!("reading the scan {}", path.display()))?;
+            (&read, path.display().to_string(), t.elapsed().as_secs_f64())
+        }
+        ScanInput::Cloud(cloud, name, seconds) => (cloud, name.to_owned(), seconds),
+    };
     let result = localizer
         .localize_points(&cloud.positions)
-        .context_with(|| format!("localizing {}", scan_path.display()))?;
+        .context_with(|| format!("localizing {name}"))?;
     if let Some(svg_path) = svg {
         write_file(svg_path, result_svg(&localizer, &result, None, 100.0))?;
     }
     let report = LocalizeReport::new(
         &localizer,
         &map_path.display().to_string(),
-        &scan_path.display().to_string(),
+        &name,
         &result,
         top,
         load_map_s,

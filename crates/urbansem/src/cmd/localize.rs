@@ -19,8 +19,8 @@ use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
 use localize::index::is_index;
 use localize::jobs::{
-    build_index, extract_eval_sequence, localize_file, track_bag, track_folder, BagTrackJob,
-    TrackJob,
+    build_index, extract_eval_sequence, localize_file, localize_scan, track_bag, track_folder,
+    BagTrackJob, ScanInput, TrackJob,
 };
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
@@ -319,9 +319,13 @@ pub struct RunArgs {
     /// OSM map (.osm or .osm.pbf), or its index (.uloc, from `localize index`).
     #[arg(long)]
     pub map: Option<PathBuf>,
-    /// Gravity-levelled scan in the sensor frame (PLY, PCD, LAS/LAZ, KITTI .bin).
+    /// Gravity-levelled scan in the sensor frame (PLY, PCD, LAS/LAZ, KITTI .bin, or a
+    /// message of a ROS 2 bag, .mcap).
     #[arg(long)]
     pub scan: Option<PathBuf>,
+    /// The bag message to read when --scan is a .mcap file.
+    #[command(flatten)]
+    pub bag: super::BagPickArgs,
     /// Cost that ranks the candidates.
     #[arg(long, value_enum, default_value = "reverse")]
     pub cost: CostArg,
@@ -485,7 +489,20 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         args.yaw_step_deg,
         &args.extract,
     )?;
-    let done = localize_file(map_path, scan_path, options, args.top, args.svg.as_deref())?;
+    let is_bag =
+        geodata::cloud::Format::from_path(scan_path).ok() == Some(geodata::cloud::Format::Mcap);
+    let done = if is_bag || args.bag.given() {
+        let (cloud, name, seconds) = args.bag.read(scan_path)?;
+        localize_scan(
+            map_path,
+            ScanInput::Cloud(&cloud, &name, seconds),
+            options,
+            args.top,
+            args.svg.as_deref(),
+        )?
+    } else {
+        localize_file(map_path, scan_path, options, args.top, args.svg.as_deref())?
+    };
     if let Some(path) = &args.geojson {
         write_geojson(
             path,
@@ -685,6 +702,7 @@ mod tests {
         let err = run_one(RunArgs {
             map: None,
             scan: None,
+            bag: Default::default(),
             cost: CostArg::Reverse,
             top: 10,
             json: false,

@@ -23,9 +23,9 @@ pub enum MapCommand {
         /// one message of --topic, or with --poses every scan placed by its pose.
         #[arg(long)]
         cloud: PathBuf,
-        /// The bag's PointCloud2 topic (needed when it has several).
-        #[arg(long)]
-        topic: Option<String>,
+        /// The bag message to read (with --poses: the topic of the scans).
+        #[command(flatten)]
+        bag: super::BagPickArgs,
         /// The bag's Odometry, PoseStamped or TF topic placing each scan (sensor pose in the map
         /// frame): builds the map from every scan of --topic.
         #[arg(long, value_name = "TOPIC", requires = "topic")]
@@ -235,7 +235,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
     match command {
         MapCommand::Build {
             cloud,
-            topic,
+            bag,
             poses,
             child_frame,
             every,
@@ -250,12 +250,9 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             let origin = origin
                 .map(|s| parse_floats::<3>(&s, "--origin"))
                 .transpose()?;
-            let is_bag = geodata::cloud::Format::from_path(&cloud).ok()
-                == Some(geodata::cloud::Format::Mcap);
-            if topic.is_some() && !is_bag {
+            if poses.is_some() && (bag.index.is_some() || bag.time.is_some()) {
                 super::usage!(
-                    "--topic selects a topic of a ROS 2 bag (.mcap); {} is not one",
-                    cloud.display()
+                    "--index and --time pick one message; --poses reads every scan of --topic"
                 );
             }
             if ray_casting && origin.is_none() && poses.is_none() {
@@ -280,7 +277,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
             let (map, stats, read_s, insert_s, bag) = if let Some(pose_topic) = poses {
                 let job = srtree::jobs::BagBuildJob {
                     bag: cloud.clone(),
-                    cloud_topic: topic.clone().unwrap_or_default(),
+                    cloud_topic: bag.topic.clone().unwrap_or_default(),
                     pose_topic,
                     child_frame,
                     every,
@@ -294,19 +291,7 @@ pub fn run_map(command: MapCommand) -> anyhow::Result<()> {
                 map.set_dirichlet(dirichlet);
                 (map, b.stats, b.seconds_read, b.seconds_insert, Some(b))
             } else {
-                let t = Instant::now();
-                let c = match &topic {
-                    Some(name) => geodata::cloud::mcap::read_bag_cloud(
-                        &cloud,
-                        Some(name),
-                        0,
-                        &Default::default(),
-                    )
-                    .map(|(c, _)| c),
-                    None => geodata::cloud::read_cloud(&cloud),
-                }
-                .with_context(|| format!("reading {}", cloud.display()))?;
-                let read_s = t.elapsed().as_secs_f64();
+                let (c, _, read_s) = bag.read(&cloud)?;
                 let mut map = SrMap::new(options)?;
                 map.set_dirichlet(dirichlet);
                 let t = Instant::now();

@@ -4,7 +4,6 @@
 
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
-use geodata::cloud::read_cloud;
 use geodata::osm::OsmMap;
 use std::path::PathBuf;
 use streets::eval::EvalOptions;
@@ -161,6 +160,9 @@ pub enum StreetsCommand {
         /// Registered point cloud (in the frame --cloud-frame names).
         #[arg(long)]
         cloud: PathBuf,
+        /// The bag message to read when --cloud is a ROS 2 bag (.mcap).
+        #[command(flatten)]
+        bag: super::BagPickArgs,
         /// The cloud's frame: local (the map's local frame), utm:ZONE[N|S] (e.g. utm:32N),
         /// or enu:LAT,LON (east/north/up metres about a WGS84 anchor); converted exactly.
         #[arg(long, default_value = "local")]
@@ -295,6 +297,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         StreetsCommand::Estimate {
             map,
             cloud,
+            bag,
             cloud_frame,
             model,
             out,
@@ -304,8 +307,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             // Checked as it is read: dimensions, finite values, bin sizes (issue 16).
             let model = StreetModel::from_json(&bytes, &model)?;
             let osm = OsmMap::load(&map).with_context(|| format!("loading {}", map.display()))?;
-            let mut pc =
-                read_cloud(&cloud).with_context(|| format!("reading {}", cloud.display()))?;
+            let (mut pc, _, _) = bag.read(&cloud)?;
             cloud_frame
                 .into_map_frame(&mut pc, &osm.frame)
                 .with_context(|| format!("moving {} into the map's frame", cloud.display()))?;
