@@ -288,7 +288,7 @@ pub struct BagTrackJob {
 /// and the poses' x, y and yaw are the odometry. Rows are named `TOPIC#INDEX`. Also returns
 /// how many scans were left out for want of a pose.
 pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
-    use geodata::cloud::mcap::{for_each_bag_cloud, interpolate, read_bag_poses, Next};
+    use geodata::cloud::mcap::{for_each_bag_cloud, Next, PoseTrack};
     if job.every == 0 || job.max_gap_s.is_nan() || job.max_gap_s < 0.0 {
         return Err(LocalizeError::Dataset {
             path: job.bag.clone(),
@@ -301,19 +301,12 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
     let (map, prepared) = load_map_or_index(&job.map)?;
     let localizer = Localizer::prepared_or_new(&map, prepared, job.options.clone(), &job.map)?;
     let t = Instant::now();
-    let time = |stamp: i64, log: u64| {
-        if stamp != 0 {
-            stamp
-        } else {
-            i64::try_from(log).unwrap_or(i64::MAX)
-        }
-    };
-    let mut poses = read_bag_poses(&job.bag, &job.odometry_topic, job.child_frame.as_deref())?;
-    for p in &mut poses {
-        p.stamp_ns = time(p.stamp_ns, p.log_time_ns);
-    }
-    poses.sort_by_key(|p| p.stamp_ns);
-    let max_gap_ns = (job.max_gap_s * 1e9).min(i64::MAX as f64) as i64;
+    let track = PoseTrack::read(
+        &job.bag,
+        &job.odometry_topic,
+        job.child_frame.as_deref(),
+        job.max_gap_s,
+    )?;
     let mut names = Vec::new();
     let mut odometry = Vec::new();
     let mut extracted = Vec::new();
@@ -327,22 +320,12 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
             if scan.index % job.every != 0 {
                 return Next::Continue;
             }
-            let Some(pose) = interpolate(&poses, time(scan.stamp_ns, scan.log_time_ns), max_gap_ns)
-            else {
+            let Some(pose) = track.at(&scan) else {
                 without_pose += 1;
                 return Next::Continue;
             };
-            // R = Rz(yaw)·R_level: turning the scan by Rz(−yaw)·R levels it and keeps its heading.
             let yaw = pose.yaw();
-            let (s, c) = yaw.sin_cos();
-            let r = pose.matrix();
-            let level: [[f64; 3]; 3] = std::array::from_fn(|i| {
-                std::array::from_fn(|j| match i {
-                    0 => c * r[0][j] + s * r[1][j],
-                    1 => -s * r[0][j] + c * r[1][j],
-                    _ => r[2][j],
-                })
-            });
+            let level = crate::levelling_rotation(&pose.matrix(), yaw);
             let points: Vec<[f64; 3]> = scan
                 .cloud
                 .positions

@@ -101,6 +101,19 @@ impl Segment {
     }
 }
 
+/// The rotation that levels a sensor frame whose orientation is `rotation` (sensor → a
+/// gravity-aligned frame) with heading `yaw`: Rz(−yaw)·R, roll and pitch removed, x forward.
+pub fn levelling_rotation(rotation: &[[f64; 3]; 3], yaw: f64) -> [[f64; 3]; 3] {
+    let (s, c) = yaw.sin_cos();
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| match i {
+            0 => c * rotation[0][j] + s * rotation[1][j],
+            1 => -s * rotation[0][j] + c * rotation[1][j],
+            _ => rotation[2][j],
+        })
+    })
+}
+
 /// A planar pose: the sensor's position and heading in the map's local frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Pose2 {

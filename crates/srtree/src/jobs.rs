@@ -225,7 +225,7 @@ pub struct BagBuild {
 /// translation, so ray casting clears the space each scan saw). The map frame is the pose
 /// topic's parent frame. A scan's time is its `header.stamp` (its log time when unstamped).
 pub fn build_from_bag(job: &BagBuildJob) -> Result<(crate::map::SrMap, BagBuild)> {
-    use geodata::cloud::mcap::{for_each_bag_cloud, interpolate, read_bag_poses, Next};
+    use geodata::cloud::mcap::{for_each_bag_cloud, Next, PoseTrack};
     use geodata::cloud::{PointCloud, ReadOptions};
     if job.every == 0 || job.batch == 0 || job.max_gap_s.is_nan() || job.max_gap_s < 0.0 {
         return Err(SrtreeError::InvalidOption {
@@ -235,25 +235,18 @@ pub fn build_from_bag(job: &BagBuildJob) -> Result<(crate::map::SrMap, BagBuild)
         });
     }
     let t0 = Instant::now();
-    let mut poses = read_bag_poses(&job.bag, &job.pose_topic, job.child_frame.as_deref())?;
-    let time = |stamp: i64, log: u64| {
-        if stamp != 0 {
-            stamp
-        } else {
-            i64::try_from(log).unwrap_or(i64::MAX)
-        }
-    };
-    for p in &mut poses {
-        p.stamp_ns = time(p.stamp_ns, p.log_time_ns);
-    }
-    poses.sort_by_key(|p| p.stamp_ns);
-    let max_gap_ns = (job.max_gap_s * 1e9).min(i64::MAX as f64) as i64;
+    let track = PoseTrack::read(
+        &job.bag,
+        &job.pose_topic,
+        job.child_frame.as_deref(),
+        job.max_gap_s,
+    )?;
     let mut map = crate::map::SrMap::new(job.options.clone())?;
     let mut report = BagBuild {
         scans: 0,
         inserted: 0,
         skipped_without_pose: 0,
-        poses: poses.len(),
+        poses: track.poses.len(),
         stats: crate::map::InsertStats::default(),
         seconds_read: 0.0,
         seconds_insert: 0.0,
@@ -288,8 +281,7 @@ pub fn build_from_bag(job: &BagBuildJob) -> Result<(crate::map::SrMap, BagBuild)
             if scan.index % job.every != 0 {
                 return Next::Continue;
             }
-            let at = time(scan.stamp_ns, scan.log_time_ns);
-            let Some(pose) = interpolate(&poses, at, max_gap_ns) else {
+            let Some(pose) = track.at(&scan) else {
                 report.skipped_without_pose += 1;
                 return Next::Continue;
             };

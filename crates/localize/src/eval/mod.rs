@@ -192,13 +192,10 @@ pub fn level_scan(seq: &dyn LidarSequence, map: &OsmMap, frame: u64) -> Result<L
         .collect();
     let r = iso.rotation.to_rotation_matrix();
     let r = r.matrix();
-    let levelling = std::array::from_fn(|i| {
-        std::array::from_fn(|j| match i {
-            0 => c * r[(0, j)] + s * r[(1, j)],
-            1 => -s * r[(0, j)] + c * r[(1, j)],
-            _ => r[(2, j)],
-        })
-    });
+    let levelling = crate::levelling_rotation(
+        &std::array::from_fn(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]),
+        yaw,
+    );
     Ok(LevelledScan {
         scan: EvalScan {
             name: format!("{frame:010}"),

@@ -53,15 +53,9 @@ pub enum CloudCommand {
         /// Skip points with NaN/infinite coordinates (counted) instead of failing.
         #[arg(long)]
         drop_non_finite: bool,
-        /// The bag's PointCloud2 topic to read (.mcap input only; needed when the bag has several).
-        #[arg(long)]
-        topic: Option<String>,
-        /// Which message of the topic to read, 0-based in file order (.mcap input only; default 0).
-        #[arg(long, conflicts_with = "time")]
-        index: Option<usize>,
-        /// Read the message logged nearest to this time, seconds since the epoch (.mcap input only).
-        #[arg(long, value_name = "SECONDS")]
-        time: Option<f64>,
+        /// The message to read when IN is a ROS 2 bag (.mcap).
+        #[command(flatten)]
+        bag: super::BagPickArgs,
     },
 }
 
@@ -82,9 +76,7 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
             labels,
             label_set,
             drop_non_finite,
-            topic,
-            index,
-            time,
+            bag,
         } => {
             let encoding = if ascii {
                 Encoding::Ascii
@@ -95,21 +87,7 @@ pub fn run(command: CloudCommand) -> anyhow::Result<()> {
             } else {
                 Encoding::BinaryLittleEndian
             };
-            let is_bag = Format::from_path(&input).ok() == Some(Format::Mcap);
-            if !is_bag && (topic.is_some() || index.is_some() || time.is_some()) {
-                super::usage!(
-                    "--topic, --index and --time select a message of a ROS 2 bag (.mcap); {} is not one",
-                    input.display()
-                );
-            }
-            let pick = match time {
-                Some(t) if !(t.is_finite() && t >= 0.0) => {
-                    super::usage!("--time {t} is not a time in seconds since the epoch")
-                }
-                Some(t) => Pick::Time((t * 1e9).round() as u64),
-                None => Pick::Index(index.unwrap_or(0)),
-            };
-            let message = is_bag.then_some((topic.as_deref(), pick));
+            let message = bag.pick(&input)?;
             convert(
                 &input,
                 &output,

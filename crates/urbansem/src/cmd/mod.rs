@@ -42,6 +42,34 @@ impl BagPickArgs {
         self.topic.is_some() || self.index.is_some() || self.time.is_some()
     }
 
+    /// The message to read when `path` is a bag: its topic and pick; `None` for any other
+    /// cloud file (the options are then a usage error).
+    pub fn pick(
+        &self,
+        path: &std::path::Path,
+    ) -> anyhow::Result<Option<(Option<&str>, geodata::cloud::mcap::Pick)>> {
+        use geodata::cloud::mcap::Pick;
+        let is_bag =
+            geodata::cloud::Format::from_path(path).ok() == Some(geodata::cloud::Format::Mcap);
+        if !is_bag {
+            if self.given() {
+                usage!(
+                    "--topic, --index and --time select a message of a ROS 2 bag (.mcap); {} is not one",
+                    path.display()
+                );
+            }
+            return Ok(None);
+        }
+        let pick = match self.time {
+            Some(s) if !(s.is_finite() && s >= 0.0) => {
+                usage!("--time {s} is not a time in seconds since the epoch")
+            }
+            Some(s) => Pick::Time((s * 1e9).round() as u64),
+            None => Pick::Index(self.index.unwrap_or(0)),
+        };
+        Ok(Some((self.topic.as_deref(), pick)))
+    }
+
     /// Reads the cloud `path`: one message of a bag as the options pick it, any other cloud
     /// file as it is (the options are then a usage error). Returns the cloud and its name
     /// (`BAG TOPIC#INDEX` for a bag message) and the seconds reading took.
@@ -52,29 +80,14 @@ impl BagPickArgs {
         use anyhow::Context;
         use geodata::cloud::mcap::{read_bag_cloud_at, Pick};
         let t = std::time::Instant::now();
-        let is_bag =
-            geodata::cloud::Format::from_path(path).ok() == Some(geodata::cloud::Format::Mcap);
-        if !is_bag {
-            if self.given() {
-                usage!(
-                    "--topic, --index and --time select a message of a ROS 2 bag (.mcap); {} is not one",
-                    path.display()
-                );
-            }
+        let Some((topic, pick)) = self.pick(path)? else {
             let cloud = geodata::cloud::read_cloud(path)
                 .with_context(|| format!("reading {}", path.display()))?;
             return Ok((cloud, path.display().to_string(), t.elapsed().as_secs_f64()));
-        }
-        let pick = match self.time {
-            Some(s) if !(s.is_finite() && s >= 0.0) => {
-                usage!("--time {s} is not a time in seconds since the epoch")
-            }
-            Some(s) => Pick::Time((s * 1e9).round() as u64),
-            None => Pick::Index(self.index.unwrap_or(0)),
         };
-        let (cloud, _) = read_bag_cloud_at(path, self.topic.as_deref(), pick, &Default::default())
+        let (cloud, _) = read_bag_cloud_at(path, topic, pick, &Default::default())
             .with_context(|| format!("reading {}", path.display()))?;
-        let name = match (&self.topic, pick) {
+        let name = match (topic, pick) {
             (Some(t), Pick::Index(i)) => format!("{} {t}#{i}", path.display()),
             (Some(t), Pick::Time(ns)) => format!("{} {t}@{}", path.display(), ns as f64 / 1e9),
             (None, _) => path.display().to_string(),

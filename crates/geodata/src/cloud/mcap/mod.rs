@@ -491,6 +491,54 @@ pub fn read_bag_poses(path: &Path, topic: &str, child_frame: Option<&str>) -> Re
     })
 }
 
+/// A bag's poses on one topic as a track: in time order, each pose's time its `header.stamp`
+/// (its log time when unstamped), looked up at a scan's time by [`interpolate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseTrack {
+    /// The poses, `stamp_ns` the time they hold, sorted by it.
+    pub poses: Vec<BagPose>,
+    /// A time more than this from both poses around it has no pose.
+    pub max_gap_ns: i64,
+}
+
+impl PoseTrack {
+    /// Reads the poses of `topic` (see [`read_bag_poses`]); `max_gap_s` bounds interpolation.
+    pub fn read(
+        path: &Path,
+        topic: &str,
+        child_frame: Option<&str>,
+        max_gap_s: f64,
+    ) -> Result<PoseTrack> {
+        let mut poses = read_bag_poses(path, topic, child_frame)?;
+        for p in &mut poses {
+            p.stamp_ns = message_time_ns(p.stamp_ns, p.log_time_ns);
+        }
+        poses.sort_by_key(|p| p.stamp_ns);
+        Ok(PoseTrack {
+            poses,
+            max_gap_ns: (max_gap_s * 1e9).min(i64::MAX as f64) as i64,
+        })
+    }
+
+    /// The pose at a scan's time, `None` outside the track or in a gap.
+    pub fn at(&self, scan: &BagScan) -> Option<BagPose> {
+        interpolate(
+            &self.poses,
+            message_time_ns(scan.stamp_ns, scan.log_time_ns),
+            self.max_gap_ns,
+        )
+    }
+}
+
+/// A message's time: its `header.stamp`, or its log time when it is unstamped (0).
+pub fn message_time_ns(stamp_ns: i64, log_time_ns: u64) -> i64 {
+    if stamp_ns != 0 {
+        stamp_ns
+    } else {
+        i64::try_from(log_time_ns).unwrap_or(i64::MAX)
+    }
+}
+
 /// One point cloud message of a bag, decoded.
 #[derive(Debug, Clone)]
 pub struct BagScan {
