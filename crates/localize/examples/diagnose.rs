@@ -189,7 +189,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
             .collect();
         let has_streets = !map.streets.segments.is_empty();
-        let (kept, counts) = filter(sup.clone(), &index, has_streets, o.search.street_distance_m);
+        let (kept, counts) = filter(
+            sup.clone(),
+            |_| (&index, has_streets),
+            o.search.street_distance_m,
+        );
         let kept_near = kept.iter().filter(|c| acc.accepts(&c.pose, &truth)).count();
         let truth_in_building = index.building_at([truth.x, truth.y]).is_some();
         let truth_street = index

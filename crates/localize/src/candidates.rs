@@ -288,7 +288,7 @@ impl<'a> Plans<'a> {
 }
 
 /// Largest cost within `factor` of `best`.
-fn limit_of(best: u64, factor: (u64, u64)) -> u64 {
+pub(crate) fn limit_of(best: u64, factor: (u64, u64)) -> u64 {
     let l = (best as u128) * (factor.0 as u128) / (factor.1.max(1) as u128);
     l.min(u64::MAX as u128) as u64
 }
@@ -389,13 +389,47 @@ pub fn search(
     mask: Option<&FeasibleMask>,
     factor: (u64, u64),
 ) -> (Vec<RawPose>, SearchStats) {
+    let (found, stats, _) = search_capped(dt, pyr, templates, domain, mask, factor, Cap::NONE);
+    (found, stats)
+}
+
+/// A cap on a search: poses costing more than `cost` are not wanted, and `minimum_only`
+/// stops once the minimum is known (a map tile's first pass, [`crate::tiles`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cap {
+    /// The most a returned pose may cost.
+    pub cost: u64,
+    /// Return the minimum only (no poses).
+    pub minimum_only: bool,
+}
+
+impl Cap {
+    /// No cap.
+    pub const NONE: Cap = Cap {
+        cost: u64::MAX,
+        minimum_only: false,
+    };
+}
+
+/// [`search`] with a cap: every pose with cost ≤ min(factor × minimum, `cap.cost`), and the
+/// minimum when it is ≤ `cap.cost` (`None` otherwise: no pose costs that little). Boxes
+/// bounded above the cap are never expanded, so a region that cannot beat it costs little.
+pub fn search_capped(
+    dt: &DtTensor,
+    pyr: &BoundPyramid,
+    templates: &[Template],
+    domain: Domain,
+    mask: Option<&FeasibleMask>,
+    factor: (u64, u64),
+    cap: Cap,
+) -> (Vec<RawPose>, SearchStats, Option<u64>) {
     let mut stats = SearchStats {
         boxes: 0,
         leaves: 0,
         space: domain.cells() * templates.len() as u64,
     };
     if domain.cells() == 0 || templates.is_empty() {
-        return (Vec::new(), stats);
+        return (Vec::new(), stats, None);
     }
     let top = pyr.top();
     let plans = Plans::new(dt, pyr, templates);
@@ -437,7 +471,7 @@ pub fn search(
     let width = (max_bound / (1 << 20)).max(1);
     let mut buckets: Vec<Vec<Node>> = vec![Vec::new(); buckets_len(max_bound, width)];
     let bucket_of = |b: u64| ((b / width) as usize).min(buckets_len(max_bound, width) - 1);
-    for r in roots {
+    for r in roots.into_iter().filter(|r| r.0 <= cap.cost) {
         if let Some(v) = buckets.get_mut(bucket_of(r.0)) {
             v.push(r);
         }
@@ -455,7 +489,7 @@ pub fn search(
             break;
         }
         // At least as large as best_leaf even for a factor below 1.
-        let cut = limit_of(best_leaf, factor).max(best_leaf);
+        let cut = limit_of(best_leaf, factor).max(best_leaf).min(cap.cost);
         batch.clear();
         let bucket = &mut buckets[cursor];
         let take = bucket.len().min(BATCH);
@@ -490,12 +524,15 @@ pub fn search(
             }
         }
     }
-    if best_leaf == u64::MAX && buckets.iter().all(Vec::is_empty) {
-        return (Vec::new(), stats);
+    if best_leaf == u64::MAX || best_leaf > cap.cost {
+        return (Vec::new(), stats, None);
     }
     let minimum = best_leaf;
+    if cap.minimum_only {
+        return (Vec::new(), stats, Some(minimum));
+    }
     // Phase 2.
-    let limit = limit_of(minimum, factor);
+    let limit = limit_of(minimum, factor).min(cap.cost);
     let frontier: Vec<Node> = buckets
         .into_iter()
         .flatten()
@@ -544,7 +581,7 @@ pub fn search(
     stats.leaves += leaves;
     let mut found = found;
     found.sort_unstable();
-    (found, stats)
+    (found, stats, Some(minimum))
 }
 
 /// Every (feasible) pose with cost ≤ factor × minimum by evaluating every pose (reference
@@ -650,11 +687,11 @@ pub struct FilterCounts {
 }
 
 /// Drops candidates inside a building or farther than `street_distance_m` from every street
-/// segment (skipped when the map has no streets).
-pub fn filter(
+/// segment (skipped when the map has no streets); `place` gives the spatial index of the
+/// map around a position and whether that map has streets.
+pub fn filter<'i>(
     candidates: Vec<SearchCandidate>,
-    index: &MapIndex<'_>,
-    has_streets: bool,
+    place: impl Fn([f64; 2]) -> (&'i MapIndex<'i>, bool),
     street_distance_m: f64,
 ) -> (Vec<SearchCandidate>, FilterCounts) {
     let mut counts = FilterCounts::default();
@@ -662,6 +699,7 @@ pub fn filter(
         .into_iter()
         .filter(|c| {
             let p = [c.pose.x, c.pose.y];
+            let (index, has_streets) = place(p);
             if index.building_at(p).is_some() {
                 counts.inside_building += 1;
                 return false;

@@ -86,8 +86,11 @@ pub fn bounding_box(segments: &[Segment]) -> Option<([f64; 2], [f64; 2])> {
 /// The directional distance-transform tensor (u8, units of τ/255).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DtTensor {
-    /// Lower-left corner of cell (0, 0), metres in the map frame.
+    /// Lower-left corner of lattice cell (0, 0), metres in the map frame.
     pub origin: [f64; 2],
+    /// The lattice cell of the tensor's cell (0, 0) (zero but for a window of a larger
+    /// lattice, such as a map tile's, whose cells then equal the larger tensor's bit for bit).
+    pub offset: [i64; 2],
     /// Cell size, metres.
     pub grid_m: f64,
     /// Cells along x.
@@ -106,6 +109,56 @@ pub struct DtTensor {
 impl DtTensor {
     /// Builds the tensor over the edges' bounding box plus τ (cells outside hold τ).
     pub fn build(edges: &[Segment], options: &ChamferOptions) -> Result<DtTensor> {
+        Self::check_options(options)?;
+        let tau = options.truncation_m;
+        let (min, max) = bounding_box(edges).unwrap_or(([0.0, 0.0], [0.0, 0.0]));
+        let origin = [min[0] - tau - options.grid_m, min[1] - tau - options.grid_m];
+        let width = ((max[0] + tau - origin[0]) / options.grid_m).ceil() as usize + 2;
+        let height = ((max[1] + tau - origin[1]) / options.grid_m).ceil() as usize + 2;
+        if width.saturating_mul(height) > options.max_cells {
+            return Err(LocalizeError::MapTooLarge {
+                width_m: max[0] - min[0],
+                height_m: max[1] - min[1],
+                grid_m: options.grid_m,
+                max_cells: options.max_cells,
+            });
+        }
+        Ok(Self::rasterize(
+            edges,
+            options,
+            origin,
+            [0, 0],
+            width,
+            height,
+        ))
+    }
+
+    /// Builds the cells `[offset, offset + (width, height))` of the lattice anchored at
+    /// `origin` (the window of a map tile): every cell holds what the tensor of all `edges`
+    /// on that lattice holds there, bit for bit, given the edges within τ of the window.
+    pub fn build_window(
+        edges: &[Segment],
+        options: &ChamferOptions,
+        origin: [f64; 2],
+        offset: [i64; 2],
+        size: [usize; 2],
+    ) -> Result<DtTensor> {
+        Self::check_options(options)?;
+        let [width, height] = size;
+        if width.saturating_mul(height) > options.max_cells || width == 0 || height == 0 {
+            return Err(LocalizeError::MapTooLarge {
+                width_m: width as f64 * options.grid_m,
+                height_m: height as f64 * options.grid_m,
+                grid_m: options.grid_m,
+                max_cells: options.max_cells,
+            });
+        }
+        Ok(Self::rasterize(
+            edges, options, origin, offset, width, height,
+        ))
+    }
+
+    fn check_options(options: &ChamferOptions) -> Result<()> {
         let checks = [
             ("grid_m", options.grid_m, options.grid_m > 0.0),
             (
@@ -133,19 +186,19 @@ impl DtTensor {
                 });
             }
         }
+        Ok(())
+    }
+
+    /// The tensor's cells, `width × height` from lattice cell `offset`.
+    fn rasterize(
+        edges: &[Segment],
+        options: &ChamferOptions,
+        origin: [f64; 2],
+        offset: [i64; 2],
+        width: usize,
+        height: usize,
+    ) -> DtTensor {
         let tau = options.truncation_m;
-        let (min, max) = bounding_box(edges).unwrap_or(([0.0, 0.0], [0.0, 0.0]));
-        let origin = [min[0] - tau - options.grid_m, min[1] - tau - options.grid_m];
-        let width = ((max[0] + tau - origin[0]) / options.grid_m).ceil() as usize + 2;
-        let height = ((max[1] + tau - origin[1]) / options.grid_m).ceil() as usize + 2;
-        if width.saturating_mul(height) > options.max_cells {
-            return Err(LocalizeError::MapTooLarge {
-                width_m: max[0] - min[0],
-                height_m: max[1] - min[1],
-                grid_m: options.grid_m,
-                max_cells: options.max_cells,
-            });
-        }
         let channels = options.channels;
         let bin = std::f64::consts::PI / channels as f64;
         let units_per_m = 255.0 / tau;
@@ -158,16 +211,21 @@ impl DtTensor {
             .iter()
             .map(|e| ((crate::wrap_pi(e.orientation_rad()) / bin).round() as usize) % channels)
             .collect();
+        // The tensor cell (lattice cell minus offset) of a coordinate, rounded by `round`.
+        let lattice = |v: f64, axis: usize, round: fn(f64) -> f64| -> i64 {
+            round((v - origin[axis]) / g) as i64 - offset[axis]
+        };
         // Edges bucketed by the stripes of rows their τ-neighbourhood meets.
         const STRIPE: usize = 64;
         let stripes = height.div_ceil(STRIPE);
         let mut by_stripe: Vec<Vec<usize>> = vec![Vec::new(); stripes];
         for (k, e) in edges.iter().enumerate() {
-            let y0 = ((e.a[1].min(e.b[1]) - tau - origin[1]) / g)
-                .floor()
-                .max(0.0) as usize;
-            let y1 = (((e.a[1].max(e.b[1]) + tau - origin[1]) / g).ceil().max(0.0) as usize)
-                .min(height - 1);
+            let y0 = lattice(e.a[1].min(e.b[1]) - tau, 1, f64::floor);
+            let y1 = lattice(e.a[1].max(e.b[1]) + tau, 1, f64::ceil);
+            if y1 < 0 || y0 >= height as i64 {
+                continue;
+            }
+            let (y0, y1) = (y0.max(0) as usize, (y1 as usize).min(height - 1));
             for list in by_stripe.iter_mut().take(y1 / STRIPE + 1).skip(y0 / STRIPE) {
                 list.push(k);
             }
@@ -183,16 +241,20 @@ impl DtTensor {
                     let (e, c) = (&edges[k], classes[k]);
                     let lo = [e.a[0].min(e.b[0]) - tau, e.a[1].min(e.b[1]) - tau];
                     let hi = [e.a[0].max(e.b[0]) + tau, e.a[1].max(e.b[1]) + tau];
-                    let x0 = ((lo[0] - origin[0]) / g).floor().max(0.0) as usize;
-                    let x1 = (((hi[0] - origin[0]) / g).ceil().max(0.0) as usize).min(width - 1);
-                    let y0 = (((lo[1] - origin[1]) / g).floor().max(0.0) as usize).max(row0);
-                    let y1 =
-                        (((hi[1] - origin[1]) / g).ceil().max(0.0) as usize).min(row0 + rows - 1);
+                    let x0 = lattice(lo[0], 0, f64::floor).max(0) as usize;
+                    let x1 = lattice(hi[0], 0, f64::ceil);
+                    if x1 < 0 || x0 >= width {
+                        continue;
+                    }
+                    let x1 = (x1 as usize).min(width - 1);
+                    let y0 = (lattice(lo[1], 1, f64::floor).max(0) as usize).max(row0);
+                    let y1 = lattice(hi[1], 1, f64::ceil).max(0) as usize;
+                    let y1 = y1.min(row0 + rows - 1);
                     for y in y0..=y1 {
-                        let cy = origin[1] + (y as f64 + 0.5) * g;
+                        let cy = origin[1] + ((offset[1] + y as i64) as f64 + 0.5) * g;
                         let row = (y - row0) * width * channels;
                         for x in x0..=x1 {
-                            let cx = origin[0] + (x as f64 + 0.5) * g;
+                            let cx = origin[0] + ((offset[0] + x as i64) as f64 + 0.5) * g;
                             let d = e.distance_to([cx, cy]);
                             if d < tau {
                                 let v = (d * units_per_m).round() as u8;
@@ -222,8 +284,9 @@ impl DtTensor {
                     }
                 }
             });
-        Ok(DtTensor {
+        DtTensor {
             origin,
+            offset,
             grid_m: g,
             width,
             height,
@@ -231,7 +294,29 @@ impl DtTensor {
             units_per_m,
             lambda_m_per_rad: options.lambda_m_per_rad,
             data,
-        })
+        }
+    }
+
+    /// The geometry of a lattice without cells (every value τ): converts between cells and
+    /// metres and makes templates for tensors on that lattice.
+    pub fn lattice(
+        origin: [f64; 2],
+        grid_m: f64,
+        channels: usize,
+        units_per_m: f64,
+        lambda_m_per_rad: f64,
+    ) -> DtTensor {
+        DtTensor {
+            origin,
+            offset: [0, 0],
+            grid_m,
+            width: 0,
+            height: 0,
+            channels,
+            units_per_m,
+            lambda_m_per_rad,
+            data: Vec::new(),
+        }
     }
 
     /// The channel of a line orientation (radians, any value; period π).
@@ -244,16 +329,16 @@ impl DtTensor {
     /// The cell containing a map point (may be outside the grid).
     pub fn cell_of(&self, p: [f64; 2]) -> (i64, i64) {
         (
-            ((p[0] - self.origin[0]) / self.grid_m).floor() as i64,
-            ((p[1] - self.origin[1]) / self.grid_m).floor() as i64,
+            ((p[0] - self.origin[0]) / self.grid_m).floor() as i64 - self.offset[0],
+            ((p[1] - self.origin[1]) / self.grid_m).floor() as i64 - self.offset[1],
         )
     }
 
     /// The lower-left corner of a cell, metres in the map frame.
     pub fn corner_of(&self, x: i64, y: i64) -> [f64; 2] {
         [
-            self.origin[0] + x as f64 * self.grid_m,
-            self.origin[1] + y as f64 * self.grid_m,
+            self.origin[0] + (self.offset[0] + x) as f64 * self.grid_m,
+            self.origin[1] + (self.offset[1] + y) as f64 * self.grid_m,
         ]
     }
 
@@ -648,6 +733,8 @@ impl DtTensor {
     pub(crate) fn encode<'a>(&'a self, e: &mut crate::codec::Enc<'a>) {
         e.f64(self.origin[0]);
         e.f64(self.origin[1]);
+        e.i64(self.offset[0]);
+        e.i64(self.offset[1]);
         e.f64(self.grid_m);
         e.u64(self.width as u64);
         e.u64(self.height as u64);
@@ -659,6 +746,10 @@ impl DtTensor {
 
     pub(crate) fn decode<R: std::io::Read>(d: &mut crate::codec::Dec<'_, R>) -> Result<DtTensor> {
         let origin: [f64; 2] = d.f64s("tensor origin")?;
+        let offset: [i64; 2] = d.i64s("tensor offset")?;
+        if offset.iter().any(|v| v.unsigned_abs() > 1 << 40) {
+            return Err(d.bad(format!("tensor offset {offset:?} out of range")));
+        }
         let grid_m = d.f64("tensor grid")?;
         let (width, height, channels) = (
             d.usize("tensor width")?,
@@ -679,6 +770,7 @@ impl DtTensor {
         let data = d.bytes(cells, "tensor data")?;
         Ok(DtTensor {
             origin,
+            offset,
             grid_m,
             width,
             height,

@@ -181,3 +181,84 @@ impl<R: Read> Dec<'_, R> {
         String::from_utf8(v).map_err(|_| self.bad(format!("{what} is not UTF-8")))
     }
 }
+
+/// Bytes of a file header: magic (8), version (4), body length (8), body CRC-32 (4).
+pub(crate) const HEADER_BYTES: u64 = 24;
+
+/// Checks a file's 24-byte header (`magic`, `version`) and returns a decoder of its body
+/// and the stored CRC.
+pub(crate) fn open_body<'p, R: Read>(
+    mut r: R,
+    file_len: u64,
+    path: &'p Path,
+    magic: &[u8; 8],
+    version: u32,
+    what: &str,
+) -> Result<(Dec<'p, R>, u32)> {
+    let mut head = [0u8; HEADER_BYTES as usize];
+    if file_len < HEADER_BYTES || r.read_exact(&mut head).is_err() {
+        return Err(index_err(
+            path,
+            format!("{file_len} bytes: too short for {what} (header of {HEADER_BYTES} bytes)"),
+        ));
+    }
+    if &head[..8] != magic {
+        return Err(index_err(path, format!("not {what}")));
+    }
+    let v = u32::from_le_bytes(head[8..12].try_into().unwrap_or_default());
+    if v != version {
+        return Err(index_err(
+            path,
+            format!("format version {v}; this build reads version {version}: rebuild it"),
+        ));
+    }
+    let body_len = u64::from_le_bytes(head[12..20].try_into().unwrap_or_default());
+    let stored_crc = u32::from_le_bytes(head[20..24].try_into().unwrap_or_default());
+    if body_len != file_len - HEADER_BYTES {
+        return Err(index_err(
+            path,
+            format!(
+                "the header announces {body_len} bytes of body, the file holds {}: truncated or not {what}",
+                file_len - HEADER_BYTES
+            ),
+        ));
+    }
+    Ok((
+        Dec {
+            r,
+            path,
+            pos: HEADER_BYTES,
+            end: file_len,
+            crc: crc32fast::Hasher::new(),
+        },
+        stored_crc,
+    ))
+}
+
+/// Checks that a decoder consumed its body and that the body's CRC matches.
+pub(crate) fn close_body<R: Read>(d: Dec<'_, R>, stored_crc: u32) -> Result<()> {
+    if d.pos != d.end {
+        return Err(d.bad(format!("{} bytes after the last section", d.end - d.pos)));
+    }
+    let crc = d.crc.clone().finalize();
+    if crc != stored_crc {
+        return Err(index_err(
+            d.path,
+            format!("checksum mismatch (stored {stored_crc:#010x}, computed {crc:#010x}): the file is corrupt; rebuild it"),
+        ));
+    }
+    Ok(())
+}
+
+/// Writes a file of `magic`, `version`, the body's length and CRC-32, then the body (atomically).
+pub(crate) fn write_file(path: &Path, magic: &[u8; 8], version: u32, body: &Enc<'_>) -> Result<()> {
+    let err = |e: std::io::Error| index_err(path, format!("writing: {e}"));
+    let mut w = geodata::fsio::AtomicFile::create(path).map_err(err)?;
+    w.write_all(magic).map_err(err)?;
+    w.write_all(&version.to_le_bytes()).map_err(err)?;
+    w.write_all(&(body.len() as u64).to_le_bytes())
+        .map_err(err)?;
+    w.write_all(&body.crc().to_le_bytes()).map_err(err)?;
+    body.write_to(&mut w).map_err(err)?;
+    w.commit().map_err(err)
+}

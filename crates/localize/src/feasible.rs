@@ -189,7 +189,7 @@ impl FeasibleMask {
 
 /// Cells `[c0, c1)` of the domain whose corner x lies in `[lo, hi]`.
 fn cell_range(dt: &DtTensor, domain: Domain, lo: f64, hi: f64) -> (i64, i64) {
-    let to_cell = |x: f64| ((x - dt.origin[0]) / dt.grid_m).floor() as i64;
+    let to_cell = |x: f64| dt.cell_of([x, 0.0]).0;
     let c0 = to_cell(lo).max(domain.i0);
     let c1 = (to_cell(hi) + 2).min(domain.i1);
     (c0, c1.max(c0))

@@ -5,7 +5,7 @@
 //! [`PreparedMap`] read from an index takes a fraction of that, and a [`Localizer`] built on
 //! it searches exactly as one built from the map (tested: same ranked candidates).
 //!
-//! File layout, little-endian, version 1:
+//! File layout, little-endian, version 2 (version 1 had no tensor offset):
 //!
 //! | bytes | field |
 //! |---|---|
@@ -28,19 +28,18 @@
 
 use crate::candidates::{Domain, SearchOptions};
 use crate::chamfer::{map_edges, BoundPyramid, ChamferOptions, DtTensor};
-use crate::codec::{index_err, Dec, Enc};
+use crate::codec::{close_body, index_err, open_body, write_file, Enc};
 use crate::feasible::FeasibleMask;
 use crate::{Result, Segment, WithContext};
 use geodata::osm::OsmMap;
-use std::io::{BufReader, Read, Write};
+use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// The index file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"ULOCIDX\0";
 /// The index format version this build reads and writes.
-pub const VERSION: u32 = 1;
-const HEADER_BYTES: u64 = 24;
+pub const VERSION: u32 = 2;
 
 /// The map preparation options an index was built with (they must match the search's).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -186,9 +185,53 @@ impl PreparedMap {
         })
     }
 
+    /// Prepares the window `[offset, offset + size)` of the lattice anchored at `origin` for
+    /// the map (crop) `map` with outline `edges`, searching `domain` (this tensor's cells):
+    /// a map tile ([`crate::tiles`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn build_window(
+        map: &OsmMap,
+        edges: Vec<Segment>,
+        chamfer: &ChamferOptions,
+        search: &SearchOptions,
+        origin: [f64; 2],
+        offset: [i64; 2],
+        size: [usize; 2],
+        domain: Domain,
+    ) -> Result<Self> {
+        let t = Instant::now();
+        let dt = DtTensor::build_window(&edges, chamfer, origin, offset, size)?;
+        let dt_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let pyramid = BoundPyramid::build(&dt, search.levels);
+        let pyr_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let feasible = search.feasible_only.then(|| {
+            FeasibleMask::build(map, &dt, domain, search.street_distance_m, pyramid.top())
+        });
+        Ok(PreparedMap {
+            options: PrepOptions::of(chamfer, search),
+            edges,
+            dt,
+            pyramid,
+            domain,
+            feasible,
+            seconds: MapSeconds {
+                edges: 0.0,
+                distance_transform: dt_s,
+                pyramid: pyr_s,
+                feasible: t.elapsed().as_secs_f64(),
+            },
+        })
+    }
+
+    /// Memory of the tensor, pyramid and feasible mask, bytes.
+    pub fn memory_bytes(&self) -> usize {
+        self.dt.bytes() + self.pyramid.bytes() + self.feasible.as_ref().map_or(0, |f| f.bytes())
+    }
+
     /// Writes the index of this prepared map of the map file `source` (atomically).
     pub fn write(&self, path: &Path, source: &Path) -> Result<()> {
-        let err = |e: std::io::Error| index_err(path, format!("writing: {e}"));
         let map_bytes = std::fs::read(source)
             .map_err(|e| index_err(path, format!("reading its map {}: {e}", source.display())))?;
         let mut body = Enc::default();
@@ -220,14 +263,7 @@ impl PreparedMap {
                 f.encode(&mut body);
             }
         }
-        let mut w = geodata::fsio::AtomicFile::create(path).map_err(err)?;
-        w.write_all(MAGIC).map_err(err)?;
-        w.write_all(&VERSION.to_le_bytes()).map_err(err)?;
-        w.write_all(&(body.len() as u64).to_le_bytes())
-            .map_err(err)?;
-        w.write_all(&body.crc().to_le_bytes()).map_err(err)?;
-        body.write_to(&mut w).map_err(err)?;
-        w.commit().map_err(err)
+        write_file(path, MAGIC, VERSION, &body)
     }
 
     /// Reads an index; returns it with the source map it was built from.
@@ -237,47 +273,23 @@ impl PreparedMap {
             .metadata()
             .map_err(|e| index_err(path, e.to_string()))?
             .len();
-        let mut r = BufReader::with_capacity(1 << 20, file);
-        let mut head = [0u8; HEADER_BYTES as usize];
-        if file_len < HEADER_BYTES || r.read_exact(&mut head).is_err() {
-            return Err(index_err(
-                path,
-                format!(
-                    "{file_len} bytes: too short for a map index (header of {HEADER_BYTES} bytes)"
-                ),
-            ));
-        }
-        if &head[..8] != MAGIC {
-            return Err(index_err(
-                path,
-                "not a urbansem map index (build one with `urbansem localize index --map MAP --out FILE.uloc`)".into(),
-            ));
-        }
-        let version = u32::from_le_bytes(head[8..12].try_into().unwrap_or_default());
-        if version != VERSION {
-            return Err(index_err(
-                path,
-                format!("index format version {version}; this build reads version {VERSION}: rebuild the index with `urbansem localize index`"),
-            ));
-        }
-        let body_len = u64::from_le_bytes(head[12..20].try_into().unwrap_or_default());
-        let stored_crc = u32::from_le_bytes(head[20..24].try_into().unwrap_or_default());
-        if body_len != file_len - HEADER_BYTES {
-            return Err(index_err(
-                path,
-                format!(
-                    "the header announces {body_len} bytes of body, the file holds {}: truncated or not an index",
-                    file_len - HEADER_BYTES
-                ),
-            ));
-        }
-        let mut d = Dec {
+        Self::read_from(BufReader::with_capacity(1 << 20, file), file_len, path)
+    }
+
+    /// Reads an index from a reader of `file_len` bytes (`path` names it in errors).
+    pub fn read_from<R: Read>(
+        r: R,
+        file_len: u64,
+        path: &Path,
+    ) -> Result<(PreparedMap, MapSource)> {
+        let (mut d, stored_crc) = open_body(
             r,
+            file_len,
             path,
-            pos: HEADER_BYTES,
-            end: file_len,
-            crc: crc32fast::Hasher::new(),
-        };
+            MAGIC,
+            VERSION,
+            "a urbansem map index (build one with `urbansem localize index --map MAP --out FILE.uloc`)",
+        )?;
         let source = MapSource {
             path: PathBuf::from(d.string("map path")?),
             len: d.u64("map length")?,
@@ -307,16 +319,7 @@ impl PreparedMap {
             1 => Some(FeasibleMask::decode(&mut d)?),
             v => return Err(d.bad(format!("feasible mask flag {v}, expected 0 or 1"))),
         };
-        if d.pos != d.end {
-            return Err(d.bad(format!("{} bytes after the last section", d.end - d.pos)));
-        }
-        let crc = d.crc.clone().finalize();
-        if crc != stored_crc {
-            return Err(index_err(
-                path,
-                format!("checksum mismatch (stored {stored_crc:#010x}, computed {crc:#010x}): the file is corrupt; rebuild it"),
-            ));
-        }
+        close_body(d, stored_crc)?;
         if dt.channels != options.channels || dt.grid_m != options.grid_m {
             return Err(index_err(
                 path,
@@ -388,6 +391,12 @@ impl MapSource {
                     self.crc
                 ),
             ));
+        }
+        if found
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("umap"))
+        {
+            return crate::tiles::read_crop(&found);
         }
         Ok(OsmMap::load(&found)?)
     }

@@ -147,20 +147,55 @@ pub fn localize_scan(
     top: usize,
     svg: Option<&Path>,
 ) -> Result<FileLocalization> {
+    localize_scan_near(map_path, scan, options, top, svg, None)
+}
+
+/// A coarse prior: only the map tiles within `radius_m` of (`lat`, `lon`) are searched.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Near {
+    /// Latitude, degrees.
+    pub lat: f64,
+    /// Longitude, degrees.
+    pub lon: f64,
+    /// Radius, metres.
+    pub radius_m: f64,
+}
+
+fn read_scan<'c>(
+    scan: ScanInput<'c>,
+    read: &'c mut Option<geodata::cloud::PointCloud>,
+) -> Result<(&'c geodata::cloud::PointCloud, String, f64)> {
+    let t = Instant::now();
+    Ok(match scan {
+        ScanInput::File(path) => {
+            let cloud = geodata::cloud::read_cloud(path)
+                .context_with(|| format!("reading the scan {}", path.display()))?;
+            let cloud = read.insert(cloud);
+            (cloud, path.display().to_string(), t.elapsed().as_secs_f64())
+        }
+        ScanInput::Cloud(cloud, name, seconds) => (cloud, name.to_owned(), seconds),
+    })
+}
+
+/// [`localize_scan`] on a map, an index or a tile manifest (`.json`, [`crate::tiles`]);
+/// on a tiled map only the tiles `near` a coarse prior are searched when one is given.
+pub fn localize_scan_near(
+    map_path: &Path,
+    scan: ScanInput<'_>,
+    options: LocalizeOptions,
+    top: usize,
+    svg: Option<&Path>,
+    near: Option<Near>,
+) -> Result<FileLocalization> {
+    if crate::tiles::is_manifest(map_path) {
+        return localize_scan_tiled(map_path, scan, options, top, near);
+    }
     let t = Instant::now();
     let (map, prepared) = load_map_or_index(map_path)?;
     let load_map_s = t.elapsed().as_secs_f64();
     let localizer = Localizer::prepared_or_new(&map, prepared, options, map_path)?;
-    let t = Instant::now();
-    let read;
-    let (cloud, name, read_scan_s) = match scan {
-        ScanInput::File(path) => {
-            read = geodata::cloud::read_cloud(path)
-                .context_with(|| format!("reading the scan {}", path.display()))?;
-            (&read, path.display().to_string(), t.elapsed().as_secs_f64())
-        }
-        ScanInput::Cloud(cloud, name, seconds) => (cloud, name.to_owned(), seconds),
-    };
+    let mut read = None;
+    let (cloud, name, read_scan_s) = read_scan(scan, &mut read)?;
     let result = localizer
         .localize_points(&cloud.positions)
         .context_with(|| format!("localizing {name}"))?;
@@ -176,6 +211,67 @@ pub fn localize_scan(
         load_map_s,
         read_scan_s,
     );
+    Ok(FileLocalization {
+        report,
+        points: cloud.len(),
+    })
+}
+
+/// One scan on a tiled map ([`localize_scan_near`]).
+fn localize_scan_tiled(
+    manifest_path: &Path,
+    scan: ScanInput<'_>,
+    options: LocalizeOptions,
+    top: usize,
+    near: Option<Near>,
+) -> Result<FileLocalization> {
+    let t = Instant::now();
+    let manifest = crate::tiles::Manifest::read(manifest_path)?;
+    let only = match near {
+        None => None,
+        Some(n) => {
+            let frame = manifest.frame(manifest_path)?;
+            Some(manifest.tiles_near(frame.to_local(n.lat, n.lon), n.radius_m))
+        }
+    };
+    let manifest_s = t.elapsed().as_secs_f64();
+    let mut read = None;
+    let (cloud, name, read_scan_s) = read_scan(scan, &mut read)?;
+    let t0 = Instant::now();
+    let extracted = crate::pipeline::scan_segments(&options, &cloud.positions)
+        .context_with(|| format!("localizing {name}"))?;
+    let tiled = crate::tiles::localize_tiled(
+        manifest_path,
+        &extracted.segments,
+        &options,
+        only.as_deref(),
+    )?;
+    let mut result = tiled.result;
+    result.record_extraction(&extracted);
+    result.seconds.total = t0.elapsed().as_secs_f64() - tiled.load_seconds;
+    if extracted.segments.is_empty() {
+        result.message = Some(format!(
+            "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
+            cloud.len(),
+            extracted.vertical_cells,
+            extracted.min_length_m
+        ));
+    }
+    let mut report = LocalizeReport::of_map(
+        &tiled.frame_map,
+        &crate::index::MapSeconds::default(),
+        (&manifest_path.display().to_string(), &name),
+        &result,
+        top,
+        manifest_s + tiled.load_seconds,
+        read_scan_s,
+    );
+    report.tiles = Some(crate::report::TilesUsed {
+        searched: tiled.tiles_searched,
+        exact: tiled.exact,
+        max_tile_memory_bytes: tiled.max_tile_memory_bytes,
+        load_seconds: tiled.load_seconds,
+    });
     Ok(FileLocalization {
         report,
         points: cloud.len(),

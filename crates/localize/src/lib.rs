@@ -31,6 +31,7 @@
 //!   answers in WGS84 as the command line prints them; [`geojson`]: candidates and tracks as
 //!   RFC 7946 GeoJSON; [`poses`]: track poses as TUM and KITTI trajectory files;
 //!   [`figure`]: pictures of results;
+//!   [`tiles`]: a map cut into tiles searched exactly as the whole map;
 //!   [`jobs`]: the command-line jobs (index, one scan file, a track folder, extraction
 //!   scores) as library calls.
 
@@ -54,6 +55,7 @@ pub mod report;
 pub mod segments;
 pub mod sensor;
 pub mod surfaces;
+pub mod tiles;
 pub mod track;
 pub mod visibility;
 

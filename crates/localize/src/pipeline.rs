@@ -12,8 +12,8 @@
 //! ```
 
 use crate::candidates::{
-    build_template, filter, search, suppress, Domain, FilterCounts, SearchOptions, SearchStats,
-    Template,
+    build_template, filter, search, suppress, Domain, FilterCounts, RawPose, SearchOptions,
+    SearchStats, Template,
 };
 use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
@@ -204,6 +204,25 @@ pub struct Localization {
 }
 
 impl Localization {
+    /// A localization with nothing found yet.
+    pub fn empty(rank_by: CostKind) -> Localization {
+        Localization {
+            segments: Vec::new(),
+            candidates: Vec::new(),
+            rank_by,
+            confidence: 0.0,
+            sensor: None,
+            clearance_m: 0.0,
+            vertical_cells: 0,
+            raw_poses: 0,
+            after_suppression: 0,
+            filtered: FilterCounts::default(),
+            search: SearchStats::default(),
+            message: None,
+            seconds: StageSeconds::default(),
+        }
+    }
+
     /// Records how the scan's walls were extracted (sensor, clearance, cells, stage times);
     /// the extraction seconds are added to the total.
     pub fn record_extraction(&mut self, extracted: &ScanSegments) {
@@ -275,28 +294,7 @@ impl<'m> Localizer<'m> {
     /// The wall segments of a gravity-levelled scan (sensor frame), with the sensor it was
     /// processed as.
     pub fn scan_segments(&self, points: &[[f64; 3]]) -> Result<ScanSegments> {
-        let t0 = Instant::now();
-        crate::surfaces::check_points(points)?;
-        let (sensor, surfaces, mut segment_options) = options_for_scan(
-            self.options.sensor,
-            &self.options.overrides,
-            (&self.options.surfaces, &self.options.segments),
-            points,
-        );
-        segment_options.seed = self.options.segments.seed;
-        let cells = vertical_cells(points, &surfaces)?;
-        let surfaces_s = t0.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let segments = extract_segments(&cells, &segment_options);
-        Ok(ScanSegments {
-            segments,
-            sensor,
-            clearance_m: surfaces.clearance_m,
-            vertical_cells: cells.len(),
-            min_length_m: segment_options.final_min_length_m,
-            surfaces_s,
-            segments_s: t.elapsed().as_secs_f64(),
-        })
+        scan_segments(&self.options, points)
     }
 
     /// Localizes a gravity-levelled scan given as points in the sensor frame.
@@ -330,21 +328,8 @@ impl<'m> Localizer<'m> {
         views: &[[f64; 2]],
     ) -> Localization {
         let t0 = Instant::now();
-        let mut out = Localization {
-            segments: segments.to_vec(),
-            candidates: Vec::new(),
-            rank_by: self.options.rank_by,
-            confidence: 0.0,
-            sensor: None,
-            clearance_m: 0.0,
-            vertical_cells: 0,
-            raw_poses: 0,
-            after_suppression: 0,
-            filtered: FilterCounts::default(),
-            search: SearchStats::default(),
-            message: None,
-            seconds: StageSeconds::default(),
-        };
+        let mut out = Localization::empty(self.options.rank_by);
+        out.segments = segments.to_vec();
         if self.edges.is_empty() {
             out.message = Some("the map has no building outlines; nothing to match against".into());
             return out;
@@ -353,105 +338,42 @@ impl<'m> Localizer<'m> {
             out.message = Some("the scan has no segments; nothing to match".into());
             return out;
         }
-        let o = &self.options;
         let t = Instant::now();
-        let n_yaw = ((360.0 / o.search.yaw_step_deg).round() as usize).max(1);
-        let templates: Vec<Template> = (0..n_yaw)
-            .into_par_iter()
-            .map(|k| {
-                let yaw = k as f64 * std::f64::consts::TAU / n_yaw as f64;
-                build_template(segments, yaw, &self.dt, self.pyramid.top())
-            })
-            .collect();
+        let templates = templates_on(segments, &self.dt, self.pyramid.top(), &self.options);
         out.seconds.templates = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let (mut raw, stats) = search(
-            &self.dt,
-            &self.pyramid,
-            &templates,
-            self.domain,
-            self.feasible.as_ref(),
-            o.search.keep_factor,
-        );
-        if o.search.max_raw_poses > 0 {
-            raw.truncate(o.search.max_raw_poses);
-        }
+        let (raw, stats) = self.search_raw(&templates);
         out.search = stats;
-        out.raw_poses = raw.len();
         out.seconds.search = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let suppressed = suppress(
-            &raw,
-            &templates,
+        let place = |_: [f64; 2]| -> &dyn Place { self };
+        finish(
+            &mut out,
+            &self.options,
+            Scan {
+                segments,
+                views,
+                templates: &templates,
+            },
+            raw,
             &self.dt,
-            o.search.nms_radius_m,
-            o.search.nms_yaw_rad,
+            &place,
         );
-        out.after_suppression = suppressed.len();
-        let has_streets = !self.map.streets.segments.is_empty();
-        let (kept, counts) = filter(
-            suppressed,
-            &self.index,
-            has_streets,
-            o.search.street_distance_m,
-        );
-        out.filtered = counts;
-        out.seconds.filter = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let mut cands: Vec<Candidate> = kept
-            .par_iter()
-            .map(|c| Candidate {
-                pose: c.pose,
-                costs: self.costs_seen_from(segments, c.pose, c.dcm, views),
-                refined: false,
-                confidence: 0.0,
-            })
-            .collect();
-        out.seconds.visibility_costs = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        self.sort(&mut cands);
-        let top = o.refine_top.min(cands.len());
-        cands[..top].par_iter_mut().for_each(|c| {
-            let visible = self.visible_from_views(&c.pose, views);
-            let pose = refine_pose(segments, &visible, c.pose, &o.refine);
-            c.pose = pose;
-            c.costs = self.costs_seen_from(segments, pose, c.costs.dcm, views);
-            c.refined = true;
-        });
-        self.sort(&mut cands);
-        out.seconds.refine = t.elapsed().as_secs_f64();
-        let ranked_costs: Vec<f64> = cands.iter().map(|c| c.costs.get(o.rank_by)).collect();
-        let ranked_poses: Vec<Pose2> = cands.iter().map(|c| c.pose).collect();
-        out.confidence = confidence(&ranked_costs, &ranked_poses, o.distinct_m, o.distinct_rad);
-        if let Some(first) = cands.first_mut() {
-            first.confidence = out.confidence;
-        }
-        if let Some(best) = cands.first() {
-            if best.costs.symmetric > o.max_accept_cost_m && best.costs.dcm > o.max_accept_dcm_m {
-                out.message = Some(format!(
-                    "no pose explains the scan: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m ({} candidates dropped); the scan is probably outside the map",
-                    best.costs.symmetric,
-                    o.max_accept_cost_m,
-                    best.costs.dcm,
-                    o.max_accept_dcm_m,
-                    cands.len()
-                ));
-                cands.clear();
-                out.confidence = 0.0;
-            }
-        } else {
-            out.message = Some(format!(
-                "no candidate pose survived ({} raw poses, {} after suppression, {} inside buildings, {} farther than {} m from streets); the scan is probably outside the map",
-                out.raw_poses,
-                out.after_suppression,
-                counts.inside_building,
-                counts.far_from_street,
-                o.search.street_distance_m
-            ));
-        }
-        out.candidates = cands;
         out.seconds.total = t0.elapsed().as_secs_f64();
         out
+    }
+
+    /// Every pose of this map's domain (feasible ones only when the search is restricted)
+    /// whose cost is within the factor of the minimum over them, sorted, in this tensor's
+    /// cells ([`search`]).
+    pub fn search_raw(&self, templates: &[Template]) -> (Vec<RawPose>, SearchStats) {
+        search(
+            &self.dt,
+            &self.pyramid,
+            templates,
+            self.domain,
+            self.feasible.as_ref(),
+            self.options.search.keep_factor,
+        )
     }
 
     /// Forward, reverse and symmetric costs of the scan segments at a pose.
@@ -467,23 +389,12 @@ impl<'m> Localizer<'m> {
         dcm: f64,
         views: &[[f64; 2]],
     ) -> Costs {
-        let visible = self.visible_from_views(&pose, views);
-        let moved: Vec<Segment> = segments.iter().map(|s| s.transformed(&pose)).collect();
-        costs(&moved, &visible, dcm, &self.options.cost)
+        costs_from(self, &self.options, segments, pose, dcm, views)
     }
 
     /// The map edges visible from any of `views` (segment frame) placed at `pose`.
     pub(crate) fn visible_from_views(&self, pose: &Pose2, views: &[[f64; 2]]) -> Vec<Segment> {
-        let mut out = Vec::new();
-        for v in views {
-            out.extend(visible_segments(
-                &self.edges,
-                &self.edge_grid,
-                pose.apply(*v),
-                &self.options.visibility,
-            ));
-        }
-        out
+        visible_from_views(self, &self.options.visibility, pose, views)
     }
 
     /// Whether a pose passes the search's filter: outside every building and, on a map with
@@ -504,12 +415,221 @@ impl<'m> Localizer<'m> {
     }
 
     pub(crate) fn sort(&self, cands: &mut Vec<Candidate>) {
-        let costs: Vec<Costs> = cands.iter().map(|c| c.costs).collect();
-        let poses: Vec<Pose2> = cands.iter().map(|c| c.pose).collect();
-        let order = rank_order(&costs, &poses, self.options.rank_by);
-        let sorted: Vec<Candidate> = order.iter().map(|&i| cands[i]).collect();
-        *cands = sorted;
+        sort_candidates(cands, self.options.rank_by);
     }
+}
+
+/// The wall segments of a gravity-levelled scan (sensor frame), with the sensor it was
+/// processed as (the map plays no part).
+pub fn scan_segments(options: &LocalizeOptions, points: &[[f64; 3]]) -> Result<ScanSegments> {
+    let t0 = Instant::now();
+    crate::surfaces::check_points(points)?;
+    let (sensor, surfaces, mut segment_options) = options_for_scan(
+        options.sensor,
+        &options.overrides,
+        (&options.surfaces, &options.segments),
+        points,
+    );
+    segment_options.seed = options.segments.seed;
+    let cells = vertical_cells(points, &surfaces)?;
+    let surfaces_s = t0.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let segments = extract_segments(&cells, &segment_options);
+    Ok(ScanSegments {
+        segments,
+        sensor,
+        clearance_m: surfaces.clearance_m,
+        vertical_cells: cells.len(),
+        min_length_m: segment_options.final_min_length_m,
+        surfaces_s,
+        segments_s: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// What the finishing stages need of the map around a pose: its buildings and streets (the
+/// filters) and its outline edges (visibility). A whole map's [`Localizer`] is one; a tiled
+/// map's tiles are others ([`crate::tiles`]).
+pub trait Place: Sync {
+    /// The spatial index of the buildings and streets.
+    fn map_index(&self) -> &MapIndex<'_>;
+    /// Whether the map has street segments (else the street filter is off).
+    fn has_streets(&self) -> bool;
+    /// The outline edges and their buckets.
+    fn edges(&self) -> (&[Segment], &EdgeGrid);
+}
+
+impl Place for Localizer<'_> {
+    fn map_index(&self) -> &MapIndex<'_> {
+        &self.index
+    }
+    fn has_streets(&self) -> bool {
+        !self.map.streets.segments.is_empty()
+    }
+    fn edges(&self) -> (&[Segment], &EdgeGrid) {
+        (&self.edges, &self.edge_grid)
+    }
+}
+
+/// The map edges of `place` visible from any of `views` (segment frame) placed at `pose`.
+pub(crate) fn visible_from_views(
+    place: &dyn Place,
+    options: &VisibilityOptions,
+    pose: &Pose2,
+    views: &[[f64; 2]],
+) -> Vec<Segment> {
+    let (edges, grid) = place.edges();
+    let mut out = Vec::new();
+    for v in views {
+        out.extend(visible_segments(edges, grid, pose.apply(*v), options));
+    }
+    out
+}
+
+/// Costs of segments gathered from `views` at `pose` against the edges of `place`.
+fn costs_from(
+    place: &dyn Place,
+    o: &LocalizeOptions,
+    segments: &[Segment],
+    pose: Pose2,
+    dcm: f64,
+    views: &[[f64; 2]],
+) -> Costs {
+    let visible = visible_from_views(place, &o.visibility, &pose, views);
+    let moved: Vec<Segment> = segments.iter().map(|s| s.transformed(&pose)).collect();
+    costs(&moved, &visible, dcm, &o.cost)
+}
+
+/// Sorts candidates by the ranking cost (ties by pose).
+pub(crate) fn sort_candidates(cands: &mut Vec<Candidate>, rank_by: CostKind) {
+    let costs: Vec<Costs> = cands.iter().map(|c| c.costs).collect();
+    let poses: Vec<Pose2> = cands.iter().map(|c| c.pose).collect();
+    let order = rank_order(&costs, &poses, rank_by);
+    let sorted: Vec<Candidate> = order.iter().map(|&i| cands[i]).collect();
+    *cands = sorted;
+}
+
+/// The yaw templates of scan segments on the lattice of `dt` (every `yaw_step_deg`).
+pub fn templates_on(
+    segments: &[Segment],
+    dt: &DtTensor,
+    levels: u32,
+    o: &LocalizeOptions,
+) -> Vec<Template> {
+    let n_yaw = ((360.0 / o.search.yaw_step_deg).round() as usize).max(1);
+    (0..n_yaw)
+        .into_par_iter()
+        .map(|k| {
+            let yaw = k as f64 * std::f64::consts::TAU / n_yaw as f64;
+            build_template(segments, yaw, dt, levels)
+        })
+        .collect()
+}
+
+/// The scan as the finishing stages see it.
+#[derive(Clone, Copy)]
+pub(crate) struct Scan<'a> {
+    /// Its segments (sensor frame).
+    pub segments: &'a [Segment],
+    /// The sensor positions they were gathered from.
+    pub views: &'a [[f64; 2]],
+    /// Its templates, one per yaw.
+    pub templates: &'a [Template],
+}
+
+/// The stages after the search: raw poses (sorted, in the cells of `lattice`, within the
+/// factor of the minimum) → truncation → suppression → filters → costs → ranking →
+/// refinement → confidence, into `out`; `place` gives the map around a pose.
+pub(crate) fn finish<'p>(
+    out: &mut Localization,
+    o: &LocalizeOptions,
+    scan: Scan<'_>,
+    mut raw: Vec<RawPose>,
+    lattice: &DtTensor,
+    place: &(dyn Sync + Fn([f64; 2]) -> &'p dyn Place),
+) {
+    let Scan {
+        segments,
+        views,
+        templates,
+    } = scan;
+    if o.search.max_raw_poses > 0 {
+        raw.truncate(o.search.max_raw_poses);
+    }
+    out.raw_poses = raw.len();
+    let t = Instant::now();
+    let suppressed = suppress(
+        &raw,
+        templates,
+        lattice,
+        o.search.nms_radius_m,
+        o.search.nms_yaw_rad,
+    );
+    out.after_suppression = suppressed.len();
+    let (kept, counts) = filter(
+        suppressed,
+        |p| {
+            let pl = place(p);
+            (pl.map_index(), pl.has_streets())
+        },
+        o.search.street_distance_m,
+    );
+    out.filtered = counts;
+    out.seconds.filter = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let at = |pose: &Pose2| place([pose.x, pose.y]);
+    let mut cands: Vec<Candidate> = kept
+        .par_iter()
+        .map(|c| Candidate {
+            pose: c.pose,
+            costs: costs_from(at(&c.pose), o, segments, c.pose, c.dcm, views),
+            refined: false,
+            confidence: 0.0,
+        })
+        .collect();
+    out.seconds.visibility_costs = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    sort_candidates(&mut cands, o.rank_by);
+    let top = o.refine_top.min(cands.len());
+    cands[..top].par_iter_mut().for_each(|c| {
+        let here = at(&c.pose);
+        let visible = visible_from_views(here, &o.visibility, &c.pose, views);
+        let pose = refine_pose(segments, &visible, c.pose, &o.refine);
+        c.pose = pose;
+        c.costs = costs_from(here, o, segments, pose, c.costs.dcm, views);
+        c.refined = true;
+    });
+    sort_candidates(&mut cands, o.rank_by);
+    out.seconds.refine = t.elapsed().as_secs_f64();
+    let ranked_costs: Vec<f64> = cands.iter().map(|c| c.costs.get(o.rank_by)).collect();
+    let ranked_poses: Vec<Pose2> = cands.iter().map(|c| c.pose).collect();
+    out.confidence = confidence(&ranked_costs, &ranked_poses, o.distinct_m, o.distinct_rad);
+    if let Some(first) = cands.first_mut() {
+        first.confidence = out.confidence;
+    }
+    if let Some(best) = cands.first() {
+        if best.costs.symmetric > o.max_accept_cost_m && best.costs.dcm > o.max_accept_dcm_m {
+            out.message = Some(format!(
+                "no pose explains the scan: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m ({} candidates dropped); the scan is probably outside the map",
+                best.costs.symmetric,
+                o.max_accept_cost_m,
+                best.costs.dcm,
+                o.max_accept_dcm_m,
+                cands.len()
+            ));
+            cands.clear();
+            out.confidence = 0.0;
+        }
+    } else {
+        out.message = Some(format!(
+            "no candidate pose survived ({} raw poses, {} after suppression, {} inside buildings, {} farther than {} m from streets); the scan is probably outside the map",
+            out.raw_poses,
+            out.after_suppression,
+            counts.inside_building,
+            counts.far_from_street,
+            o.search.street_distance_m
+        ));
+    }
+    out.candidates = cands;
 }
 
 #[cfg(test)]

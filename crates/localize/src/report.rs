@@ -129,6 +129,23 @@ pub struct LocalizeReport {
     pub message: Option<String>,
     /// Seconds.
     pub seconds: LocalizeSeconds,
+    /// On a tiled map: the tiles searched.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tiles: Option<TilesUsed>,
+}
+
+/// The tiles of a tiled map one scan was searched on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TilesUsed {
+    /// Tiles searched.
+    pub searched: usize,
+    /// Whether the answer equals the whole map's (the scan and the visibility range lie
+    /// within the tiles' overlap).
+    pub exact: bool,
+    /// The largest memory one tile held (tensor, pyramid, mask), bytes.
+    pub max_tile_memory_bytes: u64,
+    /// Seconds reading tiles and crops.
+    pub load_seconds: f64,
 }
 
 impl LocalizeReport {
@@ -142,11 +159,34 @@ impl LocalizeReport {
         load_map_seconds: f64,
         read_scan_seconds: f64,
     ) -> Self {
+        Self::of_map(
+            localizer.map,
+            &localizer.seconds,
+            (map, scan),
+            result,
+            top,
+            load_map_seconds,
+            read_scan_seconds,
+        )
+    }
+
+    /// The report of `result` on a map whose frame `frame_map` has, prepared in `prepared`
+    /// seconds; `names` are the map's and the scan's.
+    pub fn of_map(
+        frame_map: &OsmMap,
+        prepared: &crate::index::MapSeconds,
+        names: (&str, &str),
+        result: &Localization,
+        top: usize,
+        load_map_seconds: f64,
+        read_scan_seconds: f64,
+    ) -> Self {
+        let (map, scan) = names;
         LocalizeReport {
             map: map.to_owned(),
             scan: scan.to_owned(),
             cost: result.rank_by.name(),
-            candidates: GeoCandidate::top(localizer.map, result, top),
+            candidates: GeoCandidate::top(frame_map, result, top),
             candidate_count: result.candidates.len(),
             confidence: result.confidence,
             segments: result.segments.len(),
@@ -160,13 +200,14 @@ impl LocalizeReport {
             message: result.message.clone(),
             seconds: LocalizeSeconds {
                 load_map: load_map_seconds,
-                map_edges: localizer.seconds.edges,
-                distance_transform: localizer.seconds.distance_transform,
-                pyramid: localizer.seconds.pyramid,
-                feasible_mask: localizer.seconds.feasible,
+                map_edges: prepared.edges,
+                distance_transform: prepared.distance_transform,
+                pyramid: prepared.pyramid,
+                feasible_mask: prepared.feasible,
                 read_scan: read_scan_seconds,
                 scan: result.seconds,
             },
+            tiles: None,
         }
     }
 }

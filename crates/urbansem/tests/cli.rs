@@ -709,3 +709,58 @@ fn cloud_info_and_convert_read_ros2_bags() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 19: `localize index --tile-m` writes a tiled map whose manifest `localize --map`
+/// searches with the same ranked candidates as the whole map; `--near` searches only the
+/// tiles around a coarse prior and still finds the pose there.
+#[test]
+fn tiled_map_localizes_as_the_whole_map() {
+    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+    let map = format!("{shared}/osm/kth_campus_stockholm.osm");
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("sim");
+    sim_dataset(
+        "localization",
+        &["--map", &map, "--scans", "2", "--seed", "3"],
+        &data,
+    );
+    let tiles = dir.path().join("tiles");
+    let stdout = stdout_of(
+        urbansem()
+            .args([
+                "localize", "index", "--map", &map, "--tile-m", "300", "--out",
+            ])
+            .arg(&tiles)
+            .arg("--json"),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
+    assert!(v["tiles"].as_u64().unwrap() >= 4, "{v}");
+    let manifest = tiles.join("manifest.json");
+    let scan = data.join("scan_000.ply");
+    let run = |m: &std::path::Path, extra: &[&str]| -> serde_json::Value {
+        let stdout = stdout_of(
+            urbansem()
+                .args(["localize", "--json", "--top", "5", "--map"])
+                .arg(m)
+                .arg("--scan")
+                .arg(&scan)
+                .args(extra),
+        );
+        serde_json::from_slice(&stdout).unwrap()
+    };
+    let whole = run(std::path::Path::new(&map), &[]);
+    let tiled = run(&manifest, &[]);
+    assert!(whole.get("tiles").is_none());
+    assert_eq!(tiled["tiles"]["exact"], true, "{tiled}");
+    assert_eq!(whole["candidates"], tiled["candidates"]);
+    assert_eq!(whole["raw_poses"], tiled["raw_poses"]);
+    let best = &whole["candidates"][0];
+    let near = format!("{},{}", best["lat"], best["lon"]);
+    let some = run(&manifest, &["--near", &near, "--radius-m", "50"]);
+    let searched = some["tiles"]["searched"].as_u64().unwrap();
+    assert!(
+        searched >= 1 && searched < v["tiles"].as_u64().unwrap(),
+        "{some}"
+    );
+    assert_eq!(some["candidates"][0], whole["candidates"][0]);
+}

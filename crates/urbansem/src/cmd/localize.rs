@@ -19,8 +19,7 @@ use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
 use localize::index::is_index;
 use localize::jobs::{
-    build_index, extract_eval_sequence, localize_file, localize_scan, track_bag, track_folder,
-    BagTrackJob, ScanInput, TrackJob,
+    build_index, extract_eval_sequence, track_bag, track_folder, BagTrackJob, ScanInput, TrackJob,
 };
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
@@ -67,6 +66,15 @@ pub struct IndexArgs {
     /// Grid of the distance-transform tensor, metres (searches with the index must use the same).
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
+    /// Cut the map into square tiles of this side, metres (a multiple of --grid-m): --out is
+    /// then a folder that receives `manifest.json` and one index and map crop per tile, and
+    /// `localize --map DIR/manifest.json` searches them as one map.
+    #[arg(long)]
+    pub tile_m: Option<f64>,
+    /// With --tile-m: how far each tile reaches beyond its square, metres (tiled equals
+    /// untiled for scans within this reach, and for a visibility range of 75 m plus 5 m).
+    #[arg(long, default_value_t = 100.0, requires = "tile_m")]
+    pub overlap_m: f64,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -316,9 +324,17 @@ impl CostArg {
 /// Arguments of one localization.
 #[derive(Args)]
 pub struct RunArgs {
-    /// OSM map (.osm or .osm.pbf), or its index (.uloc, from `localize index`).
+    /// OSM map (.osm or .osm.pbf), its index (.uloc, from `localize index`), or a tiled
+    /// map's manifest (.json, from `localize index --tile-m`).
     #[arg(long)]
     pub map: Option<PathBuf>,
+    /// On a tiled map: search only the tiles within --radius-m of this coarse prior,
+    /// `LAT,LON` in degrees.
+    #[arg(long, value_name = "LAT,LON", requires = "radius_m")]
+    pub near: Option<String>,
+    /// With --near: the radius, metres.
+    #[arg(long, requires = "near")]
+    pub radius_m: Option<f64>,
     /// Gravity-levelled scan in the sensor frame (PLY, PCD, LAS/LAZ, KITTI .bin, or a
     /// message of a ROS 2 bag, .mcap).
     #[arg(long)]
@@ -463,6 +479,24 @@ fn index(args: IndexArgs) -> anyhow::Result<()> {
             args.map.display()
         );
     }
+    if let Some(tile_m) = args.tile_m {
+        let mut o = LocalizeOptions::default();
+        o.chamfer.grid_m = args.grid_m;
+        let report = localize::tiles::build_tiles(
+            &args.map,
+            &args.out,
+            localize::tiles::TileOptions {
+                tile_m,
+                overlap_m: args.overlap_m,
+            },
+            &o,
+        )?;
+        if args.json {
+            return super::print_json(&report);
+        }
+        print!("{}", report.text());
+        return Ok(());
+    }
     if !is_index(&args.out) {
         super::usage!(
             "--out {}: the index file name must end in .uloc",
@@ -489,19 +523,52 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         args.yaw_step_deg,
         &args.extract,
     )?;
+    let tiled = localize::tiles::is_manifest(map_path);
+    if tiled && args.svg.is_some() {
+        super::usage!("--svg draws on one map, not on a tiled map's manifest: use --geojson");
+    }
+    let near = match (&args.near, args.radius_m) {
+        (Some(text), Some(radius_m)) => {
+            if !tiled {
+                super::usage!("--near needs a tiled map (--map DIR/manifest.json)");
+            }
+            let parts: Vec<Option<f64>> = text.split(',').map(|v| v.trim().parse().ok()).collect();
+            match parts.as_slice() {
+                [Some(lat), Some(lon)] if radius_m.is_finite() && radius_m >= 0.0 => {
+                    Some(localize::jobs::Near {
+                        lat: *lat,
+                        lon: *lon,
+                        radius_m,
+                    })
+                }
+                _ => super::usage!(
+                    "--near {text} --radius-m {radius_m}: expected LAT,LON in degrees and a radius ≥ 0"
+                ),
+            }
+        }
+        _ => None,
+    };
     let is_bag =
         geodata::cloud::Format::from_path(scan_path).ok() == Some(geodata::cloud::Format::Mcap);
     let done = if is_bag || args.bag.given() {
         let (cloud, name, seconds) = args.bag.read(scan_path)?;
-        localize_scan(
+        localize::jobs::localize_scan_near(
             map_path,
             ScanInput::Cloud(&cloud, &name, seconds),
             options,
             args.top,
             args.svg.as_deref(),
+            near,
         )?
     } else {
-        localize_file(map_path, scan_path, options, args.top, args.svg.as_deref())?
+        localize::jobs::localize_scan_near(
+            map_path,
+            ScanInput::File(scan_path),
+            options,
+            args.top,
+            args.svg.as_deref(),
+            near,
+        )?
     };
     if let Some(path) = &args.geojson {
         write_geojson(
