@@ -293,35 +293,76 @@ pub fn map_corridors<T: Send>(
     options: &CorridorOptions,
     f: impl Fn(Corridor) -> T + Sync,
 ) -> Vec<Option<T>> {
-    let index = PointIndex::new(positions, 10.0);
-    let competitors: Vec<[[f64; 2]; 2]> = if options.mask_nearer_segments {
-        segments
-            .iter()
-            .filter(|s| geodata::osm::tags::is_drivable(&s.highway))
-            .map(|s| [s.a, s.b])
-            .collect()
-    } else {
-        Vec::new()
-    };
-    which
-        .par_iter()
-        .map(|&s| {
+    CorridorSource::new(segments, intersections, positions, options).map(which, f)
+}
+
+/// Everything a corridor is cut from: the map's segments and intersections, the cloud with
+/// its point index, and the competing centre lines. Built once (O(P + S)); each corridor is
+/// then a function of its segment alone, whichever other segments are asked for with it.
+pub struct CorridorSource<'a> {
+    segments: &'a [StreetSegment],
+    intersections: &'a [Intersection],
+    positions: &'a [[f64; 3]],
+    options: &'a CorridorOptions,
+    index: PointIndex,
+    competitors: Vec<[[f64; 2]; 2]>,
+}
+
+impl<'a> CorridorSource<'a> {
+    /// Indexes the cloud and collects the drivable centre lines (when
+    /// [`CorridorOptions::mask_nearer_segments`]).
+    pub fn new(
+        segments: &'a [StreetSegment],
+        intersections: &'a [Intersection],
+        positions: &'a [[f64; 3]],
+        options: &'a CorridorOptions,
+    ) -> CorridorSource<'a> {
+        let competitors = if options.mask_nearer_segments {
             segments
-                .get(s)
-                .and_then(|seg| {
-                    corridor(
-                        s,
-                        seg,
-                        intersections,
-                        &competitors,
-                        positions,
-                        &index,
-                        options,
-                    )
-                })
-                .map(&f)
-        })
-        .collect()
+                .iter()
+                .filter(|s| geodata::osm::tags::is_drivable(&s.highway))
+                .map(|s| [s.a, s.b])
+                .collect()
+        } else {
+            Vec::new()
+        };
+        CorridorSource {
+            segments,
+            intersections,
+            positions,
+            options,
+            index: PointIndex::new(positions, 10.0),
+            competitors,
+        }
+    }
+
+    /// Builds each corridor of `which` in parallel and maps it through `f` right away
+    /// (`None` where a segment is shorter than a bin or out of range).
+    pub fn map<T: Send>(
+        &self,
+        which: &[usize],
+        f: impl Fn(Corridor) -> T + Sync,
+    ) -> Vec<Option<T>> {
+        which
+            .par_iter()
+            .map(|&s| {
+                self.segments
+                    .get(s)
+                    .and_then(|seg| {
+                        corridor(
+                            s,
+                            seg,
+                            self.intersections,
+                            &self.competitors,
+                            self.positions,
+                            &self.index,
+                            self.options,
+                        )
+                    })
+                    .map(&f)
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]

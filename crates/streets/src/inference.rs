@@ -156,9 +156,94 @@ impl Network {
         msg
     }
 
-    /// Max-product: exact two-pass on a forest; on loops `rounds` of damped loopy
-    /// max-product followed by ICM. `exact` in the result says which.
+    /// Connected components of the coupling graph: segments ascending within each, components
+    /// ordered by their first segment. O(S + E).
+    pub fn components(&self) -> Vec<Vec<usize>> {
+        let adj = self.adjacency();
+        let mut component = vec![usize::MAX; self.potentials.len()];
+        let mut out: Vec<Vec<usize>> = Vec::new();
+        for root in 0..self.potentials.len() {
+            if component[root] != usize::MAX {
+                continue;
+            }
+            let id = out.len();
+            component[root] = id;
+            let mut members = vec![root];
+            let mut k = 0;
+            while k < members.len() {
+                for &(t, _) in &adj[members[k]] {
+                    if component[t] == usize::MAX {
+                        component[t] = id;
+                        members.push(t);
+                    }
+                }
+                k += 1;
+            }
+            members.sort_unstable();
+            out.push(members);
+        }
+        out
+    }
+
+    /// The network induced on `nodes` (ascending): their potentials in that order and the
+    /// edges among them in this network's order, renumbered.
+    pub fn subnetwork(&self, nodes: &[usize]) -> Network {
+        let mut local = vec![usize::MAX; self.potentials.len()];
+        for (k, &s) in nodes.iter().enumerate() {
+            local[s] = k;
+        }
+        let edges = self
+            .edges
+            .iter()
+            .filter(|e| local[e.s1] != usize::MAX && local[e.s2] != usize::MAX)
+            .map(|e| Edge {
+                s1: local[e.s1],
+                s2: local[e.s2],
+                flipped: e.flipped,
+            })
+            .collect();
+        Network {
+            potentials: nodes.iter().map(|&s| self.potentials[s].clone()).collect(),
+            edges,
+            lambda: self.lambda,
+            truncation: self.truncation,
+        }
+    }
+
+    /// Max-product, each connected component of the coupling graph on its own: exact
+    /// two-pass on a tree component; on a component with loops `rounds` of damped loopy
+    /// max-product (stopped by that component's own largest message change) followed by
+    /// ICM. `exact` says whether every component was a tree.
+    ///
+    /// A segment's state is a function of its component alone (the component's
+    /// [`Network::subnetwork`], segments and edges in this network's order): running the
+    /// components separately, or in any larger network holding them whole, gives
+    /// bit-identical states. [`crate::tiles`] relies on this.
     pub fn max_product(&self, rounds: usize) -> Solution {
+        let components = self.components();
+        if components.len() <= 1 {
+            // The one component is this network itself (its own subnetwork).
+            return self.connected_max_product(rounds);
+        }
+        let parts: Vec<Solution> = components
+            .par_iter()
+            .map(|nodes| self.subnetwork(nodes).connected_max_product(rounds))
+            .collect();
+        let mut states = vec![(0usize, 0usize); self.potentials.len()];
+        for (nodes, part) in components.iter().zip(&parts) {
+            for (&s, &x) in nodes.iter().zip(&part.states) {
+                states[s] = x;
+            }
+        }
+        Solution {
+            log_probability: self.log_probability(&states),
+            states,
+            exact: parts.iter().all(|p| p.exact),
+        }
+    }
+
+    /// Max-product on a network taken as one unit (one stopping rule for all its messages).
+    fn connected_max_product(&self, rounds: usize) -> Solution {
         if self.is_forest() {
             self.tree_max_product()
         } else {

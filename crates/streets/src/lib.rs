@@ -11,6 +11,8 @@
 //! - [`potentials`]: segment geometry potentials of eq. 4.2 by the column-count DP of eq. 4.4,
 //!   priors and the intersegment potentials.
 //! - [`inference`]: exact max-product on trees, loopy max-product, and parallel MCMC.
+//! - [`model`]: the trained model (bin classifier and prior) and the per-segment estimate.
+//! - [`tiles`]: the estimate tile by tile, each tile reading its segments' coupling components (exact).
 //! - [`dataset`]: the simulator's `streets` dataset format.
 //! - [`real`]: real labelled sequences (KITTI-360, MCD) as datasets, truth from their labels.
 //! - [`eval`]: the 5-fold round robin evaluation of Table 4.1.
@@ -33,6 +35,7 @@ pub mod potentials;
 pub mod real;
 pub mod svm;
 pub mod synthetic;
+pub mod tiles;
 
 use std::path::PathBuf;
 use thiserror::Error;
@@ -109,6 +112,26 @@ pub enum StreetsError {
         value: f64,
         /// What is accepted.
         expected: &'static str,
+    },
+    /// A tile of a plan owns a segment the map does not have.
+    #[error("tile {tile:?} owns segment {segment} but the map has {segments} street segments; check that the plan was made from this map")]
+    TilePlan {
+        /// The tile's key.
+        tile: (i64, i64),
+        /// The segment index.
+        segment: usize,
+        /// Segments in the map.
+        segments: usize,
+    },
+    /// Two tiles report the same segment.
+    #[error("segment {segment} is reported by tiles {first:?} and {second:?}; merge the results of one plan, each tile once")]
+    TileOverlap {
+        /// The segment index.
+        segment: usize,
+        /// The first tile reporting it.
+        first: (i64, i64),
+        /// The second tile reporting it.
+        second: (i64, i64),
     },
     /// A dataset file is malformed.
     #[error("{path}: {message}")]

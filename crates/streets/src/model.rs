@@ -1,7 +1,7 @@
 //! The trained street model: bin classifier (standardised features + RBF SVM), its confusion
 //! matrix on held-out bins, and the geometry prior; plus the per-segment estimate from a cloud.
 
-use crate::corridor::{map_corridors, Corridor, CorridorOptions};
+use crate::corridor::{Corridor, CorridorOptions, CorridorSource};
 use crate::features::{bin_features, BinFeatures, FeatureOptions, FEATURE_DIMS};
 use crate::inference::{Edge, McmcOptions, Network};
 use crate::potentials::{
@@ -250,6 +250,13 @@ pub struct SegmentBins {
 }
 
 impl SegmentBins {
+    /// A corridor with the features of its bins.
+    pub fn of(corridor: Corridor, cloud: &PointCloud, options: &FeatureOptions) -> SegmentBins {
+        let o = corridor.frame.origin;
+        let features = bin_features(&corridor.grid, cloud, [o[0], o[1], 0.0], options);
+        SegmentBins { corridor, features }
+    }
+
     /// Bins used for estimation: unmasked, observed, and with ground seen (the lowest point
     /// less than [`GROUND_SEEN_M`] above the local ground; a bin holding only a car roof or
     /// a canopy says nothing about the surface under it).
@@ -296,47 +303,52 @@ pub fn segment_bins(
     which: &[usize],
     options: &GeometryOptions,
 ) -> Vec<Option<SegmentBins>> {
-    map_corridors(
+    CorridorSource::new(
         &map.streets.segments,
-        which,
         &map.streets.intersections,
         &cloud.positions,
         &options.corridor,
-        |corridor| {
-            let o = corridor.frame.origin;
-            let features =
-                bin_features(&corridor.grid, cloud, [o[0], o[1], 0.0], &options.features);
-            SegmentBins { corridor, features }
-        },
     )
+    .map(which, |corridor| {
+        SegmentBins::of(corridor, cloud, &options.features)
+    })
 }
 
-/// Coupled pairs among `which` (indices into `which` in the result), with orientation.
+/// Whether neighbours `s1` and `s2` of the map are coupled when both are observed: `None`
+/// when their directions differ by more than `max_turn_deg`, else `Some(flipped)` (they run
+/// in opposite directions, left of one is right of the other).
+pub fn coupling(map: &OsmMap, s1: usize, s2: usize, max_turn_deg: f64) -> Option<bool> {
+    let segs = &map.streets.segments;
+    let (a, b) = (segs.get(s1)?, segs.get(s2)?);
+    // Same direction when one ends where the other starts.
+    let flipped = !(a.to_node == b.from_node || a.from_node == b.to_node);
+    let da = [a.b[0] - a.a[0], a.b[1] - a.a[1]];
+    let db = [b.b[0] - b.a[0], b.b[1] - b.a[1]];
+    let cos = (da[0] * db[0] + da[1] * db[1]) / (a.length_m * b.length_m).max(1e-12);
+    let cos = if flipped { -cos } else { cos };
+    if max_turn_deg < 180.0 && cos < max_turn_deg.to_radians().cos() {
+        return None;
+    }
+    Some(flipped)
+}
+
+/// Coupled pairs among `which` (indices into `which` in the result), with orientation, in
+/// the order of the map's neighbour pairs.
 pub fn network_edges(map: &OsmMap, which: &[usize], max_turn_deg: f64) -> Vec<Edge> {
     let pos: std::collections::HashMap<usize, usize> =
         which.iter().enumerate().map(|(k, &s)| (s, k)).collect();
-    let segs = &map.streets.segments;
-    let cos_max = max_turn_deg.to_radians().cos();
     let mut edges = Vec::new();
     for &[s1, s2] in &map.streets.neighbour_pairs {
         let (Some(&k1), Some(&k2)) = (pos.get(&s1), pos.get(&s2)) else {
             continue;
         };
-        let (a, b) = (&segs[s1], &segs[s2]);
-        // Same direction when one ends where the other starts.
-        let flipped = !(a.to_node == b.from_node || a.from_node == b.to_node);
-        let da = [a.b[0] - a.a[0], a.b[1] - a.a[1]];
-        let db = [b.b[0] - b.a[0], b.b[1] - b.a[1]];
-        let cos = (da[0] * db[0] + da[1] * db[1]) / (a.length_m * b.length_m).max(1e-12);
-        let cos = if flipped { -cos } else { cos };
-        if max_turn_deg < 180.0 && cos < cos_max {
-            continue;
+        if let Some(flipped) = coupling(map, s1, s2, max_turn_deg) {
+            edges.push(Edge {
+                s1: k1,
+                s2: k2,
+                flipped,
+            });
         }
-        edges.push(Edge {
-            s1: k1,
-            s2: k2,
-            flipped,
-        });
     }
     edges
 }
@@ -396,7 +408,7 @@ pub struct StreetModel {
 }
 
 /// One segment's estimate.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SegmentEstimate {
     /// Segment index in the map.
     pub segment: usize,
@@ -417,7 +429,7 @@ pub struct Estimates {
     pub too_short: usize,
     /// Segments without usable bins (not observed or masked entirely).
     pub unobserved: usize,
-    /// Whether inference was exact (tree-shaped network).
+    /// Whether inference was exact (every connected component of the coupled network a tree).
     pub exact: bool,
 }
 
@@ -594,8 +606,108 @@ impl StreetModel {
     }
 }
 
+/// What the potential step found for one drivable segment.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SegmentOutcome {
+    /// Shorter than one bin outside the intersection masks (no corridor).
+    TooShort,
+    /// No usable bin (not observed, or masked entirely).
+    Unobserved,
+    /// Observed: its potential and the number of usable bins behind it.
+    Observed {
+        /// The tempered segment potential with the prior (eq. 4.2).
+        potential: SegmentPotential,
+        /// Usable bins in the corridor.
+        bins: usize,
+    },
+}
+
+/// The per-segment step of [`StreetModel::estimate`] (corridor → features → labels →
+/// potential) with the cloud indexed once; a segment's outcome depends on that segment, the
+/// map and the cloud only, not on which other segments are asked for with it.
+pub struct PotentialStep<'a> {
+    model: &'a StreetModel,
+    cloud: &'a PointCloud,
+    source: CorridorSource<'a>,
+    grid: ThetaGrid,
+    confusion_log: [[f64; 2]; 2],
+    prior: Vec<f64>,
+}
+
+impl<'a> PotentialStep<'a> {
+    /// Indexes `cloud` against the corridors of `map`'s segments (O(P + S)).
+    pub fn new(model: &'a StreetModel, map: &'a OsmMap, cloud: &'a PointCloud) -> Self {
+        let grid = model.geometry.theta_grid();
+        PotentialStep {
+            model,
+            cloud,
+            source: CorridorSource::new(
+                &map.streets.segments,
+                &map.streets.intersections,
+                &cloud.positions,
+                &model.geometry.corridor,
+            ),
+            confusion_log: model.classifier.confusion.log_likelihood(),
+            prior: crate::potentials::prior_table(&model.prior, &grid),
+            grid,
+        }
+    }
+
+    /// The outcome of each segment of `which`, in order (parallel over segments).
+    pub fn outcomes(&self, which: &[usize]) -> Result<Vec<SegmentOutcome>> {
+        let flat = GeometryPrior::flat();
+        let geometry = &self.model.geometry;
+        // Per segment: corridor → features → labels → potential, keeping only the potential.
+        let results = self
+            .source
+            .map(which, |corridor| -> Result<SegmentOutcome> {
+                if corridor.grid.point_ids.is_empty() {
+                    return Ok(SegmentOutcome::Unobserved);
+                }
+                let b = SegmentBins::of(corridor, self.cloud, &geometry.features);
+                let rows = b.usable_rows();
+                if rows.is_empty() {
+                    return Ok(SegmentOutcome::Unobserved);
+                }
+                let labels = self.model.classifier.predict(&rows)?;
+                let potential = tempered_with_prior(
+                    &segment_potential(&b.counts(&labels), &self.confusion_log, &flat, &self.grid),
+                    &geometry.tempering,
+                    &self.prior,
+                );
+                Ok(SegmentOutcome::Observed {
+                    potential,
+                    bins: labels.len(),
+                })
+            });
+        results
+            .into_iter()
+            .map(|r| r.unwrap_or(Ok(SegmentOutcome::TooShort)))
+            .collect()
+    }
+}
+
+/// The drivable segments of a map (streets for cars only: footways have no driving area),
+/// ascending; [`StreetsError::NoStreets`] when there are none.
+pub fn drivable_segments(map: &OsmMap, map_name: &str) -> Result<Vec<usize>> {
+    let segs = &map.streets.segments;
+    let which: Vec<usize> = (0..segs.len())
+        .filter(|&s| geodata::osm::tags::is_drivable(&segs[s].highway))
+        .collect();
+    if which.is_empty() {
+        return Err(StreetsError::NoStreets {
+            path: map_name.to_string(),
+        });
+    }
+    Ok(which)
+}
+
 impl StreetModel {
     /// Estimates offset and width of every segment of `map` that `cloud` covers.
+    ///
+    /// Inference is [`Network::max_product`], which solves each connected component of the
+    /// coupled network on its own; so a segment's estimate depends only on the potentials of
+    /// its component, and [`crate::tiles`] reproduces this result bit for bit tile by tile.
     pub fn estimate(
         &self,
         map: &OsmMap,
@@ -603,106 +715,58 @@ impl StreetModel {
         map_name: &str,
         cloud_name: &str,
     ) -> Result<Estimates> {
-        let segs = &map.streets.segments;
-        if segs.is_empty() {
-            return Err(StreetsError::NoStreets {
-                path: map_name.to_string(),
-            });
-        }
-        // Streets for cars only (footways have no driving area).
-        let which: Vec<usize> = (0..segs.len())
-            .filter(|&s| geodata::osm::tags::is_drivable(&segs[s].highway))
-            .collect();
-        if which.is_empty() {
-            return Err(StreetsError::NoStreets {
-                path: map_name.to_string(),
-            });
-        }
-        let grid = self.geometry.theta_grid();
-        let clog = self.classifier.confusion.log_likelihood();
-        let prior = crate::potentials::prior_table(&self.prior, &grid);
-        let flat = GeometryPrior::flat();
-        // Per segment: corridor → features → labels → potential, keeping only the potential.
-        let results = map_corridors(
-            segs,
-            &which,
-            &map.streets.intersections,
-            &cloud.positions,
-            &self.geometry.corridor,
-            |corridor| -> Result<Option<(SegmentPotential, usize)>> {
-                if corridor.grid.point_ids.is_empty() {
-                    return Ok(None);
-                }
-                let o = corridor.frame.origin;
-                let features = bin_features(
-                    &corridor.grid,
-                    cloud,
-                    [o[0], o[1], 0.0],
-                    &self.geometry.features,
-                );
-                let b = SegmentBins { corridor, features };
-                let rows = b.usable_rows();
-                if rows.is_empty() {
-                    return Ok(None);
-                }
-                let labels = self.classifier.predict(&rows)?;
-                Ok(Some((
-                    tempered_with_prior(
-                        &segment_potential(&b.counts(&labels), &clog, &flat, &grid),
-                        &self.geometry.tempering,
-                        &prior,
-                    ),
-                    labels.len(),
-                )))
-            },
-        );
-        let too_short = results.iter().filter(|r| r.is_none()).count();
+        let which = drivable_segments(map, map_name)?;
+        let outcomes = PotentialStep::new(self, map, cloud).outcomes(&which)?;
+        let too_short = outcomes
+            .iter()
+            .filter(|o| matches!(o, SegmentOutcome::TooShort))
+            .count();
         if too_short == which.len() {
             return Err(StreetsError::SegmentsTooShort {
                 segments: which.len(),
                 bin_m: self.geometry.corridor.bin_m,
             });
         }
-        let mut used = Vec::new();
-        let mut potentials: Vec<SegmentPotential> = Vec::new();
-        let mut unobserved = 0;
-        for (&s, r) in which.iter().zip(results) {
-            match r {
-                None => {}
-                Some(r) => match r? {
-                    None => unobserved += 1,
-                    Some((p, n)) => {
-                        potentials.push(p);
-                        used.push((s, n));
-                    }
-                },
-            }
+        let unobserved = outcomes
+            .iter()
+            .filter(|o| matches!(o, SegmentOutcome::Unobserved))
+            .count();
+        let observed: Vec<(usize, SegmentPotential, usize)> = which
+            .iter()
+            .zip(outcomes)
+            .filter_map(|(&s, o)| match o {
+                SegmentOutcome::Observed { potential, bins } => Some((s, potential, bins)),
+                _ => None,
+            })
+            .collect();
+        if observed.is_empty() {
+            return Err(no_overlap(map, cloud, cloud_name));
         }
-        if used.is_empty() {
-            let cb = cloud.bounds();
-            let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for s in segs {
-                for p in [s.a, s.b] {
-                    for k in 0..2 {
-                        min[k] = min[k].min(p[k]);
-                        max[k] = max[k].max(p[k]);
-                    }
-                }
-            }
-            let (c0, c1) = cb.map_or(([f64::NAN; 3], [f64::NAN; 3]), |b| (b.min, b.max));
-            return Err(StreetsError::NoOverlap {
-                cloud: cloud_name.to_string(),
-                cx0: c0[0],
-                cx1: c1[0],
-                cy0: c0[1],
-                cy1: c1[1],
-                sx0: min[0],
-                sx1: max[0],
-                sy0: min[1],
-                sy1: max[1],
-            });
+        let (segments, exact) = self.infer(map, observed);
+        Ok(Estimates {
+            segments,
+            too_short,
+            unobserved,
+            exact,
+        })
+    }
+
+    /// Max-product over the coupled network of `observed` segments (ascending segment index,
+    /// each with its potential and usable bins): their estimates in that order and whether
+    /// every connected component was a tree (inference exact).
+    pub(crate) fn infer(
+        &self,
+        map: &OsmMap,
+        observed: Vec<(usize, SegmentPotential, usize)>,
+    ) -> (Vec<SegmentEstimate>, bool) {
+        let grid = self.geometry.theta_grid();
+        let ids: Vec<usize> = observed.iter().map(|o| o.0).collect();
+        let mut used = Vec::with_capacity(observed.len());
+        let mut potentials = Vec::with_capacity(observed.len());
+        for (s, p, n) in observed {
+            used.push((s, n));
+            potentials.push(p);
         }
-        let ids: Vec<usize> = used.iter().map(|u| u.0).collect();
         let net = Network {
             potentials,
             edges: network_edges(map, &ids, self.geometry.max_turn_deg),
@@ -723,12 +787,33 @@ impl StreetModel {
                 }
             })
             .collect();
-        Ok(Estimates {
-            segments,
-            too_short,
-            unobserved,
-            exact: sol.exact,
-        })
+        (segments, sol.exact)
+    }
+}
+
+/// [`StreetsError::NoOverlap`] with the extents of the cloud and of the map's streets.
+fn no_overlap(map: &OsmMap, cloud: &PointCloud, cloud_name: &str) -> StreetsError {
+    let cb = cloud.bounds();
+    let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for s in &map.streets.segments {
+        for p in [s.a, s.b] {
+            for k in 0..2 {
+                min[k] = min[k].min(p[k]);
+                max[k] = max[k].max(p[k]);
+            }
+        }
+    }
+    let (c0, c1) = cb.map_or(([f64::NAN; 3], [f64::NAN; 3]), |b| (b.min, b.max));
+    StreetsError::NoOverlap {
+        cloud: cloud_name.to_string(),
+        cx0: c0[0],
+        cx1: c1[0],
+        cy0: c0[1],
+        cy1: c1[1],
+        sx0: min[0],
+        sx1: max[0],
+        sy0: min[1],
+        sy1: max[1],
     }
 }
 
