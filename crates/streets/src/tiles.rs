@@ -23,6 +23,33 @@
 //! Cost: a tile computes potentials for its owned segments, its components and one ring of
 //! unobserved neighbours; a component spanning many tiles is solved once per tile it
 //! touches. The cloud is indexed once per tile, O(P).
+//!
+//! ```
+//! use geodata::cloud::PointCloud;
+//! use geodata::osm::OsmMap;
+//! use streets::model::{Estimates, StreetModel};
+//! use streets::tiles::{merge_tiles, plan_tiles};
+//!
+//! /// The whole map's estimate, one job per 1 km tile (each could run on its own machine).
+//! fn by_tiles(model: &StreetModel, map: &OsmMap, cloud: &PointCloud) -> streets::Result<Estimates> {
+//!     let parts = plan_tiles(map, 1000.0)?
+//!         .iter()
+//!         .map(|tile| model.estimate_tile(map, cloud, tile, "map.osm", "cloud.ply"))
+//!         .collect::<streets::Result<Vec<_>>>()?;
+//!     merge_tiles(parts)
+//! }
+//!
+//! // A street of two ~150 m segments: 100 m tiles give each its own owner.
+//! let map = OsmMap::from_xml_str(
+//!     r#"<osm version="0.6"><node id="1" lat="48.0" lon="11.0"/>
+//!        <node id="2" lat="48.0" lon="11.002"/><node id="3" lat="48.0" lon="11.004"/>
+//!        <way id="5"><nd ref="1"/><nd ref="2"/><nd ref="3"/><tag k="highway" v="residential"/></way></osm>"#,
+//! )?;
+//! let plan = plan_tiles(&map, 100.0)?;
+//! assert_eq!(plan.len(), 2);
+//! assert!(plan.iter().all(|tile| tile.owned.len() == 1));
+//! # Ok::<(), streets::StreetsError>(())
+//! ```
 
 use crate::model::{
     coupling, drivable_segments, Estimates, PotentialStep, SegmentEstimate, SegmentOutcome,

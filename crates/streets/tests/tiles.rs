@@ -343,6 +343,17 @@ fn plans_round_trip_and_bad_plans_are_errors() {
         .unwrap_err();
     assert!(matches!(err, StreetsError::TilePlan { .. }), "{err}");
     assert!(err.to_string().contains("made from this map"), "{err}");
+    let footways = OsmMap::from_xml_str(
+        &lattice_xml()
+            .replace("residential", "footway")
+            .replace("tertiary", "footway"),
+    )
+    .unwrap();
+    let err = model
+        .estimate_tile(&footways, &cloud, &plan[0], "footways.osm", "cloud")
+        .unwrap_err();
+    assert!(matches!(err, StreetsError::NoStreets { .. }), "{err}");
+    assert!(err.to_string().contains("footways.osm"), "{err}");
     let part = model
         .estimate_tile(&map, &cloud, &plan[0], "map", "cloud")
         .unwrap();
