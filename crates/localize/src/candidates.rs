@@ -288,7 +288,7 @@ impl<'a> Plans<'a> {
 }
 
 /// Largest cost within `factor` of `best`.
-pub(crate) fn limit_of(best: u64, factor: (u64, u64)) -> u64 {
+pub fn limit_of(best: u64, factor: (u64, u64)) -> u64 {
     let l = (best as u128) * (factor.0 as u128) / (factor.1.max(1) as u128);
     l.min(u64::MAX as u128) as u64
 }

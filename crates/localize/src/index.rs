@@ -396,7 +396,7 @@ impl MapSource {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("umap"))
         {
-            return crate::tiles::read_crop(&found);
+            return crate::crop::read_crop(&found);
         }
         Ok(OsmMap::load(&found)?)
     }

@@ -31,13 +31,15 @@
 //!   answers in WGS84 as the command line prints them; [`geojson`]: candidates and tracks as
 //!   RFC 7946 GeoJSON; [`poses`]: track poses as TUM and KITTI trajectory files;
 //!   [`figure`]: pictures of results;
-//!   [`tiles`]: a map cut into tiles searched exactly as the whole map;
+//!   [`tiles`]: a map cut into tiles searched exactly as the whole map, [`crop`]: a tile's
+//!   buildings and streets as a file;
 //!   [`jobs`]: the command-line jobs (index, one scan file, a track folder, extraction
 //!   scores) as library calls.
 
 pub mod candidates;
 pub mod chamfer;
 mod codec;
+pub mod crop;
 pub mod distractors;
 pub mod eval;
 pub mod extract_eval;

@@ -51,6 +51,9 @@ enum Command {
     /// Benchmarks against the peer implementations named in the issues.
     #[command(subcommand)]
     Bench(urbansem_bench::BenchCommand),
+    /// Fleet jobs as engine-neutral shards: plan, run one shard anywhere, merge.
+    #[command(subcommand)]
+    Shard(cmd::shard::ShardCommand),
 }
 
 /// Exit code of an error while running (a file that cannot be read, bad input data).
@@ -103,6 +106,7 @@ fn main() -> ExitCode {
         Command::Map(c) => cmd::srtree::run_map(c),
         Command::Relations(c) => cmd::srtree::run_relations(c),
         Command::Bench(c) => urbansem_bench::run(c),
+        Command::Shard(c) => cmd::shard::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -311,7 +311,8 @@ pub enum CostArg {
 }
 
 impl CostArg {
-    fn kind(self) -> CostKind {
+    /// The library's cost kind.
+    pub fn kind(self) -> CostKind {
         match self {
             CostArg::Dcm => CostKind::Dcm,
             CostArg::Forward => CostKind::Forward,
@@ -767,6 +768,8 @@ mod tests {
     #[test]
     fn localize_without_map_or_scan_is_a_clear_error() {
         let err = run_one(RunArgs {
+            near: None,
+            radius_m: None,
             map: None,
             scan: None,
             bag: Default::default(),

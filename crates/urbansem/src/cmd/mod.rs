@@ -18,6 +18,7 @@ pub mod localize;
 pub mod mln;
 pub mod osm;
 pub mod pbo;
+pub mod shard;
 pub mod sim;
 pub mod srtree;
 pub mod streets;

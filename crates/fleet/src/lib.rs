@@ -1,0 +1,81 @@
+//! Fleet jobs as engine-neutral shards: `plan` splits a job into shards, `run` runs one shard
+//! anywhere (a Ray task, a Slurm array index, a Kubernetes indexed job, a laptop loop) and
+//! writes its checksummed result file, `merge` combines the results.
+//!
+//! Where it sits: on top of the library crates (today `localize` over a tiled map); the
+//! binary's `urbansem shard plan|run|merge` and the Python package's
+//! `urbansem.distributed.run_plan` call it.
+//!
+//! Modules in data-flow order: [`plan`] (the plan file and how a job is cut), [`run`] (one
+//! shard, idempotent), [`merge`] (the combined result).
+//!
+//! **Localization over a tiled map** runs in three stages; a shard of a stage reads only
+//! files the shards of earlier stages wrote, so the stages can run as three waves of
+//! independent tasks:
+//! 1. `extract`: per batch of scans, each scan's wall segments (the map plays no part);
+//! 2. `minimum`: per batch × tile, each scan's least search cost in the tile's core;
+//! 3. `poses`: per batch × tile, each scan's poses within the factor of its least cost over
+//!    all tiles (read from stage 2).
+//!
+//! The merge then runs suppression, filters, costs, refinement and ranking per scan on the
+//! union, exactly as [`localize::tiles::localize_tiled`] does in one process (tested equal).
+
+pub mod merge;
+pub mod plan;
+pub mod run;
+
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// Why a fleet step failed.
+#[derive(Debug, Error)]
+pub enum FleetError {
+    /// A file could not be read or written.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// A plan or result file is not what it should be.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and what to do.
+        message: String,
+    },
+    /// A shard needs results of an earlier stage that are not there yet.
+    #[error("{plan}: {needed_by} needs the results of shards {missing:?} (stage {stage}) first; run them with `urbansem shard run PLAN --shard I`")]
+    NotReady {
+        /// The plan.
+        plan: PathBuf,
+        /// Which step needs them (`shard 7`, `the merge`).
+        needed_by: String,
+        /// Its stage's name.
+        stage: String,
+        /// The earlier shards without a finished result.
+        missing: Vec<usize>,
+    },
+    /// The localization library failed.
+    #[error(transparent)]
+    Localize(#[from] localize::LocalizeError),
+}
+
+/// Result of the fleet crate.
+pub type Result<T> = std::result::Result<T, FleetError>;
+
+pub(crate) fn io_err(path: &std::path::Path, e: impl std::fmt::Display) -> FleetError {
+    FleetError::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+pub(crate) fn invalid(path: &std::path::Path, message: String) -> FleetError {
+    FleetError::Invalid {
+        path: path.to_path_buf(),
+        message,
+    }
+}

@@ -1,0 +1,115 @@
+//! The merge: every shard's result combined into the job's answer — for localization one row
+//! per scan, the rows of `localize track --json`.
+
+use crate::plan::Plan;
+use crate::run::{plan_manifest, read_results, ExtractRecord, PosesRecord};
+use crate::Result;
+use localize::pipeline::Place;
+use localize::report::TrackRow;
+use localize::tiles::{finish_tiled, owners, read_crop, resolve, TilePlace, TileSearch};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+/// The merged answer of a localization plan (`shard merge --out result.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LocalizeMerge {
+    /// The plan.
+    pub plan: String,
+    /// One row per scan, in input order.
+    pub scans: Vec<TrackRow>,
+    /// Shards merged.
+    pub shards: usize,
+    /// Seconds of the merge.
+    pub seconds: f64,
+}
+
+/// Merges the results of every shard of the plan at `plan_path` (all must be complete).
+pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
+    let t = Instant::now();
+    let (plan, plan_crc) = Plan::read(plan_path)?;
+    let (manifest_path, manifest) = plan_manifest(&plan)?;
+    let options = plan.options.localize_options(manifest.grid_m, plan_path)?;
+    let all = |stage: usize| -> Vec<usize> {
+        plan.shards
+            .iter()
+            .filter(|s| s.stage == stage)
+            .map(|s| s.id)
+            .collect()
+    };
+    let merging = "the merge";
+    let extracted: Vec<ExtractRecord> = read_results(plan_path, &plan, plan_crc, merging, &all(0))?;
+    let poses: Vec<PosesRecord> = read_results(plan_path, &plan, plan_crc, merging, &all(2))?;
+    let mut by_scan: BTreeMap<usize, Vec<TileSearch>> = BTreeMap::new();
+    for p in poses {
+        by_scan.entry(p.scan).or_default().push(p.search);
+    }
+    for v in by_scan.values_mut() {
+        v.sort_by_key(|s| s.tile);
+    }
+    // The crops of every tile owning a candidate of some scan, loaded once.
+    let mut needed: Vec<usize> = by_scan
+        .values()
+        .flat_map(|s| owners(&manifest, s, &options))
+        .collect();
+    if needed.is_empty() && !manifest.tiles.is_empty() {
+        needed.push(0);
+    }
+    needed.sort_unstable();
+    needed.dedup();
+    let crops = needed
+        .iter()
+        .map(|&k| {
+            Ok((
+                k,
+                read_crop(&resolve(&manifest_path, &manifest.tiles[k].crop))?,
+            ))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let places: Vec<(usize, TilePlace<'_>)> =
+        crops.iter().map(|(k, c)| (*k, TilePlace::new(c))).collect();
+    let place_of = |k: usize| -> &dyn Place {
+        match places.iter().find(|(j, _)| *j == k) {
+            Some((_, p)) => p,
+            None => &places[0].1,
+        }
+    };
+    let frame_map = match crops.first() {
+        Some((_, c)) => c,
+        None => {
+            return Err(crate::invalid(
+                &manifest_path,
+                "the tiled map lists no tile".into(),
+            ))
+        }
+    };
+    let empty = Vec::new();
+    let mut scans = Vec::with_capacity(extracted.len());
+    for e in &extracted {
+        let searches = by_scan.get(&e.scan).unwrap_or(&empty);
+        let segments = e.segments();
+        let mut result = finish_tiled(&manifest, searches, &segments, &options, &place_of);
+        let ex = e.scan_segments();
+        result.record_extraction(&ex);
+        if segments.is_empty() {
+            result.message = Some(format!(
+                "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
+                e.points, e.vertical_cells, e.min_length_m
+            ));
+        }
+        scans.push(TrackRow::new(
+            frame_map,
+            &e.name,
+            &result,
+            &ex,
+            plan.options.top,
+        ));
+    }
+    Ok(LocalizeMerge {
+        plan: plan_path.display().to_string(),
+        scans,
+        shards: plan.shards.len(),
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,300 @@
+//! The plan file (`plan.json`): the job, its map and inputs (with sizes and checksums), the
+//! options, and the shards by stage.
+
+use crate::{invalid, io_err, Result};
+use localize::pipeline::LocalizeOptions;
+use localize::rank::CostKind;
+use localize::sensor::SensorChoice;
+use localize::tiles::{FileRef, Manifest};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The plan's `format` value.
+pub const PLAN_FORMAT: &str = "urbansem-shard-plan";
+/// The plan version this build reads and writes.
+pub const PLAN_VERSION: u32 = 1;
+
+/// The jobs a plan can hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Job {
+    /// Global localization of a folder of gravity-levelled scans on a tiled map.
+    Localize,
+}
+
+/// The options of a localization job (the rest are the library's defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobOptions {
+    /// Candidates listed per scan.
+    pub top: usize,
+    /// The cost that ranks candidates (`dcm`, `forward`, `reverse`, `symmetric`).
+    pub cost: String,
+    /// Sensor profile (`auto` or a profile name).
+    pub sensor: String,
+    /// Yaw step of the search, degrees.
+    pub yaw_step_deg: f64,
+}
+
+impl Default for JobOptions {
+    fn default() -> Self {
+        JobOptions {
+            top: 5,
+            cost: "reverse".into(),
+            sensor: "auto".into(),
+            yaw_step_deg: LocalizeOptions::default().search.yaw_step_deg,
+        }
+    }
+}
+
+impl JobOptions {
+    /// The localizer's options for a map of tensor grid `grid_m`.
+    pub fn localize_options(&self, grid_m: f64, plan: &Path) -> Result<LocalizeOptions> {
+        let mut o = LocalizeOptions::default();
+        o.chamfer.grid_m = grid_m;
+        o.search.yaw_step_deg = self.yaw_step_deg;
+        o.rank_by = CostKind::ALL
+            .into_iter()
+            .find(|k| k.name() == self.cost)
+            .ok_or_else(|| invalid(plan, format!("unknown cost {:?}", self.cost)))?;
+        o.sensor = if self.sensor == "auto" {
+            SensorChoice::Auto
+        } else {
+            SensorChoice::Named(
+                geodata::sensors::SensorKind::ALL
+                    .into_iter()
+                    .find(|k| k.name() == self.sensor)
+                    .ok_or_else(|| invalid(plan, format!("unknown sensor {:?}", self.sensor)))?,
+            )
+        };
+        Ok(o)
+    }
+}
+
+/// A stage of a plan: its name and its shards.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stage {
+    /// `extract`, `minimum` or `poses`.
+    pub name: String,
+    /// The ids of its shards.
+    pub shards: Vec<usize>,
+}
+
+/// One shard: a batch of scans, and a tile for the tile stages.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Shard {
+    /// Its id (its position in the plan).
+    pub id: usize,
+    /// Its stage (index into `stages`).
+    pub stage: usize,
+    /// Its batch of scans.
+    pub batch: usize,
+    /// Its scans: `[first, end)` of `inputs`.
+    pub scans: [usize; 2],
+    /// Its tile (position in the manifest), for the tile stages.
+    pub tile: Option<usize>,
+}
+
+/// A plan (`plan.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// Always [`PLAN_FORMAT`].
+    pub format: String,
+    /// Always [`PLAN_VERSION`].
+    pub version: u32,
+    /// The job.
+    pub job: Job,
+    /// The tiled map's manifest (absolute path) with its size and checksum.
+    pub map: FileRef,
+    /// The inputs (absolute paths), in file-name order.
+    pub inputs: Vec<FileRef>,
+    /// The job's options.
+    pub options: JobOptions,
+    /// Scans per batch.
+    pub batch_size: usize,
+    /// The folder of shard results (absolute path).
+    pub out: String,
+    /// The stages, in order.
+    pub stages: Vec<Stage>,
+    /// Every shard.
+    pub shards: Vec<Shard>,
+}
+
+/// Cloud file extensions a localization job takes from its input folder.
+const CLOUD_EXTENSIONS: [&str; 7] = ["ply", "pcd", "las", "laz", "bin", "xyz", "txt"];
+
+fn absolute(path: &Path) -> Result<PathBuf> {
+    std::fs::canonicalize(path).map_err(|e| io_err(path, e))
+}
+
+/// Plans a localization job: the scans of `inputs` (every cloud file, by name) on the tiled
+/// map `manifest`, `batch_size` scans per shard, results into `out`.
+pub fn plan_localize(
+    manifest: &Path,
+    inputs: &Path,
+    out: &Path,
+    batch_size: usize,
+    options: JobOptions,
+) -> Result<Plan> {
+    if !localize::tiles::is_manifest(manifest) {
+        return Err(invalid(
+            manifest,
+            "a localization plan needs a tiled map: write one with `urbansem localize index --map M --tile-m 1000 --out DIR` and pass DIR/manifest.json".into(),
+        ));
+    }
+    let m = Manifest::read(manifest)?;
+    let manifest = absolute(manifest)?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(inputs)
+        .map_err(|e| io_err(inputs, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(invalid(
+            inputs,
+            format!(
+                "no scan files ({}) in the folder",
+                CLOUD_EXTENSIONS.join(", ")
+            ),
+        ));
+    }
+    let batch_size = batch_size.max(1);
+    let inputs = files
+        .iter()
+        .map(|p| {
+            let abs = absolute(p)?;
+            Ok(FileRef::of(&abs, &abs.to_string_lossy())?)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
+    let out_abs = absolute(out)?;
+    let batches = inputs.len().div_ceil(batch_size);
+    let mut shards = Vec::new();
+    let mut stages = Vec::new();
+    for (stage, name) in ["extract", "minimum", "poses"].into_iter().enumerate() {
+        let mut ids = Vec::new();
+        for batch in 0..batches {
+            let scans = [
+                batch * batch_size,
+                ((batch + 1) * batch_size).min(inputs.len()),
+            ];
+            let tiles: Vec<Option<usize>> = if stage == 0 {
+                vec![None]
+            } else {
+                (0..m.tiles.len()).map(Some).collect()
+            };
+            for tile in tiles {
+                ids.push(shards.len());
+                shards.push(Shard {
+                    id: shards.len(),
+                    stage,
+                    batch,
+                    scans,
+                    tile,
+                });
+            }
+        }
+        stages.push(Stage {
+            name: name.into(),
+            shards: ids,
+        });
+    }
+    Ok(Plan {
+        format: PLAN_FORMAT.into(),
+        version: PLAN_VERSION,
+        job: Job::Localize,
+        map: FileRef::of(&manifest, &manifest.to_string_lossy())?,
+        inputs,
+        options,
+        batch_size,
+        out: out_abs.to_string_lossy().into_owned(),
+        stages,
+        shards,
+    })
+}
+
+impl Plan {
+    /// Writes the plan (atomically).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let json = serde_json::to_vec_pretty(self).map_err(|e| io_err(path, e))?;
+        geodata::fsio::write_atomic(path, json).map_err(|e| io_err(path, e))
+    }
+
+    /// Reads and checks a plan; returns it with the CRC-32 of its bytes.
+    pub fn read(path: &Path) -> Result<(Plan, u32)> {
+        let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+        let plan: Plan = serde_json::from_slice(&bytes).map_err(|e| {
+            invalid(
+                path,
+                format!(
+                    "not a shard plan (line {}, column {}: {e}); write one with `urbansem shard plan`",
+                    e.line(),
+                    e.column()
+                ),
+            )
+        })?;
+        if plan.format != PLAN_FORMAT || plan.version != PLAN_VERSION {
+            return Err(invalid(
+                path,
+                format!(
+                    "format {:?} version {}; this build reads {PLAN_FORMAT:?} version {PLAN_VERSION}",
+                    plan.format, plan.version
+                ),
+            ));
+        }
+        let n = plan.inputs.len();
+        let ok = plan.shards.iter().enumerate().all(|(i, s)| {
+            s.id == i && s.stage < plan.stages.len() && s.scans[0] <= s.scans[1] && s.scans[1] <= n
+        });
+        if !ok {
+            return Err(invalid(
+                path,
+                "a shard's id, stage or scans are out of range".into(),
+            ));
+        }
+        Ok((plan, crc32fast::hash(&bytes)))
+    }
+
+    /// The shard with id `id`.
+    pub fn shard(&self, id: usize, path: &Path) -> Result<&Shard> {
+        self.shards.get(id).ok_or_else(|| {
+            invalid(
+                path,
+                format!(
+                    "no shard {id}: the plan has {} (0–{})",
+                    self.shards.len(),
+                    self.shards.len().saturating_sub(1)
+                ),
+            )
+        })
+    }
+
+    /// The result file of shard `id`.
+    pub fn result_path(&self, id: usize) -> PathBuf {
+        Path::new(&self.out).join(format!("shard-{id:06}.jsonl"))
+    }
+
+    /// The completion record of shard `id` (written after its result).
+    pub fn done_path(&self, id: usize) -> PathBuf {
+        Path::new(&self.out).join(format!("shard-{id:06}.done.json"))
+    }
+
+    /// The shards of stage `stage` for batch `batch`.
+    pub fn stage_shards(&self, stage: usize, batch: usize) -> Vec<usize> {
+        self.shards
+            .iter()
+            .filter(|s| s.stage == stage && s.batch == batch)
+            .map(|s| s.id)
+            .collect()
+    }
+
+    /// Shards per stage, in order.
+    pub fn waves(&self) -> Vec<Vec<usize>> {
+        self.stages.iter().map(|s| s.shards.clone()).collect()
+    }
+}

@@ -1,0 +1,158 @@
+//! `urbansem shard …`: a fleet job as engine-neutral shards (plan, run one, merge).
+
+use clap::{Subcommand, ValueEnum};
+use fleet::plan::{plan_localize, JobOptions};
+use std::path::PathBuf;
+
+/// Jobs a plan can hold.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum JobArg {
+    /// Localize a folder of gravity-levelled scans on a tiled map.
+    Localize,
+}
+
+/// Subcommands of `urbansem shard`.
+#[derive(Subcommand)]
+pub enum ShardCommand {
+    /// Split a job into shards and write the plan: for localization, stages of scan batches ×
+    /// tiles (`extract`, `minimum`, `poses`) whose shards run in any order within a stage.
+    Plan {
+        /// The job.
+        #[arg(long, value_enum)]
+        job: JobArg,
+        /// The tiled map's manifest (from `localize index --tile-m`).
+        #[arg(long)]
+        map: PathBuf,
+        /// Folder of inputs (for localization: gravity-levelled scans, every cloud file).
+        #[arg(long)]
+        inputs: PathBuf,
+        /// The plan file to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Folder of the shards' results (default: the plan's name with `.d`).
+        #[arg(long)]
+        results: Option<PathBuf>,
+        /// Scans per shard.
+        #[arg(long, default_value_t = 8)]
+        batch: usize,
+        /// Candidates listed per scan.
+        #[arg(long, default_value_t = 5)]
+        top: usize,
+        /// Cost that ranks the candidates.
+        #[arg(long, value_enum, default_value = "reverse")]
+        cost: super::localize::CostArg,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Run one shard (a no-op when its result is complete) and write its result file.
+    Run {
+        /// The plan.
+        plan: PathBuf,
+        /// The shard's id (0 … shards − 1; e.g. a Slurm array or Kubernetes job index).
+        #[arg(long)]
+        shard: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Combine every shard's result (all must be complete) into the job's answer.
+    Merge {
+        /// The plan.
+        plan: PathBuf,
+        /// The answer to write (JSON; for localization `{"scans": [...]}`, the rows of
+        /// `localize track --json`).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Runs one `urbansem shard` subcommand.
+pub fn run(command: ShardCommand) -> anyhow::Result<()> {
+    match command {
+        ShardCommand::Plan {
+            job: JobArg::Localize,
+            map,
+            inputs,
+            out,
+            results,
+            batch,
+            top,
+            cost,
+            json,
+        } => {
+            if batch == 0 {
+                super::usage!("--batch 0: expected at least 1 scan per shard");
+            }
+            let results = results.unwrap_or_else(|| out.with_extension("d"));
+            let options = JobOptions {
+                top,
+                cost: cost.kind().name().into(),
+                ..JobOptions::default()
+            };
+            let plan = plan_localize(&map, &inputs, &results, batch, options)?;
+            plan.write(&out)?;
+            let summary = serde_json::json!({
+                "plan": out.display().to_string(),
+                "shards": plan.shards.len(),
+                "stages": plan.stages.iter().map(|s| serde_json::json!({"name": s.name, "shards": s.shards.len()})).collect::<Vec<_>>(),
+                "inputs": plan.inputs.len(),
+                "results": plan.out,
+            });
+            if json {
+                return super::print_json(&summary);
+            }
+            println!(
+                "{}: {} shards in {} stages ({}) over {} inputs; results in {}",
+                out.display(),
+                plan.shards.len(),
+                plan.stages.len(),
+                plan.stages
+                    .iter()
+                    .map(|s| format!("{} {}", s.name, s.shards.len()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                plan.inputs.len(),
+                plan.out
+            );
+            Ok(())
+        }
+        ShardCommand::Run { plan, shard, json } => {
+            let outcome = fleet::run::run_shard(&plan, shard, None)?;
+            if json {
+                return super::print_json(&outcome);
+            }
+            println!(
+                "shard {} ({}): {} records, {} bytes, CRC {:#010x}{} in {:.2} s",
+                outcome.shard,
+                outcome.stage,
+                outcome.records,
+                outcome.bytes,
+                outcome.crc32,
+                if outcome.skipped {
+                    " (already complete, not run)"
+                } else {
+                    ""
+                },
+                outcome.seconds
+            );
+            Ok(())
+        }
+        ShardCommand::Merge { plan, out } => {
+            let merged = fleet::merge::merge(&plan)?;
+            let value = serde_json::to_value(&merged)?;
+            geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&value)?)
+                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+            let found = merged.scans.iter().filter(|r| r.lat.is_some()).count();
+            println!(
+                "{}: {} scans ({} with a pose) from {} shards in {:.2} s",
+                out.display(),
+                merged.scans.len(),
+                found,
+                merged.shards,
+                merged.seconds
+            );
+            Ok(())
+        }
+    }
+}
