@@ -2,13 +2,15 @@
 
 A thin Python layer over the urbansem Rust libraries: point clouds and ROS 2 bags as NumPy
 arrays, OpenStreetMap maps, the semantic R-tree map, global localization on building
-outlines, street geometry, Markov logic and pseudo-Boolean optimization. Long calls release
+outlines, street geometry, Markov logic and pseudo-Boolean optimization, and fleet jobs as
+shards on Ray (:mod:`urbansem.distributed`). Long calls release
 the GIL; errors are :class:`UrbansemError` subclasses carrying the Rust message.
 """
 
-from . import localize, mln, pbo, streets
+from . import distributed, localize, mln, pbo, streets
 from ._urbansem import (
     CloudError,
+    FleetError,
     LocalizeError,
     MapError,
     MlnError,
@@ -29,6 +31,7 @@ from .localize import Candidate, LocalizeResult, Localizer, McdScan, Sensor, Tra
 __all__ = [
     "Candidate",
     "CloudError",
+    "FleetError",
     "LocalizeError",
     "LocalizeResult",
     "Localizer",
@@ -46,6 +49,7 @@ __all__ = [
     "__version__",
     "bag_poses",
     "bag_topics",
+    "distributed",
     "localize",
     "mln",
     "pbo",

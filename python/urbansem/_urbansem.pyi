@@ -38,6 +38,9 @@ class LocalizeError(UrbansemError):
 class StreetsError(UrbansemError):
     """Street geometry could not be estimated."""
 
+class FleetError(UrbansemError):
+    """A shard plan could not be made, a shard run or the results merged."""
+
 # --- point clouds -----------------------------------------------------------------------
 
 def read_cloud(
@@ -386,3 +389,24 @@ def streets_estimate(
     cloud_frame: str = "local",
 ) -> Dict[str, Any]:
     """Street offset and width per drivable segment: the GeoJSON ``urbansem streets estimate`` writes."""
+
+# --- fleet shards ------------------------------------------------------------------------
+
+def shard_plan(
+    map: _Path,
+    inputs: _Path,
+    out: _Path,
+    *,
+    results: Optional[_Path] = ...,
+    batch: int = ...,
+    top: int = ...,
+    cost: str = ...,
+) -> Dict[str, Any]: ...
+def shard_run(
+    plan: _Path,
+    shard: int,
+    *,
+    tiles: Optional[Dict[int, Tuple[bytes, bytes]]] = ...,
+    threads: Optional[int] = ...,
+) -> Dict[str, Any]: ...
+def shard_merge(plan: _Path) -> Dict[str, Any]: ...

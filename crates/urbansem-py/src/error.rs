@@ -54,6 +54,13 @@ create_exception!(
     "Street geometry could not be estimated."
 );
 
+create_exception!(
+    urbansem,
+    FleetError,
+    UrbansemError,
+    "A shard plan could not be made, a shard run or the results merged."
+);
+
 /// Adds the exception classes to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
@@ -65,6 +72,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MapError", py.get_type::<MapError>())?;
     m.add("LocalizeError", py.get_type::<LocalizeError>())?;
     m.add("StreetsError", py.get_type::<StreetsError>())?;
+    m.add("FleetError", py.get_type::<FleetError>())?;
     Ok(())
 }
 

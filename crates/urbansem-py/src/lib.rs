@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 mod arrays;
 mod cloud;
 mod error;
+mod fleet;
 mod localize;
 mod mln;
 mod osm;
@@ -29,5 +30,6 @@ fn _urbansem(m: &Bound<'_, PyModule>) -> PyResult<()> {
     srtree::register(m)?;
     localize::register(m)?;
     streets::register(m)?;
+    fleet::register(m)?;
     Ok(())
 }

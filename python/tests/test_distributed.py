@@ -1,0 +1,106 @@
+"""Issue 19: a localization plan run as Ray tasks (a local cluster of 2 CPUs) merges into
+exactly what one process computes with `urbansem shard run` + `shard merge`; a task that
+raises is retried and the merged result is still complete and identical; a re-run is a
+no-op."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict
+
+import pytest
+
+import urbansem
+from urbansem import distributed
+
+
+def ray_or_skip() -> Any:
+    try:
+        import ray
+    except ImportError:
+        if os.environ.get("URBANSEM_CLI_REQUIRED"):
+            pytest.fail("ray is not installed (pip install ray)")
+        pytest.skip("ray is not installed")
+    return ray
+
+
+@pytest.fixture(scope="module")
+def job(tmp_path_factory: pytest.TempPathFactory, data: Path, cli: Any) -> Dict[str, Path]:
+    """A tiled KTH map and three simulated scans."""
+    d = tmp_path_factory.mktemp("fleet")
+    kth = data / "osm" / "kth_campus_stockholm.osm"
+    cli("localize", "index", "--map", kth, "--tile-m", "300", "--out", d / "tiles")
+    cli("sim", "dataset", "--kind", "localization", "--map", kth, "--scans", "3", "--seed", "5",
+        "--out", d / "scans")
+    return {"dir": d, "manifest": d / "tiles" / "manifest.json", "scans": d / "scans"}
+
+
+def plain(value: Any) -> Any:
+    """As JSON holds it (tuples become lists)."""
+    return json.loads(json.dumps(value))
+
+
+def single_process(job: Dict[str, Path], cli: Any) -> Dict[str, Any]:
+    plan = job["dir"] / "one.json"
+    cli("shard", "plan", "--job", "localize", "--map", job["manifest"], "--inputs", job["scans"],
+        "--out", plan, "--batch", "2")
+    shards = len(json.loads(plan.read_text())["shards"])
+    for i in range(shards):
+        cli("shard", "run", plan, "--shard", i)
+    out = job["dir"] / "one-result.json"
+    cli("shard", "merge", plan, "--out", out)
+    return json.loads(out.read_text())
+
+
+@pytest.fixture(scope="module")
+def ray_cluster() -> Any:
+    ray = ray_or_skip()
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+
+
+def test_ray_run_equals_one_process_and_survives_a_failing_task(
+    job: Dict[str, Path], cli: Any, ray_cluster: Any
+) -> None:
+    reference = single_process(job, cli)
+    assert len(reference["scans"]) == 3
+    assert sum(r["lat"] is not None for r in reference["scans"]) >= 2
+
+    plan = job["dir"] / "ray.json"
+    p = distributed.plan_localize(job["manifest"], job["scans"], plan, batch=2)
+    assert [s["name"] for s in p["stages"]] == ["extract", "minimum", "poses"]
+    merged = distributed.run_plan(plan)
+    assert plain(merged["scans"]) == reference["scans"]
+
+    # A task that raises the first time it runs shard `bad` is retried; the merge is complete
+    # and identical.
+    flaky = job["dir"] / "flaky.json"
+    p = distributed.plan_localize(job["manifest"], job["scans"], flaky, batch=2)
+    bad = p["stages"][2]["shards"][0]
+    marker = job["dir"] / "failed-once"
+
+    def fail_once(shard: int) -> None:
+        if shard == bad and not marker.exists():
+            marker.write_text("x")
+            raise RuntimeError(f"injected failure in shard {shard}")
+
+    merged = distributed.run_plan(flaky, before_shard=fail_once)
+    assert marker.exists()
+    assert plain(merged["scans"]) == reference["scans"]
+
+    # Running the plan again: every shard is complete, nothing runs, the same answer.
+    again = distributed.run_shard(flaky, bad)
+    assert again["skipped"] is True
+    assert plain(distributed.merge(flaky)["scans"]) == reference["scans"]
+
+
+def test_shard_errors_are_fleet_errors(tmp_path: Path) -> None:
+    not_a_plan = tmp_path / "plan.json"
+    not_a_plan.write_text("[]")
+    with pytest.raises(urbansem.FleetError, match="shard plan"):
+        distributed.run_shard(not_a_plan, 0)
+    with pytest.raises(urbansem.FleetError, match="plan.json"):
+        distributed.merge(not_a_plan)
