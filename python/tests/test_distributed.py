@@ -1,7 +1,7 @@
 """Issue 19: a localization plan run as Ray tasks (a local cluster of 2 CPUs) merges into
 exactly what one process computes with `urbansem shard run` + `shard merge`; a task that
-raises is retried and the merged result is still complete and identical; a re-run is a
-no-op."""
+raises, or whose worker process dies, is retried and the merged result is still complete
+and identical; a re-run is a no-op."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def ray_cluster() -> Any:
     ray.shutdown()
 
 
-def test_ray_run_equals_one_process_and_survives_a_failing_task(
+def test_ray_run_equals_one_process_and_survives_failing_tasks_and_workers(
     job: Dict[str, Path], cli: Any, ray_cluster: Any
 ) -> None:
     reference = single_process(job, cli)
@@ -89,6 +89,22 @@ def test_ray_run_equals_one_process_and_survives_a_failing_task(
 
     merged = distributed.run_plan(flaky, before_shard=fail_once)
     assert marker.exists()
+    assert plain(merged["scans"]) == reference["scans"]
+
+    # A worker that dies in the middle of a shard (the process exits) is replaced and the
+    # shard retried; the merge is complete and identical.
+    killed = job["dir"] / "killed.json"
+    p = distributed.plan_localize(job["manifest"], job["scans"], killed, batch=2)
+    victim = p["stages"][1]["shards"][1]
+    tombstone = job["dir"] / "killed-once"
+
+    def die_once(shard: int) -> None:
+        if shard == victim and not tombstone.exists():
+            tombstone.write_text("x")
+            os._exit(1)
+
+    merged = distributed.run_plan(killed, before_shard=die_once)
+    assert tombstone.exists()
     assert plain(merged["scans"]) == reference["scans"]
 
     # Running the plan again: every shard is complete, nothing runs, the same answer.
