@@ -71,7 +71,9 @@ def test_ray_run_equals_one_process_and_survives_failing_tasks_and_workers(
 
     plan = job["dir"] / "ray.json"
     p = distributed.plan_localize(job["manifest"], job["scans"], plan, batch=2)
-    assert [s["name"] for s in p["stages"]] == ["extract", "minimum", "poses"]
+    assert [s["name"] for s in p["stages"]] == [
+        "extract", "minimum-0.3m", "minimum-0.5m", "minimum", "poses"
+    ]
     merged = distributed.run_plan(plan)
     assert plain(merged["scans"]) == reference["scans"]
 
@@ -79,7 +81,7 @@ def test_ray_run_equals_one_process_and_survives_failing_tasks_and_workers(
     # and identical.
     flaky = job["dir"] / "flaky.json"
     p = distributed.plan_localize(job["manifest"], job["scans"], flaky, batch=2)
-    bad = p["stages"][2]["shards"][0]
+    bad = p["stages"][4]["shards"][0]
     marker = job["dir"] / "failed-once"
 
     def fail_once(shard: int) -> None:

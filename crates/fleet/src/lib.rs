@@ -9,13 +9,17 @@
 //! Modules in data-flow order: [`plan`] (the plan file and how a job is cut), [`run`] (one
 //! shard, idempotent), [`merge`] (the combined result).
 //!
-//! **Localization over a tiled map** runs in three stages; a shard of a stage reads only
-//! files the shards of earlier stages wrote, so the stages can run as three waves of
-//! independent tasks:
+//! **Localization over a tiled map** runs in stages; a shard of a stage reads only files the
+//! shards of earlier stages wrote, so the stages run as waves of independent tasks:
 //! 1. `extract`: per batch of scans, each scan's wall segments (the map plays no part);
-//! 2. `minimum`: per batch × tile, each scan's least search cost in the tile's core;
-//! 3. `poses`: per batch × tile, each scan's poses within the factor of its least cost over
-//!    all tiles (read from stage 2).
+//! 2. `minimum-0.3m`, `minimum-0.5m`, `minimum`: rounds per batch × tile, each scan's least
+//!    search cost in the tile's core if it is below the round's cap (d_DCM 0.3 m, 0.5 m, none),
+//!    only for the scans no earlier round found a pose for. A shard knows nothing of the other
+//!    tiles; the cap stands in for the best cost found elsewhere, which the single-process search
+//!    uses to prune, so that a tile far from the truth is not searched to its own (poor)
+//!    minimum. Exact: the round whose cap first reaches the least cost over all tiles reports it
+//!    from the tile that has it;
+//! 3. `poses`: per batch × tile, each scan's poses within the factor of that least cost.
 //!
 //! The merge then runs suppression, filters, costs, refinement and ranking per scan on the
 //! union, exactly as [`localize::tiles::localize_tiled`] does in one process (tested equal).

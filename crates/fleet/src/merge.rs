@@ -40,7 +40,13 @@ pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
     };
     let merging = "the merge";
     let extracted: Vec<ExtractRecord> = read_results(plan_path, &plan, plan_crc, merging, &all(0))?;
-    let poses: Vec<PosesRecord> = read_results(plan_path, &plan, plan_crc, merging, &all(2))?;
+    let poses: Vec<PosesRecord> = read_results(
+        plan_path,
+        &plan,
+        plan_crc,
+        merging,
+        &all(plan.stages.len() - 1),
+    )?;
     let mut by_scan: BTreeMap<usize, Vec<TileSearch>> = BTreeMap::new();
     for p in poses {
         by_scan.entry(p.scan).or_default().push(p.search);

@@ -33,6 +33,14 @@ pub struct JobOptions {
     pub sensor: String,
     /// Yaw step of the search, degrees.
     pub yaw_step_deg: f64,
+    /// The caps of the `minimum` rounds, as d_DCM in metres: round k searches each tile only
+    /// below its cap, for the scans no earlier round found a pose for; a last round has no cap.
+    #[serde(default = "default_caps")]
+    pub minimum_caps_m: Vec<f64>,
+}
+
+fn default_caps() -> Vec<f64> {
+    vec![0.3, 0.5]
 }
 
 impl Default for JobOptions {
@@ -42,6 +50,7 @@ impl Default for JobOptions {
             cost: "reverse".into(),
             sensor: "auto".into(),
             yaw_step_deg: LocalizeOptions::default().search.yaw_step_deg,
+            minimum_caps_m: default_caps(),
         }
     }
 }
@@ -73,7 +82,7 @@ impl JobOptions {
 /// A stage of a plan: its name and its shards.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Stage {
-    /// `extract`, `minimum` or `poses`.
+    /// `extract`, `minimum-{cap}m` (capped rounds), `minimum` (the last, uncapped) or `poses`.
     pub name: String,
     /// The ids of its shards.
     pub shards: Vec<usize>,
@@ -141,6 +150,13 @@ pub fn plan_localize(
             "a localization plan needs a tiled map: write one with `urbansem localize index --map M --tile-m 1000 --out DIR` and pass DIR/manifest.json".into(),
         ));
     }
+    let caps = &options.minimum_caps_m;
+    if caps.iter().any(|d| !(d.is_finite() && *d > 0.0)) || caps.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(invalid(
+            manifest,
+            format!("minimum caps {caps:?}: expected increasing positive d_DCM values in metres"),
+        ));
+    }
     let m = Manifest::read(manifest)?;
     let manifest = absolute(manifest)?;
     let mut files: Vec<PathBuf> = std::fs::read_dir(inputs)
@@ -176,7 +192,13 @@ pub fn plan_localize(
     let batches = inputs.len().div_ceil(batch_size);
     let mut shards = Vec::new();
     let mut stages = Vec::new();
-    for (stage, name) in ["extract", "minimum", "poses"].into_iter().enumerate() {
+    let mut names = vec!["extract".to_owned()];
+    for d in &options.minimum_caps_m {
+        names.push(format!("minimum-{d}m"));
+    }
+    names.push("minimum".to_owned());
+    names.push("poses".to_owned());
+    for (stage, name) in names.into_iter().enumerate() {
         let mut ids = Vec::new();
         for batch in 0..batches {
             let scans = [
@@ -199,10 +221,7 @@ pub fn plan_localize(
                 });
             }
         }
-        stages.push(Stage {
-            name: name.into(),
-            shards: ids,
-        });
+        stages.push(Stage { name, shards: ids });
     }
     Ok(Plan {
         format: PLAN_FORMAT.into(),

@@ -11,7 +11,7 @@
 
 use crate::plan::Plan;
 use crate::{invalid, io_err, FleetError, Result};
-use localize::candidates::{limit_of, Cap};
+use localize::candidates::{limit_of, sample_segment_points, Cap};
 use localize::pipeline::{scan_segments, LocalizeOptions, ScanSegments};
 use localize::sensor::{SensorGeometry, SensorReport};
 use localize::tiles::{search_tile, LoadedTile, Manifest, TileSearch};
@@ -246,7 +246,7 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
     };
     let lines: Vec<String> = match stage.as_str() {
         "extract" => extract(&plan, &shard, &options)?,
-        "minimum" | "poses" => {
+        name if name.starts_with("minimum") || name == "poses" => {
             let tile_index = shard.tile.ok_or_else(|| {
                 invalid(
                     plan_path,
@@ -261,43 +261,65 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                 &format!("shard {id}"),
                 &previous,
             )?;
-            let caps: Vec<Cap> = if stage == "minimum" {
-                vec![
-                    Cap {
-                        cost: u64::MAX,
-                        minimum_only: true,
-                    };
-                    extracted.len()
-                ]
-            } else {
-                let ids = plan.stage_shards(1, shard.batch);
-                let minima: Vec<MinimumRecord> =
-                    read_results(plan_path, &plan, plan_crc, &format!("shard {id}"), &ids)?;
-                extracted
+            // The minima of the earlier rounds of this batch (every tile).
+            let minimum_stages: Vec<usize> = (1..shard.stage)
+                .filter(|&k| plan.stages[k].name.starts_with("minimum"))
+                .collect();
+            let mut earlier: Vec<MinimumRecord> = Vec::new();
+            for &k in &minimum_stages {
+                let ids = plan.stage_shards(k, shard.batch);
+                earlier.extend(read_results::<MinimumRecord>(
+                    plan_path,
+                    &plan,
+                    plan_crc,
+                    &format!("shard {id}"),
+                    &ids,
+                )?);
+            }
+            let best = |scan: usize| {
+                earlier
                     .iter()
-                    .map(|e| {
-                        let best = minima
-                            .iter()
-                            .filter(|m| m.scan == e.scan)
-                            .filter_map(|m| m.minimum)
-                            .min();
-                        Cap {
-                            cost: best.map_or(0, |b| limit_of(b, options.search.keep_factor)),
-                            minimum_only: false,
-                        }
-                    })
-                    .collect()
+                    .filter(|m| m.scan == scan)
+                    .filter_map(|m| m.minimum)
+                    .min()
             };
+            let round = minimum_stages.len();
+            let caps: Vec<Option<Cap>> = extracted
+                .iter()
+                .map(|e| {
+                    if stage.starts_with("minimum") {
+                        // Found in an earlier round: nothing left to do; else this round's cap.
+                        if best(e.scan).is_some() {
+                            return None;
+                        }
+                        let cost = match plan.options.minimum_caps_m.get(round) {
+                            Some(&d) => {
+                                let n = sample_segment_points(&e.segments(), manifest.grid_m).len();
+                                (d * manifest.units_per_m * n as f64).floor() as u64
+                            }
+                            None => u64::MAX,
+                        };
+                        Some(Cap {
+                            cost,
+                            minimum_only: true,
+                        })
+                    } else {
+                        best(e.scan).map(|b| Cap {
+                            cost: limit_of(b, options.search.keep_factor),
+                            minimum_only: false,
+                        })
+                    }
+                })
+                .collect();
             let tile = load(tile_index)?;
             let mut lines = Vec::new();
             for (e, cap) in extracted.iter().zip(caps) {
                 let segments = e.segments();
-                let search = if segments.is_empty() || (cap.cost == 0 && !cap.minimum_only) {
-                    None
-                } else {
-                    Some(search_tile(&tile, tile_index, &segments, &options, cap)?)
+                let Some(cap) = cap.filter(|_| !segments.is_empty()) else {
+                    continue;
                 };
-                let line = if stage == "minimum" {
+                let search = Some(search_tile(&tile, tile_index, &segments, &options, cap)?);
+                let line = if stage.starts_with("minimum") {
                     serde_json::to_string(&MinimumRecord {
                         scan: e.scan,
                         tile: tile_index,

@@ -81,11 +81,11 @@ fn sharded_localization_equals_one_process_and_survives_reruns() {
     let plan_path = dir.path().join("plan.json");
     plan.write(&plan_path).unwrap();
     let (plan, _) = Plan::read(&plan_path).unwrap();
-    assert_eq!(plan.stages.len(), 3);
+    assert_eq!(plan.stages.len(), 5);
     let waves = plan.waves();
 
     // A later stage before an earlier one: an error naming the missing shards.
-    let early = waves[2][0];
+    let early = waves[4][0];
     match run_shard(&plan_path, early, None) {
         Err(e @ FleetError::NotReady { .. }) => assert!(e.to_string().contains("extract"), "{e}"),
         other => panic!("expected NotReady, got {other:?}"),
@@ -103,7 +103,7 @@ fn sharded_localization_equals_one_process_and_survives_reruns() {
     assert!(merged.scans.iter().filter(|r| r.lat.is_some()).count() >= 2);
 
     // Re-running a finished shard: a no-op, the file untouched.
-    let id = *waves[2]
+    let id = *waves[4]
         .iter()
         .max_by_key(|&&i| std::fs::metadata(plan.result_path(i)).unwrap().len())
         .unwrap();
