@@ -2,12 +2,13 @@
 //! anywhere (a Ray task, a Slurm array index, a Kubernetes indexed job, a laptop loop) and
 //! writes its checksummed result file, `merge` combines the results.
 //!
-//! Where it sits: on top of the library crates (today `localize` over a tiled map); the
+//! Where it sits: on top of the library crates (`localize` over a tiled map, `streets`); the
 //! binary's `urbansem shard plan|run|merge` and the Python package's
 //! `urbansem.distributed.run_plan` call it.
 //!
 //! Modules in data-flow order: [`plan`] (the plan file and how a job is cut), [`run`] (one
-//! shard, idempotent), [`merge`] (the combined result).
+//! shard, idempotent), [`merge`] (the combined result); [`streets`] holds the street job's
+//! own steps, which `run` and `merge` dispatch to.
 //!
 //! **Localization over a tiled map** runs in stages; a shard of a stage reads only files the
 //! shards of earlier stages wrote, so the stages run as waves of independent tasks:
@@ -23,10 +24,15 @@
 //!
 //! The merge then runs suppression, filters, costs, refinement and ranking per scan on the
 //! union, exactly as [`localize::tiles::localize_tiled`] does in one process (tested equal).
+//!
+//! **Street geometry** runs in one stage, `tiles`: a shard per street tile estimates the
+//! segments the tile owns, reading their whole coupling components as a halo, and the merge
+//! equals `StreetModel::estimate` on the whole map bit for bit (see [`streets`]).
 
 pub mod merge;
 pub mod plan;
 pub mod run;
+pub mod streets;
 
 use std::path::PathBuf;
 use thiserror::Error;
@@ -65,6 +71,24 @@ pub enum FleetError {
     /// The localization library failed.
     #[error(transparent)]
     Localize(#[from] localize::LocalizeError),
+    /// The street geometry library failed (boxed: its errors are large).
+    #[error(transparent)]
+    Streets(Box<::streets::StreetsError>),
+    /// An OSM map could not be loaded (boxed: its errors are large).
+    #[error(transparent)]
+    Osm(Box<geodata::osm::OsmError>),
+}
+
+impl From<::streets::StreetsError> for FleetError {
+    fn from(e: ::streets::StreetsError) -> Self {
+        FleetError::Streets(Box::new(e))
+    }
+}
+
+impl From<geodata::osm::OsmError> for FleetError {
+    fn from(e: geodata::osm::OsmError) -> Self {
+        FleetError::Osm(Box::new(e))
+    }
 }
 
 /// Result of the fleet crate.

@@ -1,8 +1,10 @@
 //! The merge: every shard's result combined into the job's answer — for localization one row
-//! per scan, the rows of `localize track --json`.
+//! per scan, the rows of `localize track --json`; for streets the whole map's estimates and
+//! their GeoJSON ([`merge_job`] takes either).
 
-use crate::plan::Plan;
+use crate::plan::{Job, Plan};
 use crate::run::{plan_manifest, read_results, ExtractRecord, PosesRecord};
+use crate::streets::StreetsMerge;
 use crate::Result;
 use localize::pipeline::Place;
 use localize::report::TrackRow;
@@ -25,10 +27,42 @@ pub struct LocalizeMerge {
     pub seconds: f64,
 }
 
-/// Merges the results of every shard of the plan at `plan_path` (all must be complete).
+/// The merged answer of a plan, by its job.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Merged {
+    /// A localization plan's rows.
+    Localize(LocalizeMerge),
+    /// A streets plan's estimates and GeoJSON.
+    Streets(StreetsMerge),
+}
+
+/// Merges the results of every shard of the plan at `plan_path`, whatever its job.
+pub fn merge_job(plan_path: &Path) -> Result<Merged> {
+    let (plan, plan_crc) = Plan::read(plan_path)?;
+    match plan.job {
+        Job::Localize => merge(plan_path).map(Merged::Localize),
+        Job::Streets => {
+            let ids: Vec<usize> = plan.shards.iter().map(|s| s.id).collect();
+            let parts = read_results(plan_path, &plan, plan_crc, "the merge", &ids)?;
+            crate::streets::merge_parts(plan_path, &plan, parts).map(Merged::Streets)
+        }
+    }
+}
+
+/// Merges the results of every shard of the localization plan at `plan_path` (all must be
+/// complete); [`merge_job`] merges a plan of any job.
 pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
     let t = Instant::now();
     let (plan, plan_crc) = Plan::read(plan_path)?;
+    if plan.job != Job::Localize {
+        return Err(crate::invalid(
+            plan_path,
+            format!(
+                "a {:?} plan, not a localization plan: merge it with `merge_job`",
+                plan.job
+            ),
+        ));
+    }
     let (manifest_path, manifest) = plan_manifest(&plan)?;
     let options = plan.options.localize_options(manifest.grid_m, plan_path)?;
     let all = |stage: usize| -> Vec<usize> {

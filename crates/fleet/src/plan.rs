@@ -20,6 +20,9 @@ pub const PLAN_VERSION: u32 = 1;
 pub enum Job {
     /// Global localization of a folder of gravity-levelled scans on a tiled map.
     Localize,
+    /// Street geometry of a map from one registered cloud, tile by tile (exact; see
+    /// [`crate::streets`]).
+    Streets,
 }
 
 /// The options of a localization job (the rest are the library's defaults).
@@ -126,12 +129,21 @@ pub struct Plan {
     pub stages: Vec<Stage>,
     /// Every shard.
     pub shards: Vec<Shard>,
+    /// The street model (streets job).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<FileRef>,
+    /// Side of the street tiles, metres (streets job).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tile_m: Option<f64>,
+    /// The street tiles with their owned segments, one per shard (streets job).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub street_tiles: Vec<streets::tiles::StreetTile>,
 }
 
 /// Cloud file extensions a localization job takes from its input folder.
 const CLOUD_EXTENSIONS: [&str; 7] = ["ply", "pcd", "las", "laz", "bin", "xyz", "txt"];
 
-fn absolute(path: &Path) -> Result<PathBuf> {
+pub(crate) fn absolute(path: &Path) -> Result<PathBuf> {
     std::fs::canonicalize(path).map_err(|e| io_err(path, e))
 }
 
@@ -234,6 +246,9 @@ pub fn plan_localize(
         out: out_abs.to_string_lossy().into_owned(),
         stages,
         shards,
+        model: None,
+        tile_m: None,
+        street_tiles: Vec::new(),
     })
 }
 

@@ -9,7 +9,7 @@
 //! result) or a complete pair; the merge reads only complete pairs and names any shard
 //! without one.
 
-use crate::plan::Plan;
+use crate::plan::{Job, Plan};
 use crate::{invalid, io_err, FleetError, Result};
 use localize::candidates::{limit_of, sample_segment_points, Cap};
 use localize::pipeline::{scan_segments, LocalizeOptions, ScanSegments};
@@ -236,6 +236,10 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
             seconds: t.elapsed().as_secs_f64(),
         });
     }
+    if plan.job == Job::Streets {
+        let lines = crate::streets::tile_lines(plan_path, &plan, &shard)?;
+        return write_result(&plan, plan_crc, id, stage, &lines, t);
+    }
     let (manifest_path, manifest) = plan_manifest(&plan)?;
     let options = plan.options.localize_options(manifest.grid_m, plan_path)?;
     let load = |k: usize| -> Result<LoadedTile> {
@@ -342,8 +346,21 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
             return Err(invalid(plan_path, format!("unknown stage {other:?}")));
         }
     };
+    write_result(&plan, plan_crc, id, stage, &lines, t)
+}
+
+/// Writes a shard's result lines, then its completion record (both atomically).
+fn write_result(
+    plan: &Plan,
+    plan_crc: u32,
+    id: usize,
+    stage: String,
+    lines: &[String],
+    t: Instant,
+) -> Result<ShardOutcome> {
+    let result = plan.result_path(id);
     let mut text = String::new();
-    for l in &lines {
+    for l in lines {
         text.push_str(l);
         text.push('\n');
     }

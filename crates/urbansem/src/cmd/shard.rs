@@ -1,7 +1,9 @@
 //! `urbansem shard …`: a fleet job as engine-neutral shards (plan, run one, merge).
 
 use clap::{Subcommand, ValueEnum};
+use fleet::merge::Merged;
 use fleet::plan::{plan_localize, JobOptions};
+use fleet::streets::plan_streets;
 use std::path::PathBuf;
 
 /// Jobs a plan can hold.
@@ -9,23 +11,34 @@ use std::path::PathBuf;
 pub enum JobArg {
     /// Localize a folder of gravity-levelled scans on a tiled map.
     Localize,
+    /// Street geometry (offset and width per segment) of a map from one cloud, per street tile.
+    Streets,
 }
 
 /// Subcommands of `urbansem shard`.
 #[derive(Subcommand)]
 pub enum ShardCommand {
     /// Split a job into shards and write the plan: for localization, stages of scan batches ×
-    /// tiles (`extract`, `minimum`, `poses`) whose shards run in any order within a stage.
+    /// tiles (`extract`, `minimum`, `poses`) whose shards run in any order within a stage;
+    /// for streets, one stage (`tiles`) of a shard per street tile.
     Plan {
         /// The job.
         #[arg(long, value_enum)]
         job: JobArg,
-        /// The tiled map's manifest (from `localize index --tile-m`).
+        /// The map: for localization the tiled map's manifest (from `localize index
+        /// --tile-m`), for streets the OSM map (.osm or .osm.pbf).
         #[arg(long)]
         map: PathBuf,
-        /// Folder of inputs (for localization: gravity-levelled scans, every cloud file).
+        /// The inputs: for localization a folder of gravity-levelled scans (every cloud
+        /// file), for streets one registered cloud in the map's local frame.
         #[arg(long)]
         inputs: PathBuf,
+        /// The street model from `urbansem streets train` (streets only).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Side of the street tiles, metres (streets only).
+        #[arg(long, default_value_t = 500.0)]
+        tile_m: f64,
         /// The plan file to write.
         #[arg(long)]
         out: PathBuf,
@@ -60,8 +73,8 @@ pub enum ShardCommand {
     Merge {
         /// The plan.
         plan: PathBuf,
-        /// The answer to write (JSON; for localization `{"scans": [...]}`, the rows of
-        /// `localize track --json`).
+        /// The answer to write (for localization JSON `{"scans": [...]}`, the rows of
+        /// `localize track --json`; for streets the GeoJSON `streets estimate` writes).
         #[arg(long)]
         out: PathBuf,
     },
@@ -71,9 +84,11 @@ pub enum ShardCommand {
 pub fn run(command: ShardCommand) -> anyhow::Result<()> {
     match command {
         ShardCommand::Plan {
-            job: JobArg::Localize,
+            job,
             map,
             inputs,
+            model,
+            tile_m,
             out,
             results,
             batch,
@@ -85,12 +100,27 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                 super::usage!("--batch 0: expected at least 1 scan per shard");
             }
             let results = results.unwrap_or_else(|| out.with_extension("d"));
-            let options = JobOptions {
-                top,
-                cost: cost.kind().name().into(),
-                ..JobOptions::default()
+            let plan = match (job, model) {
+                (JobArg::Localize, _) => {
+                    let options = JobOptions {
+                        top,
+                        cost: cost.kind().name().into(),
+                        ..JobOptions::default()
+                    };
+                    plan_localize(&map, &inputs, &results, batch, options)?
+                }
+                (JobArg::Streets, Some(model)) => {
+                    if !(tile_m.is_finite() && tile_m > 0.0) {
+                        super::usage!("--tile-m {tile_m}: expected a tile side > 0 metres");
+                    }
+                    plan_streets(&map, &inputs, &model, &results, tile_m)?
+                }
+                (JobArg::Streets, None) => {
+                    super::usage!(
+                        "--job streets needs --model MODEL.json (from `urbansem streets train`)"
+                    )
+                }
             };
-            let plan = plan_localize(&map, &inputs, &results, batch, options)?;
             plan.write(&out)?;
             let summary = serde_json::json!({
                 "plan": out.display().to_string(),
@@ -139,7 +169,25 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             Ok(())
         }
         ShardCommand::Merge { plan, out } => {
-            let merged = fleet::merge::merge(&plan)?;
+            let merged = match fleet::merge::merge_job(&plan)? {
+                Merged::Localize(merged) => merged,
+                Merged::Streets(merged) => {
+                    geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&merged.geojson)?)
+                        .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+                    let est = &merged.estimates;
+                    println!(
+                        "{}: {} segments estimated ({} exact inference), {} shorter than a bin, {} without observed bins; from {} shards in {:.2} s",
+                        out.display(),
+                        est.segments.len(),
+                        if est.exact { "tree," } else { "loopy," },
+                        est.too_short,
+                        est.unobserved,
+                        merged.shards,
+                        merged.seconds
+                    );
+                    return Ok(());
+                }
+            };
             let value = serde_json::to_value(&merged)?;
             geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&value)?)
                 .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
