@@ -46,7 +46,8 @@ def run_shard(plan: str, shard: int) -> Dict[str, Any]:
 
 
 def merge(plan: str) -> Dict[str, Any]:
-    """Merges every shard's result of a plan: what ``urbansem shard merge`` writes."""
+    """Merges every shard's result of a plan: what ``urbansem shard merge`` writes (for a
+    localization plan the rows per scan, for a streets plan the GeoJSON)."""
     return _urbansem.shard_merge(str(plan))
 
 

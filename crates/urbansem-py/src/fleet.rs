@@ -101,12 +101,16 @@ fn shard_run<'py>(
     Ok(pythonize::pythonize(py, &outcome)?)
 }
 
-/// Merges every shard's result of a plan (`urbansem shard merge`): `{"scans": [...], ...}`.
+/// Merges every shard's result of a plan (`urbansem shard merge`): for localization
+/// `{"scans": [...], ...}`, for streets the GeoJSON FeatureCollection.
 #[pyfunction]
 #[pyo3(signature = (plan,))]
 fn shard_merge<'py>(py: Python<'py>, plan: PathBuf) -> PyResult<Bound<'py, PyAny>> {
     let merged = py
-        .detach(|| fleet::merge::merge(&plan))
+        .detach(|| fleet::merge::merge_job(&plan))
         .map_err(raise!(FleetError))?;
-    Ok(pythonize::pythonize(py, &merged)?)
+    Ok(match merged {
+        fleet::merge::Merged::Localize(m) => pythonize::pythonize(py, &m)?,
+        fleet::merge::Merged::Streets(m) => pythonize::pythonize(py, &m.geojson)?,
+    })
 }

@@ -54,6 +54,17 @@ pub enum ShardCommand {
         /// Cost that ranks the candidates.
         #[arg(long, value_enum, default_value = "reverse")]
         cost: super::localize::CostArg,
+        /// Localization: sensor profile (`auto`, `terrestrial`, `hdl64`, `vlp16`, `os1-64`,
+        /// `os1-128`).
+        #[arg(long, default_value = "auto")]
+        sensor: String,
+        /// Localization: yaw step of the search, degrees.
+        #[arg(long, default_value_t = 0.5)]
+        yaw_step_deg: f64,
+        /// Localization: the d_DCM caps of the `minimum` rounds, metres, increasing (a last
+        /// round without a cap follows).
+        #[arg(long, value_delimiter = ',', default_value = "0.3,0.5")]
+        minimum_caps_m: Vec<f64>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -94,6 +105,9 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             batch,
             top,
             cost,
+            sensor,
+            yaw_step_deg,
+            minimum_caps_m,
             json,
         } => {
             if batch == 0 {
@@ -102,11 +116,24 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             let results = results.unwrap_or_else(|| out.with_extension("d"));
             let plan = match (job, model) {
                 (JobArg::Localize, _) => {
+                    if !(yaw_step_deg.is_finite() && yaw_step_deg > 0.0) {
+                        super::usage!("--yaw-step-deg {yaw_step_deg}: expected degrees > 0");
+                    }
                     let options = JobOptions {
                         top,
                         cost: cost.kind().name().into(),
-                        ..JobOptions::default()
+                        sensor,
+                        yaw_step_deg,
+                        minimum_caps_m,
                     };
+                    let known = geodata::sensors::SensorKind::ALL.map(|k| k.name());
+                    if options.sensor != "auto" && !known.contains(&options.sensor.as_str()) {
+                        super::usage!(
+                            "--sensor {}: expected auto or one of {}",
+                            options.sensor,
+                            known.join(", ")
+                        );
+                    }
                     plan_localize(&map, &inputs, &results, batch, options)?
                 }
                 (JobArg::Streets, Some(model)) => {
