@@ -322,21 +322,20 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                 let Some(cap) = cap.filter(|_| !segments.is_empty()) else {
                     continue;
                 };
-                let search = Some(search_tile(&tile, tile_index, &segments, &options, cap)?);
+                let search = search_tile(&tile, tile_index, &segments, &options, cap)?;
                 let line = if stage.starts_with("minimum") {
                     serde_json::to_string(&MinimumRecord {
                         scan: e.scan,
                         tile: tile_index,
-                        minimum: search.and_then(|s| s.minimum),
+                        minimum: search.minimum,
                     })
+                } else if search.raw.is_empty() {
+                    continue;
                 } else {
-                    match search {
-                        Some(s) if !s.raw.is_empty() => serde_json::to_string(&PosesRecord {
-                            scan: e.scan,
-                            search: s,
-                        }),
-                        _ => continue,
-                    }
+                    serde_json::to_string(&PosesRecord {
+                        scan: e.scan,
+                        search,
+                    })
                 };
                 lines.push(line.map_err(|e| io_err(&result, e))?);
             }

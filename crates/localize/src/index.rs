@@ -150,10 +150,6 @@ impl PreparedMap {
         let t = Instant::now();
         let dt = DtTensor::build(&edges, chamfer)?;
         let dt_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let pyramid = BoundPyramid::build(&dt, search.levels);
-        let pyr_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
         let domain = match crate::chamfer::bounding_box(&edges) {
             Some((min, max)) => {
                 let m = search.pose_margin_m;
@@ -166,23 +162,10 @@ impl PreparedMap {
                 j1: 0,
             },
         };
-        let feasible = search.feasible_only.then(|| {
-            FeasibleMask::build(map, &dt, domain, search.street_distance_m, pyramid.top())
-        });
-        Ok(PreparedMap {
-            options: PrepOptions::of(chamfer, search),
-            edges,
-            dt,
-            pyramid,
-            domain,
-            feasible,
-            seconds: MapSeconds {
-                edges: edges_s,
-                distance_transform: dt_s,
-                pyramid: pyr_s,
-                feasible: t.elapsed().as_secs_f64(),
-            },
-        })
+        let mut prepared = Self::on_tensor(map, edges, dt, chamfer, search, domain);
+        prepared.seconds.edges = edges_s;
+        prepared.seconds.distance_transform = dt_s;
+        Ok(prepared)
     }
 
     /// Prepares the window `[offset, offset + size)` of the lattice anchored at `origin` for
@@ -202,6 +185,21 @@ impl PreparedMap {
         let t = Instant::now();
         let dt = DtTensor::build_window(&edges, chamfer, origin, offset, size)?;
         let dt_s = t.elapsed().as_secs_f64();
+        let mut prepared = Self::on_tensor(map, edges, dt, chamfer, search, domain);
+        prepared.seconds.distance_transform = dt_s;
+        Ok(prepared)
+    }
+
+    /// The rest of a preparation once the tensor is built: its pyramid and the feasible
+    /// mask of `domain` (the seconds of both recorded, the others zero).
+    fn on_tensor(
+        map: &OsmMap,
+        edges: Vec<Segment>,
+        dt: DtTensor,
+        chamfer: &ChamferOptions,
+        search: &SearchOptions,
+        domain: Domain,
+    ) -> PreparedMap {
         let t = Instant::now();
         let pyramid = BoundPyramid::build(&dt, search.levels);
         let pyr_s = t.elapsed().as_secs_f64();
@@ -209,7 +207,7 @@ impl PreparedMap {
         let feasible = search.feasible_only.then(|| {
             FeasibleMask::build(map, &dt, domain, search.street_distance_m, pyramid.top())
         });
-        Ok(PreparedMap {
+        PreparedMap {
             options: PrepOptions::of(chamfer, search),
             edges,
             dt,
@@ -218,11 +216,11 @@ impl PreparedMap {
             feasible,
             seconds: MapSeconds {
                 edges: 0.0,
-                distance_transform: dt_s,
+                distance_transform: 0.0,
                 pyramid: pyr_s,
                 feasible: t.elapsed().as_secs_f64(),
             },
-        })
+        }
     }
 
     /// Memory of the tensor, pyramid and feasible mask, bytes.

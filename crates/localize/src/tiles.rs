@@ -35,6 +35,7 @@ use crate::index::{PrepOptions, PreparedMap};
 use crate::pipeline::{finish, templates_on, Localization, LocalizeOptions, Place, Scan};
 use crate::visibility::EdgeGrid;
 use crate::{LocalizeError, Result, Segment, WithContext};
+use geodata::osm::geometry::ring_bounds;
 use geodata::osm::index::MapIndex;
 use geodata::osm::model::{Building, StreetSegment};
 use geodata::osm::OsmMap;
@@ -209,13 +210,8 @@ fn crop_box(map: &OsmMap, lo: [f64; 2], hi: [f64; 2]) -> OsmMap {
         .buildings
         .iter()
         .filter(|b| {
-            bounding_box(
-                &b.outer
-                    .iter()
-                    .map(|&p| Segment::new(p, p))
-                    .collect::<Vec<_>>(),
-            )
-            .is_some_and(|(a, c)| meets(a, c))
+            let (a, c) = ring_bounds(&b.outer);
+            meets(a, c)
         })
         .cloned()
         .collect();
