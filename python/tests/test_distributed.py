@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, Dict, List
 
 import pytest
 
@@ -72,16 +72,20 @@ def test_ray_run_equals_one_process_and_survives_failing_tasks_and_workers(
     plan = job["dir"] / "ray.json"
     p = distributed.plan_localize(job["manifest"], job["scans"], plan, batch=2)
     assert [s["name"] for s in p["stages"]] == [
-        "extract", "minimum-0.3m", "minimum-0.5m", "minimum", "poses"
+        "extract", "minimum-0.3m", "minimum-0.5m", "minimum-0.8m", "minimum", "poses"
     ]
-    merged = distributed.run_plan(plan)
+    report: List[Dict[str, Any]] = []
+    merged = distributed.run_plan(plan, report=report)
     assert plain(merged["scans"]) == reference["scans"]
+    # One outcome per shard, from worker processes that say how much memory they used.
+    assert sorted(r["shard"] for r in report) == [s["id"] for s in p["shards"]]
+    assert all(r["max_rss_mb"] > 0 and r["pid"] != os.getpid() for r in report)
 
     # A task that raises the first time it runs shard `bad` is retried; the merge is complete
     # and identical.
     flaky = job["dir"] / "flaky.json"
     p = distributed.plan_localize(job["manifest"], job["scans"], flaky, batch=2)
-    bad = p["stages"][4]["shards"][0]
+    bad = p["stages"][-1]["shards"][0]
     marker = job["dir"] / "failed-once"
 
     def fail_once(shard: int) -> None:

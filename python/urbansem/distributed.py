@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from . import _urbansem
@@ -71,7 +72,22 @@ def _run_task(
         before(shard)
     cpus = ray.get_runtime_context().get_assigned_resources().get("CPU", 1.0)
     tiles = {tile: tile_bytes} if tile is not None and tile_bytes is not None else None
-    return _urbansem.shard_run(plan_path, shard, tiles=tiles, threads=max(1, int(cpus)))
+    outcome = dict(_urbansem.shard_run(plan_path, shard, tiles=tiles, threads=max(1, int(cpus))))
+    outcome["pid"] = os.getpid()
+    outcome["node"] = ray.get_runtime_context().get_node_id()
+    outcome["max_rss_mb"] = _max_rss_mb()
+    return outcome
+
+
+def _max_rss_mb() -> float:
+    """Peak resident memory of this process so far, MB (0 where unknown)."""
+    try:
+        import resource
+    except ImportError:  # not on every platform
+        return 0.0
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # Linux reports KiB, macOS bytes.
+    return kb / (1024.0 * 1024.0) if sys.platform == "darwin" else kb / 1024.0
 
 
 def run_plan(
@@ -81,6 +97,7 @@ def run_plan(
     cpus_per_task: float = 1.0,
     max_retries: int = 3,
     before_shard: Optional[Callable[[int], None]] = None,
+    report: Optional[List[Dict[str, Any]]] = None,
 ) -> Dict[str, Any]:
     """Runs every shard of ``plan`` as Ray tasks, stage by stage, and returns the merge (what
     ``urbansem shard merge`` writes).
@@ -88,7 +105,9 @@ def run_plan(
     ``address``: the Ray cluster to join (``None``: the running one, else a local one);
     ``cpus_per_task``: CPUs each task reserves and uses; ``max_retries``: how often a task
     that raised or lost its worker is tried again; ``before_shard``: called with the shard id
-    at the start of each task (a hook for tests and instrumentation).
+    at the start of each task (a hook for tests and instrumentation); ``report``: a list that
+    receives one dict per shard, as ``urbansem shard run --json`` prints it plus the worker's
+    ``pid``, ``node`` and peak resident memory so far (``max_rss_mb``).
     """
     import ray
 
@@ -119,5 +138,7 @@ def run_plan(
             tile = p["shards"][sid].get("tile")
             data = tile_ref(tile) if tile is not None else None
             pending.append(task.remote(plan_path, sid, tile, data, before_shard))
-        ray.get(pending)
+        outcomes = ray.get(pending)
+        if report is not None:
+            report.extend(outcomes)
     return merge(plan_path)

@@ -43,7 +43,7 @@ pub struct JobOptions {
 }
 
 fn default_caps() -> Vec<f64> {
-    vec![0.3, 0.5]
+    vec![0.3, 0.5, 0.8]
 }
 
 impl Default for JobOptions {

@@ -315,6 +315,15 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                     }
                 })
                 .collect();
+            // A tile no scan of the batch still needs is not read (e.g. a later round once
+            // every scan of the batch has its minimum).
+            let wanted = extracted
+                .iter()
+                .zip(&caps)
+                .any(|(e, cap)| cap.is_some() && !e.segments.is_empty());
+            if !wanted {
+                return write_result(&plan, plan_crc, id, stage, &[], t);
+            }
             let tile = load(tile_index)?;
             let mut lines = Vec::new();
             for (e, cap) in extracted.iter().zip(caps) {

@@ -81,11 +81,13 @@ fn sharded_localization_equals_one_process_and_survives_reruns() {
     let plan_path = dir.path().join("plan.json");
     plan.write(&plan_path).unwrap();
     let (plan, _) = Plan::read(&plan_path).unwrap();
-    assert_eq!(plan.stages.len(), 5);
+    // extract, three capped minimum rounds, the last minimum round, poses.
+    assert_eq!(plan.stages.len(), 6);
     let waves = plan.waves();
+    let poses = &waves[5];
 
     // A later stage before an earlier one: an error naming the missing shards.
-    let early = waves[4][0];
+    let early = poses[0];
     match run_shard(&plan_path, early, None) {
         Err(e @ FleetError::NotReady { .. }) => assert!(e.to_string().contains("extract"), "{e}"),
         other => panic!("expected NotReady, got {other:?}"),
@@ -103,7 +105,7 @@ fn sharded_localization_equals_one_process_and_survives_reruns() {
     assert!(merged.scans.iter().filter(|r| r.lat.is_some()).count() >= 2);
 
     // Re-running a finished shard: a no-op, the file untouched.
-    let id = *waves[4]
+    let id = *poses
         .iter()
         .max_by_key(|&&i| std::fs::metadata(plan.result_path(i)).unwrap().len())
         .unwrap();

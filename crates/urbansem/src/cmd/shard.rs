@@ -63,7 +63,7 @@ pub enum ShardCommand {
         yaw_step_deg: f64,
         /// Localization: the d_DCM caps of the `minimum` rounds, metres, increasing (a last
         /// round without a cap follows).
-        #[arg(long, value_delimiter = ',', default_value = "0.3,0.5")]
+        #[arg(long, value_delimiter = ',', default_value = "0.3,0.5,0.8")]
         minimum_caps_m: Vec<f64>,
         /// Print one JSON object.
         #[arg(long)]
