@@ -72,7 +72,7 @@ def test_ray_run_equals_one_process_and_survives_failing_tasks_and_workers(
     plan = job["dir"] / "ray.json"
     p = distributed.plan_localize(job["manifest"], job["scans"], plan, batch=2)
     assert [s["name"] for s in p["stages"]] == [
-        "extract", "minimum-0.3m", "minimum-0.5m", "minimum-0.8m", "minimum", "poses"
+        "extract", "minimum-0.4m", "minimum-0.55m", "minimum-0.8m", "minimum", "poses"
     ]
     report: List[Dict[str, Any]] = []
     merged = distributed.run_plan(plan, report=report)

@@ -7,8 +7,8 @@
 //! `urbansem.distributed.run_plan` call it.
 //!
 //! Modules in data-flow order: [`plan`] (the plan file and how a job is cut), [`run`] (one
-//! shard, idempotent), [`merge`] (the combined result); [`streets`] holds the street job's
-//! own steps, which `run` and `merge` dispatch to.
+//! shard, idempotent), [`merge`] (the combined result); [`streets`] and [`map`] hold the
+//! street and map jobs' own steps, which `run` and `merge` dispatch to.
 //!
 //! **Localization over a tiled map** runs in stages; a shard of a stage reads only files the
 //! shards of earlier stages wrote, so the stages run as waves of independent tasks:
@@ -28,7 +28,12 @@
 //! **Street geometry** runs in one stage, `tiles`: a shard per street tile estimates the
 //! segments the tile owns, reading their whole coupling components as a halo, and the merge
 //! equals `StreetModel::estimate` on the whole map bit for bit (see [`streets`]).
+//!
+//! **Map building** runs in one stage, `map-tiles`: a shard per tile builds the semantic map
+//! (`.srt`) of its core and of the objects it owns from the labelled clouds; the cores
+//! partition the whole map's cells and the owned objects are the whole map's (see [`map`]).
 
+pub mod map;
 pub mod merge;
 pub mod plan;
 pub mod run;

@@ -34,6 +34,8 @@ pub enum Merged {
     Localize(LocalizeMerge),
     /// A streets plan's estimates and GeoJSON.
     Streets(StreetsMerge),
+    /// A map plan's tiles and GeoJSON.
+    Map(crate::map::MapMerge),
 }
 
 /// Merges the results of every shard of the plan at `plan_path`, whatever its job.
@@ -45,6 +47,11 @@ pub fn merge_job(plan_path: &Path) -> Result<Merged> {
             let ids: Vec<usize> = plan.shards.iter().map(|s| s.id).collect();
             let parts = read_results(plan_path, &plan, plan_crc, "the merge", &ids)?;
             crate::streets::merge_parts(plan_path, &plan, parts).map(Merged::Streets)
+        }
+        Job::Map => {
+            let ids: Vec<usize> = plan.shards.iter().map(|s| s.id).collect();
+            let parts = read_results(plan_path, &plan, plan_crc, "the merge", &ids)?;
+            crate::map::merge_parts(plan_path, &plan, parts).map(Merged::Map)
         }
     }
 }

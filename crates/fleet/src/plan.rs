@@ -23,6 +23,8 @@ pub enum Job {
     /// Street geometry of a map from one registered cloud, tile by tile (exact; see
     /// [`crate::streets`]).
     Streets,
+    /// Semantic maps of labelled, registered clouds, tile by tile (see [`crate::map`]).
+    Map,
 }
 
 /// The options of a localization job (the rest are the library's defaults).
@@ -43,7 +45,7 @@ pub struct JobOptions {
 }
 
 fn default_caps() -> Vec<f64> {
-    vec![0.3, 0.5, 0.8]
+    vec![0.4, 0.55, 0.8]
 }
 
 impl Default for JobOptions {
@@ -138,6 +140,12 @@ pub struct Plan {
     /// The street tiles with their owned segments, one per shard (streets job).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub street_tiles: Vec<streets::tiles::StreetTile>,
+    /// The map-building options (map job).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map_job: Option<crate::map::MapJob>,
+    /// The map tiles, one per shard (map job).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub map_tiles: Vec<crate::map::MapTile>,
 }
 
 /// Cloud file extensions a localization job takes from its input folder.
@@ -249,6 +257,8 @@ pub fn plan_localize(
         model: None,
         tile_m: None,
         street_tiles: Vec::new(),
+        map_job: None,
+        map_tiles: Vec::new(),
     })
 }
 

@@ -10,6 +10,7 @@
 //! without one.
 
 use crate::plan::{Job, Plan};
+use rayon::prelude::*;
 use crate::{invalid, io_err, FleetError, Result};
 use localize::candidates::{limit_of, sample_segment_points, Cap};
 use localize::pipeline::{scan_segments, LocalizeOptions, ScanSegments};
@@ -240,6 +241,10 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
         let lines = crate::streets::tile_lines(plan_path, &plan, &shard)?;
         return write_result(&plan, plan_crc, id, stage, &lines, t);
     }
+    if plan.job == Job::Map {
+        let lines = crate::map::tile_lines(plan_path, &plan, &shard)?;
+        return write_result(&plan, plan_crc, id, stage, &lines, t);
+    }
     let (manifest_path, manifest) = plan_manifest(&plan)?;
     let options = plan.options.localize_options(manifest.grid_m, plan_path)?;
     let load = |k: usize| -> Result<LoadedTile> {
@@ -325,29 +330,36 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                 return write_result(&plan, plan_crc, id, stage, &[], t);
             }
             let tile = load(tile_index)?;
-            let mut lines = Vec::new();
-            for (e, cap) in extracted.iter().zip(caps) {
-                let segments = e.segments();
-                let Some(cap) = cap.filter(|_| !segments.is_empty()) else {
-                    continue;
-                };
-                let search = search_tile(&tile, tile_index, &segments, &options, cap)?;
-                let line = if stage.starts_with("minimum") {
-                    serde_json::to_string(&MinimumRecord {
-                        scan: e.scan,
-                        tile: tile_index,
-                        minimum: search.minimum,
-                    })
-                } else if search.raw.is_empty() {
-                    continue;
-                } else {
-                    serde_json::to_string(&PosesRecord {
-                        scan: e.scan,
-                        search,
-                    })
-                };
-                lines.push(line.map_err(|e| io_err(&result, e))?);
-            }
+            // The scans in parallel (each search also splits its own work): a capped
+            // search alone leaves cores idle between its best-first batches.
+            let minimum_stage = stage.starts_with("minimum");
+            let found: Vec<Option<String>> = extracted
+                .par_iter()
+                .zip(caps)
+                .map(|(e, cap)| -> Result<Option<String>> {
+                    let segments = e.segments();
+                    let Some(cap) = cap.filter(|_| !segments.is_empty()) else {
+                        return Ok(None);
+                    };
+                    let search = search_tile(&tile, tile_index, &segments, &options, cap)?;
+                    let line = if minimum_stage {
+                        serde_json::to_string(&MinimumRecord {
+                            scan: e.scan,
+                            tile: tile_index,
+                            minimum: search.minimum,
+                        })
+                    } else if search.raw.is_empty() {
+                        return Ok(None);
+                    } else {
+                        serde_json::to_string(&PosesRecord {
+                            scan: e.scan,
+                            search,
+                        })
+                    };
+                    line.map(Some).map_err(|e| io_err(&result, e))
+                })
+                .collect::<Result<_>>()?;
+            let lines: Vec<String> = found.into_iter().flatten().collect();
             lines
         }
         other => {

@@ -90,11 +90,13 @@ pub fn plan_streets(
         model: Some(model_ref),
         tile_m: Some(tile_m),
         street_tiles,
+        map_job: None,
+        map_tiles: Vec::new(),
     })
 }
 
 /// The bytes of a file the plan names, checked against the size and CRC-32 it recorded.
-fn checked_bytes(file: &FileRef, what: &str) -> Result<(PathBuf, Vec<u8>)> {
+pub(crate) fn checked_bytes(file: &FileRef, what: &str) -> Result<(PathBuf, Vec<u8>)> {
     let path = PathBuf::from(&file.path);
     let bytes = std::fs::read(&path).map_err(|e| io_err(&path, e))?;
     if bytes.len() as u64 != file.bytes || crc32fast::hash(&bytes) != file.crc32 {

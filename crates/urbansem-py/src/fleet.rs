@@ -112,5 +112,6 @@ fn shard_merge<'py>(py: Python<'py>, plan: PathBuf) -> PyResult<Bound<'py, PyAny
     Ok(match merged {
         fleet::merge::Merged::Localize(m) => pythonize::pythonize(py, &m)?,
         fleet::merge::Merged::Streets(m) => pythonize::pythonize(py, &m.geojson)?,
+        fleet::merge::Merged::Map(m) => pythonize::pythonize(py, &m.geojson)?,
     })
 }

@@ -13,6 +13,8 @@ pub enum JobArg {
     Localize,
     /// Street geometry (offset and width per segment) of a map from one cloud, per street tile.
     Streets,
+    /// Semantic maps (`.srt`) of labelled clouds in the map's local frame, per map tile.
+    Map,
 }
 
 /// Subcommands of `urbansem shard`.
@@ -20,25 +22,32 @@ pub enum JobArg {
 pub enum ShardCommand {
     /// Split a job into shards and write the plan: for localization, stages of scan batches ×
     /// tiles (`extract`, `minimum`, `poses`) whose shards run in any order within a stage;
-    /// for streets, one stage (`tiles`) of a shard per street tile.
+    /// for streets, one stage (`tiles`) of a shard per street tile; for maps, one stage
+    /// (`map-tiles`) of a shard per map tile.
     Plan {
         /// The job.
         #[arg(long, value_enum)]
         job: JobArg,
         /// The map: for localization the tiled map's manifest (from `localize index
-        /// --tile-m`), for streets the OSM map (.osm or .osm.pbf).
+        /// --tile-m`), for streets and maps the OSM map (.osm or .osm.pbf) whose local frame
+        /// the clouds are in.
         #[arg(long)]
         map: PathBuf,
         /// The inputs: for localization a folder of gravity-levelled scans (every cloud
-        /// file), for streets one registered cloud in the map's local frame.
+        /// file), for streets one registered cloud in the map's local frame, for maps a folder
+        /// of labelled clouds (or one) in the map's local frame.
         #[arg(long)]
         inputs: PathBuf,
         /// The street model from `urbansem streets train` (streets only).
         #[arg(long)]
         model: Option<PathBuf>,
-        /// Side of the street tiles, metres (streets only).
-        #[arg(long, default_value_t = 500.0)]
-        tile_m: f64,
+        /// Side of the tiles, metres (streets: default 500; maps: default 100, a whole number
+        /// of cells).
+        #[arg(long)]
+        tile_m: Option<f64>,
+        /// Cell size of the maps, metres (maps only).
+        #[arg(long, default_value_t = 0.1)]
+        resolution: f64,
         /// The plan file to write.
         #[arg(long)]
         out: PathBuf,
@@ -63,7 +72,7 @@ pub enum ShardCommand {
         yaw_step_deg: f64,
         /// Localization: the d_DCM caps of the `minimum` rounds, metres, increasing (a last
         /// round without a cap follows).
-        #[arg(long, value_delimiter = ',', default_value = "0.3,0.5,0.8")]
+        #[arg(long, value_delimiter = ',', default_value = "0.4,0.55,0.8")]
         minimum_caps_m: Vec<f64>,
         /// Print one JSON object.
         #[arg(long)]
@@ -100,6 +109,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             inputs,
             model,
             tile_m,
+            resolution,
             out,
             results,
             batch,
@@ -137,6 +147,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                     plan_localize(&map, &inputs, &results, batch, options)?
                 }
                 (JobArg::Streets, Some(model)) => {
+                    let tile_m = tile_m.unwrap_or(500.0);
                     if !(tile_m.is_finite() && tile_m > 0.0) {
                         super::usage!("--tile-m {tile_m}: expected a tile side > 0 metres");
                     }
@@ -146,6 +157,17 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                     super::usage!(
                         "--job streets needs --model MODEL.json (from `urbansem streets train`)"
                     )
+                }
+                (JobArg::Map, _) => {
+                    let tile_m = tile_m.unwrap_or(100.0);
+                    if !(resolution.is_finite() && resolution > 0.0) {
+                        super::usage!("--resolution {resolution}: expected a cell size > 0 metres");
+                    }
+                    let cells = tile_m / resolution;
+                    if !(cells >= 1.0 && (cells - cells.round()).abs() < 1e-6) {
+                        super::usage!("--tile-m {tile_m}: expected a whole number (≥ 1) of {resolution} m cells");
+                    }
+                    fleet::map::plan_map(&map, &inputs, &results, tile_m, resolution)?
                 }
             };
             plan.write(&out)?;
@@ -198,6 +220,22 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
         ShardCommand::Merge { plan, out } => {
             let merged = match fleet::merge::merge_job(&plan)? {
                 Merged::Localize(merged) => merged,
+                Merged::Map(merged) => {
+                    geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&merged.geojson)?)
+                        .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+                    let cells: usize = merged.tiles.iter().map(|t| t.core_cells).sum();
+                    let objects: usize = merged.tiles.iter().map(|t| t.objects.len()).sum();
+                    println!(
+                        "{}: {} tiles ({} cells, {} objects; the tiles' maps are beside the shard results) from {} shards in {:.2} s",
+                        out.display(),
+                        merged.tiles.len(),
+                        cells,
+                        objects,
+                        merged.shards,
+                        merged.seconds
+                    );
+                    return Ok(());
+                }
                 Merged::Streets(merged) => {
                     geodata::fsio::write_atomic(&out, serde_json::to_vec_pretty(&merged.geojson)?)
                         .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
