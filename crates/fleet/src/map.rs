@@ -129,7 +129,12 @@ fn in_box(k: [i32; 3], b: [i32; 4]) -> bool {
 }
 
 fn union(a: [i32; 4], b: [i32; 4]) -> [i32; 4] {
-    [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+    [
+        a[0].min(b[0]),
+        a[1].min(b[1]),
+        a[2].max(b[2]),
+        a[3].max(b[3]),
+    ]
 }
 
 fn overlaps(a: [i32; 4], b: [i32; 4]) -> bool {
@@ -235,7 +240,11 @@ pub fn plan_map(
     // Each object to the tile holding the centre of its box.
     let mut owned: BTreeMap<[i32; 2], Vec<u32>> = BTreeMap::new();
     for (&id, b) in &object_boxes {
-        let centre = [(b[0] + b[2] - 1).div_euclid(2), (b[1] + b[3] - 1).div_euclid(2), 0];
+        let centre = [
+            (b[0] + b[2] - 1).div_euclid(2),
+            (b[1] + b[3] - 1).div_euclid(2),
+            0,
+        ];
         let g = tile_of(centre);
         tiles.insert(g);
         owned.entry(g).or_default().push(id);
@@ -306,7 +315,11 @@ fn srtree_err(path: &Path) -> impl Fn(srtree::SrtreeError) -> FleetError + '_ {
 }
 
 /// The plan's map-job options and tile `k`.
-fn job_tile<'p>(plan_path: &Path, plan: &'p Plan, k: Option<usize>) -> Result<(&'p MapJob, &'p MapTile)> {
+fn job_tile<'p>(
+    plan_path: &Path,
+    plan: &'p Plan,
+    k: Option<usize>,
+) -> Result<(&'p MapJob, &'p MapTile)> {
     let job = plan
         .map_job
         .as_ref()
@@ -339,17 +352,19 @@ pub fn tile_lines(plan_path: &Path, plan: &Plan, shard: &Shard) -> Result<Vec<St
         let file = plan.inputs.get(i).ok_or_else(|| {
             invalid(
                 plan_path,
-                format!("tile {k} names input {i}; the plan lists {}", plan.inputs.len()),
+                format!(
+                    "tile {k} names input {i}; the plan lists {}",
+                    plan.inputs.len()
+                ),
             )
         })?;
         let (path, _) = crate::streets::checked_bytes(file, "cloud")?;
         let cloud = read_cloud(&path).map_err(|e| io_err(&path, e))?;
         let window = tile.window;
         let kept = cloud.filter(|j| {
-            cloud
-                .positions
-                .get(j)
-                .is_some_and(|p| p.iter().all(|v| v.is_finite()) && in_box(cells.key_of(*p), window))
+            cloud.positions.get(j).is_some_and(|p| {
+                p.iter().all(|v| v.is_finite()) && in_box(cells.key_of(*p), window)
+            })
         });
         clouds.push(kept);
     }

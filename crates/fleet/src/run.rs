@@ -10,13 +10,13 @@
 //! without one.
 
 use crate::plan::{Job, Plan};
-use rayon::prelude::*;
 use crate::{invalid, io_err, FleetError, Result};
 use localize::candidates::{limit_of, sample_segment_points, Cap};
 use localize::pipeline::{scan_segments, LocalizeOptions, ScanSegments};
 use localize::sensor::{SensorGeometry, SensorReport};
 use localize::tiles::{search_tile, LoadedTile, Manifest, TileSearch};
 use localize::Segment;
+use rayon::prelude::*;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

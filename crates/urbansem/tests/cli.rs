@@ -764,3 +764,87 @@ fn tiled_map_localizes_as_the_whole_map() {
     );
     assert_eq!(some["candidates"][0], whole["candidates"][0]);
 }
+
+/// Issue 19: `shard plan --job map` → `shard run` for every shard → `shard merge` builds the
+/// same cells and objects as `map build` on the whole cloud, and writes a GeoJSON with a
+/// feature per tile and per object; a tile side that is not a whole number of cells exits 2.
+#[test]
+fn shard_map_job_builds_what_map_build_builds() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("sim");
+    sim_dataset("streets", &["--scans", "4"], &data);
+    let inputs = dir.path().join("clouds");
+    std::fs::create_dir_all(&inputs).unwrap();
+    std::fs::copy(data.join("cloud.ply"), inputs.join("cloud.ply")).unwrap();
+    let whole: serde_json::Value = serde_json::from_slice(&stdout_of(
+        urbansem()
+            .args(["map", "build", "--json", "--cloud"])
+            .arg(inputs.join("cloud.ply"))
+            .arg("--out")
+            .arg(dir.path().join("whole.srt")),
+    ))
+    .unwrap();
+    let plan = dir.path().join("plan.json");
+    let map = data.join("city.osm");
+    let v: serde_json::Value = serde_json::from_slice(&stdout_of(
+        urbansem()
+            .args([
+                "shard", "plan", "--job", "map", "--tile-m", "40", "--json", "--map",
+            ])
+            .arg(&map)
+            .arg("--inputs")
+            .arg(&inputs)
+            .arg("--out")
+            .arg(&plan),
+    ))
+    .unwrap();
+    let shards = v["shards"].as_u64().unwrap();
+    assert!(shards >= 4, "{v}");
+    for i in 0..shards {
+        stdout_of(
+            urbansem()
+                .args(["shard", "run"])
+                .arg(&plan)
+                .args(["--shard", &i.to_string()]),
+        );
+    }
+    let out = dir.path().join("map.geojson");
+    stdout_of(
+        urbansem()
+            .args(["shard", "merge"])
+            .arg(&plan)
+            .arg("--out")
+            .arg(&out),
+    );
+    let g: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let features = g["features"].as_array().unwrap();
+    let of = |kind: &str| {
+        features
+            .iter()
+            .filter(|f| f["properties"]["kind"] == kind)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(of("tile").len() as u64, shards);
+    assert_eq!(
+        of("object").len() as u64,
+        whole["objects"].as_u64().unwrap()
+    );
+    let cells: u64 = of("tile")
+        .iter()
+        .map(|f| f["properties"]["cells"].as_u64().unwrap())
+        .sum();
+    assert_eq!(cells, whole["cells"].as_u64().unwrap());
+
+    let bad = urbansem()
+        .args([
+            "shard", "plan", "--job", "map", "--tile-m", "40.05", "--map",
+        ])
+        .arg(&map)
+        .arg("--inputs")
+        .arg(&inputs)
+        .arg("--out")
+        .arg(dir.path().join("bad.json"))
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+}
