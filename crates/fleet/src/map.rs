@@ -16,7 +16,9 @@
 //! objects are the whole map's objects (tested). The merge ([`merge_parts`]) writes a WGS84
 //! GeoJSON: each object's box footprint and each tile's core with its map file.
 
-use crate::plan::{absolute, Job, JobOptions, Plan, Shard, Stage, PLAN_FORMAT, PLAN_VERSION};
+use crate::plan::{
+    absolute, Job, JobOptions, MapJob, MapTile, Plan, Shard, Stage, PLAN_FORMAT, PLAN_VERSION,
+};
 use crate::{invalid, io_err, FleetError, Result};
 use geodata::cloud::{read_cloud, PointCloud};
 use geodata::osm::OsmMap;
@@ -34,33 +36,6 @@ pub const STAGE: &str = "map-tiles";
 
 /// Cloud file extensions the map job takes from its input folder.
 const CLOUD_EXTENSIONS: [&str; 6] = ["ply", "pcd", "las", "laz", "bin", "xyz"];
-
-/// The options of a map-building job.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MapJob {
-    /// Cell size of the maps, metres.
-    pub resolution_m: f64,
-    /// Side of the tiles, metres (a whole number of cells).
-    pub tile_m: f64,
-    /// Side of the tiles, cells.
-    pub tile_cells: i32,
-}
-
-/// One tile of a map-building plan: its core and window as half-open cell-key ranges
-/// `[x0, y0, x1, y1]`, its owned objects and the inputs touching its window.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MapTile {
-    /// The tile's grid position (core = `[x, x + 1) × [y, y + 1)` tile sides).
-    pub grid: [i32; 2],
-    /// The core's cell keys.
-    pub core: [i32; 4],
-    /// The cell keys the shard builds: the core and the boxes of its owned objects.
-    pub window: [i32; 4],
-    /// The instance ids of the objects the tile owns.
-    pub objects: Vec<u32>,
-    /// The inputs (positions in the plan) with a point in the window.
-    pub inputs: Vec<usize>,
-}
 
 /// One owned object of a tile's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -142,10 +142,37 @@ pub struct Plan {
     pub street_tiles: Vec<streets::tiles::StreetTile>,
     /// The map-building options (map job).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub map_job: Option<crate::map::MapJob>,
+    pub map_job: Option<MapJob>,
     /// The map tiles, one per shard (map job).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub map_tiles: Vec<crate::map::MapTile>,
+    pub map_tiles: Vec<MapTile>,
+}
+
+/// The options of a map-building job ([`crate::map`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapJob {
+    /// Cell size of the maps, metres.
+    pub resolution_m: f64,
+    /// Side of the tiles, metres (a whole number of cells).
+    pub tile_m: f64,
+    /// Side of the tiles, cells.
+    pub tile_cells: i32,
+}
+
+/// One tile of a map-building plan: its core and window as half-open cell-key ranges
+/// `[x0, y0, x1, y1]`, its owned objects and the inputs touching its window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapTile {
+    /// The tile's grid position (core = `[x, x + 1) × [y, y + 1)` tile sides).
+    pub grid: [i32; 2],
+    /// The core's cell keys.
+    pub core: [i32; 4],
+    /// The cell keys the shard builds: the core and the boxes of its owned objects.
+    pub window: [i32; 4],
+    /// The instance ids of the objects the tile owns.
+    pub objects: Vec<u32>,
+    /// The inputs (positions in the plan) with a point in the window.
+    pub inputs: Vec<usize>,
 }
 
 /// Cloud file extensions a localization job takes from its input folder.
