@@ -414,50 +414,60 @@ fn extract(
     shard: &crate::plan::Shard,
     options: &LocalizeOptions,
 ) -> Result<Vec<String>> {
-    let mut lines = Vec::new();
-    for k in shard.scans[0]..shard.scans[1] {
-        let input = &plan.inputs[k];
-        let path = PathBuf::from(&input.path);
-        let bytes = std::fs::metadata(&path)
-            .map_err(|e| io_err(&path, e))?
-            .len();
-        if bytes != input.bytes {
-            return Err(invalid(
-                &path,
-                format!(
-                    "{bytes} bytes, the plan recorded {}: the scan changed since the plan was made",
-                    input.bytes
-                ),
-            ));
-        }
-        let cloud = geodata::cloud::read_cloud(&path).map_err(|e| io_err(&path, e))?;
-        let e = scan_segments(options, &cloud.positions)?;
-        let record = ExtractRecord {
-            scan: k,
-            name: path
-                .file_name()
-                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
-            points: cloud.len(),
-            segments: e
-                .segments
-                .iter()
-                .map(|s| [s.a[0], s.a[1], s.b[0], s.b[1]])
-                .collect(),
-            sensor: e.sensor.map(|s| SensorRecord {
-                profile: geodata::sensors::SensorKind::ALL
-                    .iter()
-                    .position(|k| k.name() == s.profile)
-                    .unwrap_or(0),
-                detected: s.detected,
-                mount_height_m: s.geometry.mount_height_m,
-                vfov_deg: s.geometry.vfov_deg,
-                beams: s.geometry.beams,
-            }),
-            clearance_m: e.clearance_m,
-            vertical_cells: e.vertical_cells,
-            min_length_m: e.min_length_m,
-        };
-        lines.push(serde_json::to_string(&record).map_err(|e| io_err(&path, e))?);
+    // The scans in parallel; the lines stay in scan order.
+    (shard.scans[0]..shard.scans[1])
+        .into_par_iter()
+        .map(|k| extract_one(plan, k, options))
+        .collect()
+}
+
+/// One scan's [`ExtractRecord`] as a JSON line.
+fn extract_one(plan: &Plan, k: usize, options: &LocalizeOptions) -> Result<String> {
+    let input = plan.inputs.get(k).ok_or_else(|| {
+        invalid(
+            Path::new(&plan.out),
+            format!("scan {k} of a shard; the plan lists {}", plan.inputs.len()),
+        )
+    })?;
+    let path = PathBuf::from(&input.path);
+    let bytes = std::fs::metadata(&path)
+        .map_err(|e| io_err(&path, e))?
+        .len();
+    if bytes != input.bytes {
+        return Err(invalid(
+            &path,
+            format!(
+                "{bytes} bytes, the plan recorded {}: the scan changed since the plan was made",
+                input.bytes
+            ),
+        ));
     }
-    Ok(lines)
+    let cloud = geodata::cloud::read_cloud(&path).map_err(|e| io_err(&path, e))?;
+    let e = scan_segments(options, &cloud.positions)?;
+    let record = ExtractRecord {
+        scan: k,
+        name: path
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+        points: cloud.len(),
+        segments: e
+            .segments
+            .iter()
+            .map(|s| [s.a[0], s.a[1], s.b[0], s.b[1]])
+            .collect(),
+        sensor: e.sensor.map(|s| SensorRecord {
+            profile: geodata::sensors::SensorKind::ALL
+                .iter()
+                .position(|k| k.name() == s.profile)
+                .unwrap_or(0),
+            detected: s.detected,
+            mount_height_m: s.geometry.mount_height_m,
+            vfov_deg: s.geometry.vfov_deg,
+            beams: s.geometry.beams,
+        }),
+        clearance_m: e.clearance_m,
+        vertical_cells: e.vertical_cells,
+        min_length_m: e.min_length_m,
+    };
+    serde_json::to_string(&record).map_err(|e| io_err(&path, e))
 }

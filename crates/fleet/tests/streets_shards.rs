@@ -10,137 +10,22 @@ use fleet::plan::{Job, Plan};
 use fleet::run::run_shard;
 use fleet::streets::plan_streets;
 use fleet::FleetError;
-use geodata::cloud::{read_cloud, write_cloud, PointCloud};
+use geodata::cloud::{read_cloud, write_cloud};
 use geodata::osm::OsmMap;
 use std::collections::BTreeSet;
-use streets::corridor::CorridorOptions;
-use streets::dataset::SegmentTruth;
-use streets::model::{
-    network_edges, BinClassifier, ClassifierOptions, GeometryOptions, StreetModel, Target,
-};
-use streets::potentials::GeometryPrior;
-
-const LAT0: f64 = 48.0;
-const LON0: f64 = 11.0;
-
-fn node(id: i64, x: f64, y: f64) -> String {
-    let lat = LAT0 + y / 111_320.0;
-    let lon = LON0 + x / (111_320.0 * LAT0.to_radians().cos());
-    format!(r#"<node id="{id}" lat="{lat:.8}" lon="{lon:.8}"/>"#)
-}
-
-/// A 4 × 4 lattice of residential streets 50 m apart (one way per row and per column), a
-/// footway across it and a spur leaving it to the east — the lattice of
-/// `crates/streets/tests/tiles.rs`.
-fn lattice_xml() -> String {
-    let mut s = String::from(r#"<?xml version="1.0"?><osm version="0.6">"#);
-    let id = |i: i64, j: i64| 1 + i + 4 * j;
-    for j in 0..4 {
-        for i in 0..4 {
-            s += &node(id(i, j), 50.0 * i as f64, 50.0 * j as f64 + 3.0 * i as f64);
-        }
-    }
-    s += &node(100, 230.0, 60.0);
-    s += &node(101, 300.0, 70.0);
-    let way = |wid: i64, nodes: &[i64], highway: &str| {
-        let refs: String = nodes
-            .iter()
-            .map(|n| format!(r#"<nd ref="{n}"/>"#))
-            .collect();
-        format!(r#"<way id="{wid}">{refs}<tag k="highway" v="{highway}"/></way>"#)
-    };
-    for j in 0..4 {
-        let row: Vec<i64> = (0..4).map(|i| id(i, j)).collect();
-        s += &way(200 + j, &row, "residential");
-        let col: Vec<i64> = (0..4).map(|i| id(j, i)).collect();
-        s += &way(300 + j, &col, "residential");
-    }
-    s += &way(400, &[id(0, 0), id(1, 1), id(2, 2)], "footway");
-    s += &way(401, &[id(3, 1), 100, 101], "tertiary");
-    s += "</osm>";
-    s
-}
-
-/// The lattice's synthetic ground cloud (widths 5–8 m, offsets −0.5–0.5 m), the far end of
-/// the spur not covered, with its truth.
-fn lattice_cloud(map: &OsmMap) -> (PointCloud, Vec<SegmentTruth>) {
-    let truth: Vec<SegmentTruth> = map
-        .streets
-        .segments
-        .iter()
-        .enumerate()
-        .map(|(i, s)| SegmentTruth {
-            segment: i,
-            offset_m: 0.1 * (i % 11) as f64 - 0.5,
-            width_m: 5.0 + 0.4 * (i % 8) as f64,
-            sidewalk_m: 2.0,
-            outer_offset_m: None,
-            outer_observed: true,
-            drivable: geodata::osm::tags::is_drivable(&s.highway),
-            observed: true,
-            points: 1000,
-        })
-        .collect();
-    let full = streets::synthetic::ground_cloud(map, &truth, 0.8, 12.0, 19);
-    let spur = map
-        .streets
-        .segments
-        .iter()
-        .find(|s| s.from_node == 100)
-        .unwrap();
-    let cloud = full.filter(|k| full.positions[k][0] <= spur.a[0] - 5.0);
-    (cloud, truth)
-}
-
-/// A model trained on the lattice's own labelled bins (seeded; a 24 m corridor).
-fn lattice_model(map: &OsmMap, cloud: &PointCloud, truth: &[SegmentTruth]) -> StreetModel {
-    let geometry = GeometryOptions {
-        corridor: CorridorOptions {
-            width_m: 24.0,
-            ..CorridorOptions::default()
-        },
-        max_width_m: 12.0,
-        ..GeometryOptions::default()
-    };
-    let which: Vec<usize> = (0..map.streets.segments.len()).collect();
-    let bins = streets::model::segment_bins(map, cloud, &which, &geometry);
-    let (mut x, mut y) = (Vec::new(), Vec::new());
-    for b in bins.iter().flatten() {
-        for k in b.usable() {
-            if let Some(c) = b.features.truth[k] {
-                x.extend_from_slice(b.features.row(k));
-                y.push(Target::DrivingArea.positive(c));
-            }
-        }
-    }
-    let options = ClassifierOptions {
-        max_train_bins: 150,
-        calibration_bins: 150,
-        ..ClassifierOptions::default()
-    };
-    let drivable: Vec<(f64, f64)> = truth
-        .iter()
-        .filter(|t| t.drivable)
-        .map(|t| (t.offset_m, t.width_m))
-        .collect();
-    StreetModel {
-        target: Target::DrivingArea,
-        geometry,
-        classifier: BinClassifier::train(&x, &y, &options).unwrap(),
-        prior: GeometryPrior::fit(&drivable),
-    }
-}
+use streets::model::{network_edges, StreetModel};
 
 #[test]
 fn sharded_streets_equal_the_whole_map_estimate_and_survive_reruns() {
     let dir = tempfile::tempdir().unwrap();
     let map_path = dir.path().join("lattice.osm");
-    std::fs::write(&map_path, lattice_xml()).unwrap();
+    std::fs::write(&map_path, streets::synthetic::lattice_osm_xml()).unwrap();
     let map = OsmMap::load(&map_path).unwrap();
-    let (cloud, truth) = lattice_cloud(&map);
+    let lattice = streets::synthetic::lattice().unwrap();
+    let cloud = lattice.cloud.clone();
     let cloud_path = dir.path().join("cloud.ply");
     write_cloud(&cloud_path, &cloud).unwrap();
-    let model = lattice_model(&map, &cloud, &truth);
+    let model = streets::synthetic::lattice_model(&lattice).unwrap();
     let model_path = dir.path().join("model.json");
     std::fs::write(&model_path, serde_json::to_vec(&model).unwrap()).unwrap();
     // The model and the cloud as every shard reads them back.

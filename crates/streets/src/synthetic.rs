@@ -93,3 +93,133 @@ pub fn ground_cloud(
     }
     cloud
 }
+
+/// Latitude of the synthetic maps' local origin, degrees.
+pub const ORIGIN_LAT: f64 = 48.0;
+/// Longitude of the synthetic maps' local origin, degrees.
+pub const ORIGIN_LON: f64 = 11.0;
+
+/// An OSM XML `<node>` at local metres `(x, y)` east and north of
+/// ([`ORIGIN_LAT`], [`ORIGIN_LON`]).
+pub fn osm_node(id: i64, x: f64, y: f64) -> String {
+    let lat = ORIGIN_LAT + y / 111_320.0;
+    let lon = ORIGIN_LON + x / (111_320.0 * ORIGIN_LAT.to_radians().cos());
+    format!(r#"<node id="{id}" lat="{lat:.8}" lon="{lon:.8}"/>"#)
+}
+
+/// A 4 × 4 lattice of residential streets 50 m apart (one way per row and per column, 24
+/// segments), a footway across it, and a spur way leaving the lattice to the east.
+pub fn lattice_osm_xml() -> String {
+    let mut s = String::from(r#"<?xml version="1.0"?><osm version="0.6">"#);
+    let id = |i: i64, j: i64| 1 + i + 4 * j;
+    for j in 0..4 {
+        for i in 0..4 {
+            s += &osm_node(id(i, j), 50.0 * i as f64, 50.0 * j as f64 + 3.0 * i as f64);
+        }
+    }
+    s += &osm_node(100, 230.0, 60.0);
+    s += &osm_node(101, 300.0, 70.0);
+    let way = |wid: i64, nodes: &[i64], highway: &str| {
+        let refs: String = nodes
+            .iter()
+            .map(|n| format!(r#"<nd ref="{n}"/>"#))
+            .collect();
+        format!(r#"<way id="{wid}">{refs}<tag k="highway" v="{highway}"/></way>"#)
+    };
+    for j in 0..4 {
+        let row: Vec<i64> = (0..4).map(|i| id(i, j)).collect();
+        s += &way(200 + j, &row, "residential");
+        let col: Vec<i64> = (0..4).map(|i| id(j, i)).collect();
+        s += &way(300 + j, &col, "residential");
+    }
+    s += &way(400, &[id(0, 0), id(1, 1), id(2, 2)], "footway");
+    s += &way(401, &[id(3, 1), 100, 101], "tertiary");
+    s += "</osm>";
+    s
+}
+
+/// The street lattice of [`lattice_osm_xml`] with its ground cloud and truth.
+#[derive(Debug, Clone)]
+pub struct Lattice {
+    /// The map.
+    pub map: OsmMap,
+    /// Ground points around its segments; the far end of the spur is not covered.
+    pub cloud: PointCloud,
+    /// Every segment's true offset and width (widths 5–8 m, offsets −0.5–0.5 m).
+    pub truth: Vec<SegmentTruth>,
+}
+
+/// The street lattice: map, ground cloud (seeded) and truth; a fixture whose tiles, shards
+/// and whole-map estimates the tests compare.
+pub fn lattice() -> crate::Result<Lattice> {
+    let map = OsmMap::from_xml_str(&lattice_osm_xml())?;
+    let truth: Vec<SegmentTruth> = map
+        .streets
+        .segments
+        .iter()
+        .enumerate()
+        .map(|(i, s)| SegmentTruth {
+            segment: i,
+            offset_m: 0.1 * (i % 11) as f64 - 0.5,
+            width_m: 5.0 + 0.4 * (i % 8) as f64,
+            sidewalk_m: 2.0,
+            outer_offset_m: None,
+            outer_observed: true,
+            drivable: geodata::osm::tags::is_drivable(&s.highway),
+            observed: true,
+            points: 1000,
+        })
+        .collect();
+    let full = ground_cloud(&map, &truth, 0.8, 12.0, 19);
+    // The map's local frame is not the lattice's: cut 5 m before node 100.
+    let cut = map
+        .streets
+        .segments
+        .iter()
+        .find(|s| s.from_node == 100)
+        .map_or(f64::INFINITY, |spur| spur.a[0] - 5.0);
+    let cloud = full.filter(|k| full.positions.get(k).is_some_and(|p| p[0] <= cut));
+    Ok(Lattice { map, cloud, truth })
+}
+
+/// A model trained on the lattice's own labelled bins (a few hundred, seeded); a 24 m
+/// corridor (120 columns) keeps loopy max-product on the lattice quick.
+pub fn lattice_model(lattice: &Lattice) -> crate::Result<crate::model::StreetModel> {
+    use crate::model::{BinClassifier, ClassifierOptions, GeometryOptions, StreetModel, Target};
+    let geometry = GeometryOptions {
+        corridor: crate::corridor::CorridorOptions {
+            width_m: 24.0,
+            ..crate::corridor::CorridorOptions::default()
+        },
+        max_width_m: 12.0,
+        ..GeometryOptions::default()
+    };
+    let which: Vec<usize> = (0..lattice.map.streets.segments.len()).collect();
+    let bins = crate::model::segment_bins(&lattice.map, &lattice.cloud, &which, &geometry);
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    for b in bins.iter().flatten() {
+        for k in b.usable() {
+            if let Some(c) = b.features.truth[k] {
+                x.extend_from_slice(b.features.row(k));
+                y.push(Target::DrivingArea.positive(c));
+            }
+        }
+    }
+    let options = ClassifierOptions {
+        max_train_bins: 150,
+        calibration_bins: 150,
+        ..ClassifierOptions::default()
+    };
+    let drivable: Vec<(f64, f64)> = lattice
+        .truth
+        .iter()
+        .filter(|t| t.drivable)
+        .map(|t| (t.offset_m, t.width_m))
+        .collect();
+    Ok(StreetModel {
+        target: Target::DrivingArea,
+        geometry,
+        classifier: BinClassifier::train(&x, &y, &options)?,
+        prior: crate::potentials::GeometryPrior::fit(&drivable),
+    })
+}

@@ -11,14 +11,7 @@ use streets::model::{BinClassifier, ClassifierOptions, GeometryOptions, StreetMo
 use streets::potentials::GeometryPrior;
 use streets::StreetsError;
 
-const LAT0: f64 = 48.0;
-const LON0: f64 = 11.0;
-
-fn node(id: i64, x: f64, y: f64) -> String {
-    let lat = LAT0 + y / 111_320.0;
-    let lon = LON0 + x / (111_320.0 * LAT0.to_radians().cos());
-    format!(r#"<node id="{id}" lat="{lat:.8}" lon="{lon:.8}"/>"#)
-}
+use streets::synthetic::osm_node as node;
 
 /// A T-free cross: way 1 along x (6 segments of 40 m), way 2 along y through node 4.
 fn cross_xml() -> String {
@@ -206,8 +199,8 @@ fn estimate_writes_valid_geojson_and_bad_inputs_are_named() {
     let back: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(back["features"].as_array().unwrap().len(), 11);
     let lonlat = &back["features"][0]["geometry"]["coordinates"][0][0];
-    assert!((lonlat[0].as_f64().unwrap() - LON0).abs() < 0.01);
-    assert!((lonlat[1].as_f64().unwrap() - LAT0).abs() < 0.01);
+    assert!((lonlat[0].as_f64().unwrap() - streets::synthetic::ORIGIN_LON).abs() < 0.01);
+    assert!((lonlat[1].as_f64().unwrap() - streets::synthetic::ORIGIN_LAT).abs() < 0.01);
     assert!(back["features"][0]["properties"]["width"].as_f64().unwrap() > 4.0);
 
     // A cloud far away from the streets.

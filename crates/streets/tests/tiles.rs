@@ -11,121 +11,25 @@ use std::path::{Path, PathBuf};
 use streets::corridor::CorridorOptions;
 use streets::dataset::SegmentTruth;
 use streets::inference::{Edge, Network};
-use streets::model::{
-    network_edges, BinClassifier, ClassifierOptions, Estimates, GeometryOptions, StreetModel,
-    Target,
-};
-use streets::potentials::{GeometryPrior, SegmentPotential};
+use streets::model::{network_edges, ClassifierOptions, Estimates, StreetModel, Target};
+use streets::potentials::SegmentPotential;
 use streets::tiles::{merge_tiles, plan_tiles, TileGrid};
 use streets::StreetsError;
 
-const LAT0: f64 = 48.0;
-const LON0: f64 = 11.0;
-
-fn node(id: i64, x: f64, y: f64) -> String {
-    let lat = LAT0 + y / 111_320.0;
-    let lon = LON0 + x / (111_320.0 * LAT0.to_radians().cos());
-    format!(r#"<node id="{id}" lat="{lat:.8}" lon="{lon:.8}"/>"#)
-}
-
-/// A 4 × 4 lattice of residential streets 50 m apart (one way per row and per column, 24
-/// segments), a footway across it, and a spur way leaving the lattice to the east.
-fn lattice_xml() -> String {
-    let mut s = String::from(r#"<?xml version="1.0"?><osm version="0.6">"#);
-    let id = |i: i64, j: i64| 1 + i + 4 * j;
-    for j in 0..4 {
-        for i in 0..4 {
-            s += &node(id(i, j), 50.0 * i as f64, 50.0 * j as f64 + 3.0 * i as f64);
-        }
-    }
-    s += &node(100, 230.0, 60.0);
-    s += &node(101, 300.0, 70.0);
-    let way = |wid: i64, nodes: &[i64], highway: &str| {
-        let refs: String = nodes
-            .iter()
-            .map(|n| format!(r#"<nd ref="{n}"/>"#))
-            .collect();
-        format!(r#"<way id="{wid}">{refs}<tag k="highway" v="{highway}"/></way>"#)
-    };
-    for j in 0..4 {
-        let row: Vec<i64> = (0..4).map(|i| id(i, j)).collect();
-        s += &way(200 + j, &row, "residential");
-        let col: Vec<i64> = (0..4).map(|i| id(j, i)).collect();
-        s += &way(300 + j, &col, "residential");
-    }
-    s += &way(400, &[id(0, 0), id(1, 1), id(2, 2)], "footway");
-    s += &way(401, &[id(3, 1), 100, 101], "tertiary");
-    s += "</osm>";
-    s
-}
-
-/// The lattice with its synthetic ground cloud (widths 5–8 m, offsets −0.5–0.5 m); the
-/// far end of the spur (beyond node 100) is not covered.
+/// The lattice fixture: map, cloud, truth.
 fn lattice() -> (OsmMap, PointCloud, Vec<SegmentTruth>) {
-    let map = OsmMap::from_xml_str(&lattice_xml()).unwrap();
-    let truth: Vec<SegmentTruth> = map
-        .streets
-        .segments
-        .iter()
-        .enumerate()
-        .map(|(i, s)| SegmentTruth {
-            segment: i,
-            offset_m: 0.1 * (i % 11) as f64 - 0.5,
-            width_m: 5.0 + 0.4 * (i % 8) as f64,
-            sidewalk_m: 2.0,
-            outer_offset_m: None,
-            outer_observed: true,
-            drivable: geodata::osm::tags::is_drivable(&s.highway),
-            observed: true,
-            points: 1000,
-        })
-        .collect();
-    let full = streets::synthetic::ground_cloud(&map, &truth, 0.8, 12.0, 19);
-    // The map's local frame is not the lattice's: cut 5 m before node 100.
-    let segs = &map.streets.segments;
-    let spur = segs.iter().find(|s| s.from_node == 100).unwrap();
-    let cloud = full.filter(|k| full.positions[k][0] <= spur.a[0] - 5.0);
-    (map, cloud, truth)
+    let l = streets::synthetic::lattice().unwrap();
+    (l.map, l.cloud, l.truth)
 }
 
-/// A model trained on the lattice's own labelled bins (a few hundred, seeded).
-/// A 24 m corridor (120 columns) keeps loopy max-product on the lattice quick.
+/// The lattice fixture's model.
 fn lattice_model(map: &OsmMap, cloud: &PointCloud, truth: &[SegmentTruth]) -> StreetModel {
-    let geometry = GeometryOptions {
-        corridor: CorridorOptions {
-            width_m: 24.0,
-            ..CorridorOptions::default()
-        },
-        max_width_m: 12.0,
-        ..GeometryOptions::default()
-    };
-    let which: Vec<usize> = (0..map.streets.segments.len()).collect();
-    let bins = streets::model::segment_bins(map, cloud, &which, &geometry);
-    let (mut x, mut y) = (Vec::new(), Vec::new());
-    for b in bins.iter().flatten() {
-        for k in b.usable() {
-            if let Some(c) = b.features.truth[k] {
-                x.extend_from_slice(b.features.row(k));
-                y.push(Target::DrivingArea.positive(c));
-            }
-        }
-    }
-    let options = ClassifierOptions {
-        max_train_bins: 150,
-        calibration_bins: 150,
-        ..ClassifierOptions::default()
-    };
-    let drivable: Vec<(f64, f64)> = truth
-        .iter()
-        .filter(|t| t.drivable)
-        .map(|t| (t.offset_m, t.width_m))
-        .collect();
-    StreetModel {
-        target: Target::DrivingArea,
-        geometry,
-        classifier: BinClassifier::train(&x, &y, &options).unwrap(),
-        prior: GeometryPrior::fit(&drivable),
-    }
+    streets::synthetic::lattice_model(&streets::synthetic::Lattice {
+        map: map.clone(),
+        cloud: cloud.clone(),
+        truth: truth.to_vec(),
+    })
+    .unwrap()
 }
 
 /// KITTI-360 drive 0009 (real scans, registered) on its OSM roads.
@@ -315,7 +219,7 @@ fn kitti360_tiles_equal_the_whole_map_with_loopy_coupling() {
 
 #[test]
 fn plans_round_trip_and_bad_plans_are_errors() {
-    let map = OsmMap::from_xml_str(&lattice_xml()).unwrap();
+    let map = OsmMap::from_xml_str(&streets::synthetic::lattice_osm_xml()).unwrap();
     let plan = plan_tiles(&map, 60.0).unwrap();
     let text = serde_json::to_string(&plan).unwrap();
     assert_eq!(
@@ -344,7 +248,7 @@ fn plans_round_trip_and_bad_plans_are_errors() {
     assert!(matches!(err, StreetsError::TilePlan { .. }), "{err}");
     assert!(err.to_string().contains("made from this map"), "{err}");
     let footways = OsmMap::from_xml_str(
-        &lattice_xml()
+        &streets::synthetic::lattice_osm_xml()
             .replace("residential", "footway")
             .replace("tertiary", "footway"),
     )
