@@ -194,17 +194,7 @@ pub fn lattice_model(lattice: &Lattice) -> crate::Result<crate::model::StreetMod
         max_width_m: 12.0,
         ..GeometryOptions::default()
     };
-    let which: Vec<usize> = (0..lattice.map.streets.segments.len()).collect();
-    let bins = crate::model::segment_bins(&lattice.map, &lattice.cloud, &which, &geometry);
-    let (mut x, mut y) = (Vec::new(), Vec::new());
-    for b in bins.iter().flatten() {
-        for k in b.usable() {
-            if let Some(c) = b.features.truth[k] {
-                x.extend_from_slice(b.features.row(k));
-                y.push(Target::DrivingArea.positive(c));
-            }
-        }
-    }
+    let (x, y) = labelled_rows(&lattice.map, &lattice.cloud, &geometry, Target::DrivingArea);
     let options = ClassifierOptions {
         max_train_bins: 150,
         calibration_bins: 150,
@@ -222,4 +212,26 @@ pub fn lattice_model(lattice: &Lattice) -> crate::Result<crate::model::StreetMod
         classifier: BinClassifier::train(&x, &y, &options)?,
         prior: crate::potentials::GeometryPrior::fit(&drivable),
     })
+}
+
+/// The feature rows and `target` labels of every usable labelled bin of the map's segments
+/// in the cloud: a classifier's training set.
+pub fn labelled_rows(
+    map: &OsmMap,
+    cloud: &PointCloud,
+    geometry: &crate::model::GeometryOptions,
+    target: crate::model::Target,
+) -> (Vec<f32>, Vec<bool>) {
+    let which: Vec<usize> = (0..map.streets.segments.len()).collect();
+    let bins = crate::model::segment_bins(map, cloud, &which, geometry);
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    for b in bins.iter().flatten() {
+        for k in b.usable() {
+            if let Some(c) = b.features.truth[k] {
+                x.extend_from_slice(b.features.row(k));
+                y.push(target.positive(c));
+            }
+        }
+    }
+    (x, y)
 }

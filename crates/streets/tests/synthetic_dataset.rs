@@ -145,17 +145,8 @@ fn evaluation_recovers_known_widths() {
 
 fn model_for(ds: &StreetsDataset) -> StreetModel {
     let geometry = GeometryOptions::default();
-    let which: Vec<usize> = (0..ds.segments.len()).collect();
-    let bins = streets::model::segment_bins(&ds.map, &ds.cloud, &which, &geometry);
-    let (mut x, mut y) = (Vec::new(), Vec::new());
-    for b in bins.iter().flatten() {
-        for k in b.usable() {
-            if let Some(c) = b.features.truth[k] {
-                x.extend_from_slice(b.features.row(k));
-                y.push(Target::DrivingArea.positive(c));
-            }
-        }
-    }
+    let (x, y) =
+        streets::synthetic::labelled_rows(&ds.map, &ds.cloud, &geometry, Target::DrivingArea);
     let classifier = BinClassifier::train(
         &x,
         &y,
