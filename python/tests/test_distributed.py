@@ -1,7 +1,8 @@
 """Issue 19: a localization plan run as Ray tasks (a local cluster of 2 CPUs) merges into
 exactly what one process computes with `urbansem shard run` + `shard merge`; a task that
 raises, or whose worker process dies, is retried and the merged result is still complete
-and identical; a re-run is a no-op."""
+and identical; a re-run is a no-op. A map-building plan through Ray gives the GeoJSON the
+command line's merge writes."""
 
 from __future__ import annotations
 
@@ -126,3 +127,27 @@ def test_shard_errors_are_fleet_errors(tmp_path: Path) -> None:
         distributed.run_shard(not_a_plan, 0)
     with pytest.raises(urbansem.FleetError, match="plan.json"):
         distributed.merge(not_a_plan)
+
+
+def test_a_map_plan_on_ray_gives_the_command_line_merge(
+    tmp_path: Path, cli: Any, ray_cluster: Any
+) -> None:
+    cli("sim", "dataset", "--kind", "streets", "--scans", "3", "--out", tmp_path / "sim")
+    clouds = tmp_path / "clouds"
+    clouds.mkdir()
+    (clouds / "cloud.ply").write_bytes((tmp_path / "sim" / "cloud.ply").read_bytes())
+    plans = {}
+    for name in ("one", "ray"):
+        plans[name] = tmp_path / f"{name}.json"
+        cli("shard", "plan", "--job", "map", "--map", tmp_path / "sim" / "city.osm",
+            "--inputs", clouds, "--tile-m", "50", "--out", plans[name])
+    shards = len(json.loads(plans["one"].read_text())["shards"])
+    assert shards >= 2
+    for i in range(shards):
+        cli("shard", "run", plans["one"], "--shard", i)
+    out = tmp_path / "one.geojson"
+    cli("shard", "merge", plans["one"], "--out", out)
+    merged = distributed.run_plan(plans["ray"])
+    assert plain(merged) == json.loads(out.read_text())
+    kinds = [f["properties"]["kind"] for f in merged["features"]]
+    assert kinds.count("tile") == shards and kinds.count("object") > 0

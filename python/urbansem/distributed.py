@@ -116,7 +116,9 @@ def run_plan(
     plan_path = os.path.abspath(str(plan))
     with open(plan_path, encoding="utf-8") as f:
         p = json.load(f)
-    base, tiles = _tile_files(p)
+    # Localization tiles go through the object store; the streets and map jobs' shards read
+    # their (checksummed) inputs themselves.
+    base, tiles = _tile_files(p) if p["job"] == "localize" else ("", [])
     refs: Dict[int, Any] = {}
 
     def tile_ref(k: int) -> Any:
@@ -135,7 +137,7 @@ def run_plan(
     for stage in p["stages"]:
         pending = []
         for sid in stage["shards"]:
-            tile = p["shards"][sid].get("tile")
+            tile = p["shards"][sid].get("tile") if tiles else None
             data = tile_ref(tile) if tile is not None else None
             pending.append(task.remote(plan_path, sid, tile, data, before_shard))
         outcomes = ray.get(pending)

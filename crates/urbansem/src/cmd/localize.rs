@@ -600,6 +600,12 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     if args.top == 0 && writes_poses {
         super::usage!("--top 0: --geojson, --poses-tum and --poses-kitti need --top 1 or more");
     }
+    if localize::tiles::is_manifest(&args.map) {
+        super::usage!(
+            "localize track searches one map or .uloc index, not a tiled map's manifest: localize each scan with `localize --map {} --near LAT,LON --radius-m R`, or a folder of scans with `shard plan --job localize`",
+            args.map.display()
+        );
+    }
     let options = options(
         args.cost.kind(),
         args.grid_m,
@@ -709,6 +715,15 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     } else {
         args.method.iter().filter_map(|m| m.rank_method()).collect()
     };
+    if args
+        .map
+        .as_deref()
+        .is_some_and(localize::tiles::is_manifest)
+    {
+        super::usage!(
+            "localize eval runs on one map or .uloc index, not a tiled map's manifest (`shard plan --job localize` localizes a folder of scans on tiles)"
+        );
+    }
     let mcd = is_mcd(&args.dataset);
     if mcd && args.map.is_none() {
         super::usage!(
