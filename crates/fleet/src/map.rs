@@ -17,7 +17,8 @@
 //! GeoJSON: each object's box footprint and each tile's core with its map file.
 
 use crate::plan::{
-    absolute, Job, JobOptions, MapJob, MapTile, Plan, Shard, Stage, PLAN_FORMAT, PLAN_VERSION,
+    absolute, cloud_files, tile_stage, Job, JobOptions, MapJob, MapTile, Plan, Shard, PLAN_FORMAT,
+    PLAN_VERSION,
 };
 use crate::{invalid, io_err, FleetError, Result};
 use geodata::cloud::{read_cloud, PointCloud};
@@ -121,27 +122,7 @@ fn input_files(inputs: &Path) -> Result<Vec<PathBuf>> {
     if inputs.is_file() {
         return Ok(vec![inputs.to_path_buf()]);
     }
-    let mut files: Vec<PathBuf> = std::fs::read_dir(inputs)
-        .map_err(|e| io_err(inputs, e))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        })
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        return Err(invalid(
-            inputs,
-            format!(
-                "no labelled cloud files ({}) in the folder",
-                CLOUD_EXTENSIONS.join(", ")
-            ),
-        ));
-    }
-    Ok(files)
+    cloud_files(inputs, &CLOUD_EXTENSIONS, "labelled cloud files")
 }
 
 /// Plans the map-building job: the labelled clouds of `inputs` (a folder or one file, in the
@@ -250,15 +231,7 @@ pub fn plan_map(
         .collect();
     std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
     let out_abs = absolute(out)?;
-    let shards: Vec<Shard> = (0..map_tiles.len())
-        .map(|k| Shard {
-            id: k,
-            stage: 0,
-            batch: 0,
-            scans: [0, refs.len()],
-            tile: Some(k),
-        })
-        .collect();
+    let (stages, shards) = tile_stage(STAGE, map_tiles.len(), [0, refs.len()]);
     Ok(Plan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
@@ -268,19 +241,12 @@ pub fn plan_map(
         options: JobOptions::default(),
         batch_size: files.len(),
         out: out_abs.to_string_lossy().into_owned(),
-        stages: vec![Stage {
-            name: STAGE.into(),
-            shards: (0..shards.len()).collect(),
-        }],
+        stages,
         shards,
         model: None,
         tile_m: Some(tile_m),
         street_tiles: Vec::new(),
-        map_job: Some(MapJob {
-            resolution_m,
-            tile_m,
-            tile_cells,
-        }),
+        map_job: Some(MapJob { resolution_m }),
         map_tiles,
     })
 }

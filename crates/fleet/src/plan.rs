@@ -151,12 +151,9 @@ pub struct Plan {
 /// The options of a map-building job ([`crate::map`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MapJob {
-    /// Cell size of the maps, metres.
+    /// Cell size of the maps, metres (the tile side, the plan's `tile_m`, is a whole number
+    /// of cells).
     pub resolution_m: f64,
-    /// Side of the tiles, metres (a whole number of cells).
-    pub tile_m: f64,
-    /// Side of the tiles, cells.
-    pub tile_cells: i32,
 }
 
 /// One tile of a map-building plan: its core and window as half-open cell-key ranges
@@ -177,6 +174,47 @@ pub struct MapTile {
 
 /// Cloud file extensions a localization job takes from its input folder.
 const CLOUD_EXTENSIONS: [&str; 7] = ["ply", "pcd", "las", "laz", "bin", "xyz", "txt"];
+
+/// The files of folder `dir` whose extension is one of `extensions` (any case), sorted by
+/// name; an error naming `what` when there is none.
+pub(crate) fn cloud_files(dir: &Path, extensions: &[&str], what: &str) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| io_err(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| extensions.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(invalid(
+            dir,
+            format!("no {what} ({}) in the folder", extensions.join(", ")),
+        ));
+    }
+    Ok(files)
+}
+
+/// The one stage `name` of a job with a shard per tile, each over the inputs `scans`.
+pub(crate) fn tile_stage(name: &str, tiles: usize, scans: [usize; 2]) -> (Vec<Stage>, Vec<Shard>) {
+    let shards: Vec<Shard> = (0..tiles)
+        .map(|k| Shard {
+            id: k,
+            stage: 0,
+            batch: 0,
+            scans,
+            tile: Some(k),
+        })
+        .collect();
+    let stages = vec![Stage {
+        name: name.into(),
+        shards: (0..tiles).collect(),
+    }];
+    (stages, shards)
+}
 
 pub(crate) fn absolute(path: &Path) -> Result<PathBuf> {
     std::fs::canonicalize(path).map_err(|e| io_err(path, e))
@@ -206,26 +244,7 @@ pub fn plan_localize(
     }
     let m = Manifest::read(manifest)?;
     let manifest = absolute(manifest)?;
-    let mut files: Vec<PathBuf> = std::fs::read_dir(inputs)
-        .map_err(|e| io_err(inputs, e))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| CLOUD_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        })
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        return Err(invalid(
-            inputs,
-            format!(
-                "no scan files ({}) in the folder",
-                CLOUD_EXTENSIONS.join(", ")
-            ),
-        ));
-    }
+    let files = cloud_files(inputs, &CLOUD_EXTENSIONS, "scan files")?;
     let batch_size = batch_size.max(1);
     let inputs = files
         .iter()

@@ -359,8 +359,7 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                     line.map(Some).map_err(|e| io_err(&result, e))
                 })
                 .collect::<Result<_>>()?;
-            let lines: Vec<String> = found.into_iter().flatten().collect();
-            lines
+            found.into_iter().flatten().collect()
         }
         other => {
             return Err(invalid(plan_path, format!("unknown stage {other:?}")));

@@ -14,7 +14,7 @@
 //! The cloud must already be in the map's local frame (the default `--cloud-frame local`
 //! of `streets estimate`).
 
-use crate::plan::{absolute, Job, JobOptions, Plan, Shard, Stage, PLAN_FORMAT, PLAN_VERSION};
+use crate::plan::{absolute, tile_stage, Job, JobOptions, Plan, Shard, PLAN_FORMAT, PLAN_VERSION};
 use crate::{invalid, io_err, Result};
 use geodata::cloud::PointCloud;
 use geodata::osm::OsmMap;
@@ -64,15 +64,7 @@ pub fn plan_streets(
     let cloud_ref = FileRef::of(&cloud_abs, &cloud_abs.to_string_lossy())?;
     std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
     let out_abs = absolute(out)?;
-    let shards: Vec<Shard> = (0..street_tiles.len())
-        .map(|k| Shard {
-            id: k,
-            stage: 0,
-            batch: 0,
-            scans: [0, 1],
-            tile: Some(k),
-        })
-        .collect();
+    let (stages, shards) = tile_stage(STAGE, street_tiles.len(), [0, 1]);
     Ok(Plan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
@@ -82,10 +74,7 @@ pub fn plan_streets(
         options: JobOptions::default(),
         batch_size: 1,
         out: out_abs.to_string_lossy().into_owned(),
-        stages: vec![Stage {
-            name: STAGE.into(),
-            shards: (0..shards.len()).collect(),
-        }],
+        stages,
         shards,
         model: Some(model_ref),
         tile_m: Some(tile_m),
