@@ -9,12 +9,13 @@ use crate::generate::{self, GenerateError, GeneratedMln};
 use crate::ground::{ground, GroundError, GroundOptions, GroundProblem};
 use crate::infer::MapResult;
 use crate::learn::{self, LearnError, LearnOptions, Learnt, Training};
+use crate::marginal::{Marginals, McSatOptions};
 use crate::parse::{
     parse_query_predicates, read_evidence, read_program, read_query, Atom, EvidenceAtom,
     ParseError, Program,
 };
 use serde::Serialize;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -239,18 +240,56 @@ pub fn query_values(
     query: &[Atom],
     assignment: &[bool],
 ) -> Vec<(String, bool)> {
+    query_atoms(program, problem, query, assignment, false)
+}
+
+/// Every unknown atom of a query predicate with its value in `values` (`missing` past its
+/// end), sorted by name.
+fn query_atoms<T: Copy>(
+    program: &Program,
+    problem: &GroundProblem,
+    query: &[Atom],
+    values: &[T],
+    missing: T,
+) -> Vec<(String, T)> {
     let query_preds: Vec<usize> = query.iter().map(|a| a.predicate).collect();
-    let mut values: Vec<(String, bool)> = (0..problem.atoms.len())
+    let mut out: Vec<(String, T)> = (0..problem.atoms.len())
         .filter(|&i| query_preds.contains(&problem.atoms[i].predicate))
         .map(|i| {
             (
                 problem.atom_name(program, i),
-                assignment.get(i).copied().unwrap_or(false),
+                values.get(i).copied().unwrap_or(missing),
             )
         })
         .collect();
-    values.sort();
-    values
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+/// Every unknown atom of a query predicate with its probability, sorted by name (atoms
+/// written as in evidence files).
+pub fn query_probabilities(
+    program: &Program,
+    problem: &GroundProblem,
+    query: &[Atom],
+    probabilities: &[f64],
+) -> Vec<(String, f64)> {
+    query_atoms(program, problem, query, probabilities, 0.0)
+}
+
+/// The query atoms' probabilities in Tuffy's marginal result format (`0.7300<TAB>Atom(A,B)`,
+/// one per line, sorted by atom).
+pub fn marginal_text(
+    program: &Program,
+    problem: &GroundProblem,
+    query: &[Atom],
+    probabilities: &[f64],
+) -> String {
+    let mut text = String::new();
+    for (atom, p) in query_probabilities(program, problem, query, probabilities) {
+        let _ = writeln!(text, "{p:.4}\t{atom}");
+    }
+    text
 }
 
 /// A benchmark problem of the thesis that [`benchmark_problem`] generates.
@@ -513,6 +552,136 @@ impl InferReport {
             "seconds           parse {:.3}  ground {:.3}  quadratize {:.3}  solve {:.3}  total {:.3}",
             s.parse, s.ground, s.quadratize, s.solve, s.total
         );
+        out
+    }
+}
+
+/// Seconds per phase of one `mln infer --marginal` run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MarginalSeconds {
+    /// Reading the files.
+    pub parse: f64,
+    /// Grounding.
+    pub ground: f64,
+    /// Sampling (all chains).
+    pub sample: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// What marginal inference on one problem found (`mln infer --marginal --json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MarginalReport {
+    /// The program file.
+    pub program: String,
+    /// The algorithm (`mc-sat`).
+    pub method: String,
+    /// Seed of every random step.
+    pub seed: u64,
+    /// Counted samples per chain.
+    pub samples: usize,
+    /// Steps per chain before counting.
+    pub burn_in: usize,
+    /// Chains run in parallel.
+    pub chains: usize,
+    /// Unknown ground atoms.
+    pub ground_atoms: usize,
+    /// Ground formulas.
+    pub ground_factors: usize,
+    /// Atoms the hard formulas force (probability exactly 0 or 1).
+    pub fixed_atoms: usize,
+    /// The largest difference between two chains' estimates of one atom.
+    pub max_chain_spread: f64,
+    /// Its mean over atoms.
+    pub mean_chain_spread: f64,
+    /// Share of the moves inside the slice that were kept.
+    pub acceptance: f64,
+    /// Probability of every unknown query atom, by atom.
+    pub marginals: BTreeMap<String, f64>,
+    /// Seconds per phase.
+    pub seconds: MarginalSeconds,
+}
+
+impl MarginalReport {
+    /// The report of `result` on `loaded` (`total_seconds` from the start of reading).
+    pub fn new(
+        loaded: &Loaded,
+        program: &Path,
+        options: &McSatOptions,
+        result: &Marginals,
+        total_seconds: f64,
+    ) -> Self {
+        Self {
+            program: program.display().to_string(),
+            method: "mc-sat".to_owned(),
+            seed: options.seed,
+            samples: result.samples,
+            burn_in: options.burn_in,
+            chains: result.chains,
+            ground_atoms: loaded.problem.atoms.len(),
+            ground_factors: loaded.problem.factors.len(),
+            fixed_atoms: result.fixed_atoms,
+            max_chain_spread: result.max_chain_spread,
+            mean_chain_spread: result.mean_chain_spread,
+            acceptance: result.acceptance,
+            marginals: query_probabilities(
+                &loaded.program,
+                &loaded.problem,
+                &loaded.query,
+                &result.probabilities,
+            )
+            .into_iter()
+            .collect(),
+            seconds: MarginalSeconds {
+                parse: loaded.parse_seconds,
+                ground: loaded.ground_seconds,
+                sample: result.seconds,
+                total: total_seconds,
+            },
+        }
+    }
+
+    /// The problem's size, the sampler's diagnostics, seconds per phase and the most
+    /// probable query atoms.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{}: {} ground atoms, {} ground formulas",
+            self.program, self.ground_atoms, self.ground_factors
+        );
+        let _ = writeln!(
+            out,
+            "method            mc-sat, {} chains × {} samples (burn-in {}), seed {}",
+            self.chains, self.samples, self.burn_in, self.seed
+        );
+        let _ = writeln!(
+            out,
+            "fixed by hard     {} atoms (probability 0 or 1)",
+            self.fixed_atoms
+        );
+        let _ = writeln!(
+            out,
+            "chain spread      max {:.4}  mean {:.4}  (difference between chains' estimates)",
+            self.max_chain_spread, self.mean_chain_spread
+        );
+        let _ = writeln!(out, "slice moves kept  {:.1} %", 100.0 * self.acceptance);
+        let s = &self.seconds;
+        let _ = writeln!(
+            out,
+            "seconds           parse {:.3}  ground {:.3}  sample {:.3}  total {:.3}",
+            s.parse, s.ground, s.sample, s.total
+        );
+        let mut top: Vec<(&String, &f64)> = self.marginals.iter().collect();
+        top.sort_by(|a, b| b.1.total_cmp(a.1).then_with(|| a.0.cmp(b.0)));
+        let _ = writeln!(
+            out,
+            "query atoms       {} (the 10 most probable below; -r FILE or --json for all)",
+            top.len()
+        );
+        for (atom, p) in top.into_iter().take(10) {
+            let _ = writeln!(out, "  {p:.4}  {atom}");
+        }
         out
     }
 }

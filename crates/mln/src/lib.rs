@@ -8,6 +8,7 @@
 //! - [`ground`]: join-based grounding with evidence simplification → the cost polynomial.
 //! - [`infer`]: MAP inference (QPBO/QSSR, MaxWalkSAT on formulas or monomials).
 //! - [`learn`]: discriminative weight learning (voted perceptron on MAP counts).
+//! - [`marginal`]: marginal probabilities (MC-SAT; exact enumeration for small problems).
 //! - [`walksat`]: MaxWalkSAT over weighted conjunctive factors.
 //! - [`wcnf`]: the ground problem as weighted partial MaxSAT for exact solvers.
 //! - [`generate`]: seeded generators of the thesis' F&S, −F&S and ID problems.
@@ -18,6 +19,7 @@ pub mod generate;
 pub mod ground;
 pub mod infer;
 pub mod learn;
+pub mod marginal;
 pub mod parse;
 pub mod walksat;
 pub mod wcnf;

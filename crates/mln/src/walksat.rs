@@ -211,12 +211,16 @@ impl<'a> Chain<'a> {
             let mut sat = self.sat_clauses[fi] as i64;
             // All occurrences of this factor are adjacent (built factor by factor).
             while k < occ.len() && occ[k].0 as usize == fi {
-                let (_, ci, l) = occ[k];
-                let t = self.true_lits[fi][ci as usize];
-                let now_true = l.eval(self.x[v]);
-                let after = if now_true { t - 1 } else { t + 1 };
+                // A clause's occurrences are adjacent; a variable may occur in a clause
+                // more than once (x ∨ x̄ from groundings with equal arguments).
+                let ci = occ[k].1;
+                let t = i64::from(self.true_lits[fi][ci as usize]);
+                let mut after = t;
+                while k < occ.len() && occ[k].0 as usize == fi && occ[k].1 == ci {
+                    after += if occ[k].2.eval(self.x[v]) { -1 } else { 1 };
+                    k += 1;
+                }
                 sat += i64::from(after > 0) - i64::from(t > 0);
-                k += 1;
             }
             let before = self.is_true(fi);
             let after = sat as usize == self.factors[fi].clauses.len();

@@ -848,3 +848,81 @@ fn shard_map_job_builds_what_map_build_builds() {
         .unwrap();
     assert_eq!(bad.status.code(), Some(2));
 }
+
+#[test]
+fn mln_infer_marginal_writes_tuffy_results_and_json_marginals() {
+    // Smokes(Anna) is evidence, so Cancer(Anna) is only in one one-atom formula of weight
+    // 0.5: its probability is σ(0.5) exactly, every sample.
+    let program = temp_file(
+        "marg.mln",
+        "Smokes(person)\nCancer(person)\nFriends(person, person)\n\
+         0.5 Smokes(x) => Cancer(x)\n\
+         0.4 Friends(x, y) ^ Smokes(x) => Smokes(y)\n",
+    );
+    let evidence = temp_file(
+        "marg.db",
+        "Smokes(Anna)\nFriends(Anna, Bob)\nFriends(Bob, Chris)\n",
+    );
+    let result = program.with_file_name("marg.result");
+    let out = stdout_of(
+        urbansem()
+            .args([
+                "mln",
+                "infer",
+                "--marginal",
+                "--samples",
+                "2000",
+                "--json",
+                "-i",
+            ])
+            .arg(&program)
+            .arg("-e")
+            .arg(&evidence)
+            .args(["-q", "Cancer,Smokes", "-r"])
+            .arg(&result),
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    for key in [
+        "method",
+        "samples",
+        "chains",
+        "max_chain_spread",
+        "fixed_atoms",
+        "seconds",
+    ] {
+        assert!(j.get(key).is_some(), "missing {key}: {j}");
+    }
+    let m = j["marginals"].as_object().unwrap();
+    let sigmoid = 1.0 / (1.0 + (-0.5f64).exp());
+    assert!(
+        (m["Cancer(Anna)"].as_f64().unwrap() - sigmoid).abs() < 1e-9,
+        "{m:?}"
+    );
+    // Smokes(Bob) by enumeration: Anna pushes it up (0.4), but a smoker's Cancer formula
+    // and Chris's implication can fail: Σ over Cancer(Bob), Smokes(Chris), Cancer(Chris).
+    let e = |w: f64| w.exp();
+    let cancer = |smokes: bool| if smokes { 1.0 + e(0.5) } else { 2.0 * e(0.5) };
+    let chris = |bob: bool| {
+        let s_c1 = e(0.4) * cancer(true);
+        let s_c0 = if bob { 1.0 } else { e(0.4) } * cancer(false);
+        s_c1 + s_c0
+    };
+    let w1 = e(0.4) * cancer(true) * chris(true);
+    let w0 = cancer(false) * chris(false);
+    let exact = w1 / (w1 + w0);
+    let p_bob = m["Smokes(Bob)"].as_f64().unwrap();
+    assert!((p_bob - exact).abs() < 0.03, "{p_bob} vs exact {exact}");
+    assert_eq!(m.len(), 5, "{m:?}"); // Cancer ×3, Smokes(Bob), Smokes(Chris)
+    let text = std::fs::read_to_string(&result).unwrap();
+    let first = text.lines().next().unwrap();
+    assert_eq!(first, format!("{sigmoid:.4}\tCancer(Anna)"));
+    assert_eq!(text.lines().count(), 5);
+    // --samples without --marginal is a usage error.
+    let out = urbansem()
+        .args(["mln", "infer", "--samples", "10", "-i"])
+        .arg(&program)
+        .args(["-q", "Cancer"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}

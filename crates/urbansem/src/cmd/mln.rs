@@ -1,12 +1,13 @@
-//! `urbansem mln …`: MAP inference on Markov logic networks.
+//! `urbansem mln …`: MAP and marginal inference on Markov logic networks.
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use mln::files::{
-    benchmark_problem, learn_program, load_and_ground, read_answer, result_text, Benchmark,
-    InferReport, LearnReport, ProblemFiles, QuerySource, ScoreReport,
+    benchmark_problem, learn_program, load_and_ground, marginal_text, read_answer, result_text,
+    Benchmark, InferReport, LearnReport, MarginalReport, ProblemFiles, QuerySource, ScoreReport,
 };
 use mln::infer::{map_inference, InferOptions, Method, Representation};
+use mln::marginal::{mc_sat, McSatOptions};
 use pbo::quadratize::Quadratizer;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -14,7 +15,8 @@ use std::time::Instant;
 /// Subcommands of `urbansem mln`.
 #[derive(Subcommand)]
 pub enum MlnCommand {
-    /// MAP inference: the most probable truth values of the query atoms.
+    /// MAP inference (the most probable truth values of the query atoms) or, with
+    /// `--marginal`, the probability of every query atom (MC-SAT).
     Infer(InferArgs),
     /// Generate a synthetic problem of the thesis (prog.mln, evidence.db, query.db).
     Generate(GenerateArgs),
@@ -127,9 +129,20 @@ pub struct InferArgs {
     /// Program, evidence and query.
     #[command(flatten)]
     pub problem: ProblemArgs,
-    /// Write the MAP state of the query atoms here (Alchemy's format: `Atom(A,B) 1`).
+    /// Write the MAP state of the query atoms here (Alchemy's format: `Atom(A,B) 1`); with
+    /// `--marginal`, their probabilities (Tuffy's format: `0.7300<TAB>Atom(A,B)`).
     #[arg(short = 'r', long = "result")]
     pub result: Option<PathBuf>,
+    /// Marginal inference (Alchemy's -ms, Tuffy's -marginal): the probability of every query
+    /// atom by MC-SAT, instead of the MAP state.
+    #[arg(long)]
+    pub marginal: bool,
+    /// Marginal inference: counted samples per chain.
+    #[arg(long, default_value_t = 5000, requires = "marginal")]
+    pub samples: usize,
+    /// Marginal inference: steps per chain before counting.
+    #[arg(long, default_value_t = 500, requires = "marginal")]
+    pub burn_in: usize,
     /// MAP algorithm: qpbo, maxwalksat, maxwalksat-monomials.
     #[arg(long, default_value = "qpbo", value_parser = parse_method)]
     pub method: Method,
@@ -158,7 +171,7 @@ pub struct InferArgs {
     /// Flips per MaxWalkSAT chain.
     #[arg(long, default_value_t = 1_000_000)]
     pub flips: usize,
-    /// MaxWalkSAT chains run in parallel.
+    /// MaxWalkSAT (or, with --marginal, MC-SAT) chains run in parallel.
     #[arg(long, default_value_t = 2)]
     pub chains: usize,
     /// Seed of every random step.
@@ -321,6 +334,9 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
             summary.offset
         );
     }
+    if args.marginal {
+        return infer_marginal(args, &loaded, t0);
+    }
     let mut options = InferOptions {
         method: args.method,
         quadratizer: args.quadratize,
@@ -347,6 +363,49 @@ fn infer(args: &InferArgs) -> anyhow::Result<()> {
             .with_context(|| format!("writing the result file {}", path.display()))?;
     }
     let report = InferReport::new(&loaded, &args.problem.program, &options, &r, total_s);
+    if args.json {
+        super::print_json(&report)?;
+    } else {
+        print!("{}", report.text());
+    }
+    Ok(())
+}
+
+/// `mln infer --marginal`: MC-SAT marginals of the query atoms.
+fn infer_marginal(
+    args: &InferArgs,
+    loaded: &mln::files::Loaded,
+    t0: Instant,
+) -> anyhow::Result<()> {
+    if args.samples == 0 {
+        super::usage!("--samples must be at least 1");
+    }
+    let options = McSatOptions {
+        samples: args.samples,
+        burn_in: args.burn_in,
+        chains: args.chains.max(1),
+        seed: args.seed,
+        ..McSatOptions::default()
+    };
+    let m = mc_sat(&loaded.problem, &options)
+        .with_context(|| format!("marginal inference on {}", args.problem.program.display()))?;
+    if let Some(path) = &args.result {
+        let text = marginal_text(
+            &loaded.program,
+            &loaded.problem,
+            &loaded.query,
+            &m.probabilities,
+        );
+        geodata::fsio::write_atomic(path, text)
+            .with_context(|| format!("writing the result file {}", path.display()))?;
+    }
+    let report = MarginalReport::new(
+        loaded,
+        &args.problem.program,
+        &options,
+        &m,
+        t0.elapsed().as_secs_f64(),
+    );
     if args.json {
         super::print_json(&report)?;
     } else {
