@@ -164,6 +164,17 @@ def mln_infer(
     chains: int = 2,
     seed: int = 0,
 ) -> Tuple[Dict[str, int], Dict[str, Any]]: ...
+def mln_marginals(
+    program: _Path,
+    evidence: Sequence[_Path],
+    queries: Optional[Sequence[str]] = None,
+    *,
+    query_file: Optional[_Path] = None,
+    samples: int = 5000,
+    burn_in: int = 500,
+    chains: int = 2,
+    seed: int = 0,
+) -> Tuple[Dict[str, float], Dict[str, Any]]: ...
 
 # --- semantic map (srtree) ----------------------------------------------------------------
 

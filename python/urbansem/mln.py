@@ -1,9 +1,11 @@
-"""Markov logic networks: MAP inference from Alchemy/Tuffy-style files.
+"""Markov logic networks: MAP and marginal inference from Alchemy/Tuffy-style files.
 
     >>> from urbansem import mln
     >>> values = mln.infer("prog.mln", ["evidence.db"], ["Smokes", "Cancer"])
     >>> values["Smokes(Anna)"]
     1
+    >>> mln.marginals("prog.mln", ["evidence.db"], ["Cancer"])["Cancer(Anna)"]
+    0.6224593312017901
 """
 
 from __future__ import annotations
@@ -12,8 +14,9 @@ import os
 from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 from ._urbansem import mln_infer as _infer
+from ._urbansem import mln_marginals as _marginals
 
-__all__ = ["infer", "infer_report"]
+__all__ = ["infer", "infer_report", "marginals", "marginals_report"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -70,3 +73,44 @@ def infer(
 ) -> Dict[str, int]:
     """MAP inference: each query atom → 0 or 1 (see :func:`infer_report` for the options)."""
     return infer_report(program, evidence, queries, **options)[0]
+
+
+def marginals_report(
+    program: PathLike,
+    evidence: Sequence[PathLike] = (),
+    queries: Optional[Union[str, Sequence[str]]] = None,
+    *,
+    query_file: Optional[PathLike] = None,
+    samples: int = 5000,
+    burn_in: int = 500,
+    chains: int = 2,
+    seed: int = 0,
+) -> Tuple[Dict[str, float], Dict[str, Any]]:
+    """Marginal inference (MC-SAT): ``(probabilities, report)``.
+
+    ``probabilities`` maps every unknown atom of the query predicates to P(true);
+    ``report`` is the dict ``urbansem mln infer --marginal --json`` prints (chain spread,
+    atoms fixed by hard formulas, seconds). The options are the CLI's.
+    """
+    if isinstance(queries, str):
+        queries = [q.strip() for q in queries.split(",") if q.strip()]
+    return _marginals(
+        os.fspath(program),
+        [os.fspath(e) for e in evidence],
+        list(queries) if queries is not None else None,
+        query_file=os.fspath(query_file) if query_file is not None else None,
+        samples=samples,
+        burn_in=burn_in,
+        chains=chains,
+        seed=seed,
+    )
+
+
+def marginals(
+    program: PathLike,
+    evidence: Sequence[PathLike] = (),
+    queries: Optional[Union[str, Sequence[str]]] = None,
+    **options: Any,
+) -> Dict[str, float]:
+    """Marginal inference: each unknown query atom → P(true) (options: :func:`marginals_report`)."""
+    return marginals_report(program, evidence, queries, **options)[0]

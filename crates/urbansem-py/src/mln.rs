@@ -1,9 +1,14 @@
-//! `mln.infer`: MAP inference on a Markov logic network from its files, returning every
-//! query atom's value and the report `urbansem mln infer --json` prints.
+//! `mln.infer` and `mln.marginals`: MAP and marginal inference on a Markov logic network from
+//! its files, returning every query atom's value or probability and the report
+//! `urbansem mln infer [--marginal] --json` prints.
 
 use crate::error::raise;
-use mln::files::{load_and_ground, query_values, InferReport, ProblemFiles, QuerySource};
+use mln::files::{
+    load_and_ground, query_probabilities, query_values, InferReport, MarginalReport, ProblemFiles,
+    QuerySource,
+};
 use mln::infer::{map_inference, InferOptions, Method, Representation};
+use mln::marginal::{mc_sat, McSatOptions};
 use pbo::quadratize::Quadratizer;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -13,7 +18,25 @@ use std::time::Instant;
 
 /// Adds the mln functions to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(mln_infer, m)?)
+    m.add_function(wrap_pyfunction!(mln_infer, m)?)?;
+    m.add_function(wrap_pyfunction!(mln_marginals, m)?)
+}
+
+/// The query as predicates or a query file (exactly one of them).
+fn query_source(
+    queries: Option<Vec<String>>,
+    query_file: Option<PathBuf>,
+) -> PyResult<QuerySource> {
+    match (queries, query_file) {
+        (Some(_), Some(_)) => Err(PyValueError::new_err(
+            "give the query as predicates or as a query file, not both",
+        )),
+        (Some(list), None) => Ok(QuerySource::Predicates(list.join(","))),
+        (None, Some(f)) => Ok(QuerySource::File(f)),
+        (None, None) => Err(PyValueError::new_err(
+            "no query: give query predicates or query_file",
+        )),
+    }
 }
 
 /// MAP inference: `(values, report)`, values mapping each query atom (as written in
@@ -40,20 +63,7 @@ fn mln_infer<'py>(
     chains: usize,
     seed: u64,
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
-    let query = match (queries, query_file) {
-        (Some(_), Some(_)) => {
-            return Err(PyValueError::new_err(
-                "give the query as predicates or as a query file, not both",
-            ))
-        }
-        (Some(list), None) => QuerySource::Predicates(list.join(",")),
-        (None, Some(f)) => QuerySource::File(f),
-        (None, None) => {
-            return Err(PyValueError::new_err(
-                "no query: give query predicates or query_file",
-            ))
-        }
-    };
+    let query = query_source(queries, query_file)?;
     let method: Method = method.parse().map_err(PyValueError::new_err)?;
     let quadratizer: Quadratizer = quadratize.parse().map_err(PyValueError::new_err)?;
     let representation: Representation = representation.parse().map_err(PyValueError::new_err)?;
@@ -94,6 +104,61 @@ fn mln_infer<'py>(
     let d = PyDict::new(py);
     for (atom, value) in values {
         d.set_item(atom, u8::from(value))?;
+    }
+    Ok((d, pythonize::pythonize(py, &report)?))
+}
+
+/// Marginal inference (MC-SAT): `(probabilities, report)`, probabilities mapping each
+/// unknown query atom to P(true), report the dict of `urbansem mln infer --marginal --json`.
+#[pyfunction]
+#[pyo3(name = "mln_marginals", signature = (program, evidence, queries = None, *,
+    query_file = None, samples = 5000, burn_in = 500, chains = 2, seed = 0))]
+#[allow(clippy::too_many_arguments)]
+fn mln_marginals<'py>(
+    py: Python<'py>,
+    program: PathBuf,
+    evidence: Vec<PathBuf>,
+    queries: Option<Vec<String>>,
+    query_file: Option<PathBuf>,
+    samples: usize,
+    burn_in: usize,
+    chains: usize,
+    seed: u64,
+) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyAny>)> {
+    if samples == 0 {
+        return Err(PyValueError::new_err("samples must be at least 1"));
+    }
+    let files = ProblemFiles {
+        program: program.clone(),
+        evidence,
+        query: query_source(queries, query_file)?,
+    };
+    let options = McSatOptions {
+        samples,
+        burn_in,
+        chains: chains.max(1),
+        seed,
+        ..McSatOptions::default()
+    };
+    let (values, report) = py
+        .detach(|| {
+            let t0 = Instant::now();
+            let loaded = load_and_ground(&files).map_err(|e| crate::error::chain(&e))?;
+            let m = mc_sat(&loaded.problem, &options).map_err(|e| crate::error::chain(&e))?;
+            let report =
+                MarginalReport::new(&loaded, &program, &options, &m, t0.elapsed().as_secs_f64());
+            let values = query_probabilities(
+                &loaded.program,
+                &loaded.problem,
+                &loaded.query,
+                &m.probabilities,
+            );
+            Ok::<_, String>((values, report))
+        })
+        .map_err(crate::error::MlnError::new_err)?;
+    let d = PyDict::new(py);
+    for (atom, p) in values {
+        d.set_item(atom, p)?;
     }
     Ok((d, pythonize::pythonize(py, &report)?))
 }
