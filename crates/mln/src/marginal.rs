@@ -246,18 +246,14 @@ impl Flat {
             weight.push(w);
             hard.push(f.hard);
             keep.push(if f.hard { 1.0 } else { -(-w.abs()).exp_m1() });
-            scratch.clear();
             for c in &f.clauses {
                 for &l in c {
                     lits.push(l);
                     occ_count[l.var() as usize] += 1;
-                    scratch.push(l.var());
                 }
                 lit_start.push(lits.len() as u32);
             }
-            scratch.sort_unstable();
-            scratch.dedup();
-            scratch.retain(|&v| fixed[v as usize].is_none());
+            // `scratch` still holds the factor's distinct free variables, sorted.
             vars.extend_from_slice(&scratch);
             var_start.push(vars.len() as u32);
             if scratch.len() >= 2 {
@@ -652,6 +648,7 @@ fn propagate_hard(problem: &GroundProblem) -> Result<Vec<Option<bool>>, Marginal
 /// A world satisfying every hard formula, with the forced atoms set (WalkSAT from random).
 fn hard_world(
     problem: &GroundProblem,
+    hard: &[Factor],
     fixed: &[Option<bool>],
     options: &McSatOptions,
     rng: &mut ChaCha8Rng,
@@ -661,21 +658,12 @@ fn hard_world(
         .iter()
         .map(|f| f.unwrap_or_else(|| rng.gen_bool(0.5)))
         .collect();
-    let hard: Vec<Factor> = problem
-        .factors
-        .iter()
-        .filter(|f| f.hard)
-        .map(|f| Factor {
-            weight: 1.0,
-            clauses: f.clauses.clone(),
-        })
-        .collect();
     if hard.is_empty() {
         return Ok(start);
     }
     let frozen: Vec<bool> = fixed.iter().map(Option::is_some).collect();
     let (x, _) = max_walk_sat_frozen(
-        &hard,
+        hard,
         start.len(),
         Some(&start),
         Some(&frozen),
@@ -703,6 +691,7 @@ fn hard_world(
 /// One chain's estimates and its (proposed, kept) moves.
 fn run_chain(
     problem: &GroundProblem,
+    hard: &[Factor],
     flat: &Flat,
     fixed: &[Option<bool>],
     options: &McSatOptions,
@@ -713,7 +702,7 @@ fn run_chain(
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
         .wrapping_add(chain as u64);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let x = hard_world(problem, fixed, options, &mut rng, seed ^ 0x5A5A_5A5A)?;
+    let x = hard_world(problem, hard, fixed, options, &mut rng, seed ^ 0x5A5A_5A5A)?;
     let mut c = Chain::new(flat, x, rng);
     let pairs = options.sweeps.max(1) * flat.pair_vars.len();
     // Occurrences of the paired atoms per step: an eighth of what one Gibbs sweep visits (a
@@ -761,10 +750,20 @@ pub fn mc_sat(problem: &GroundProblem, options: &McSatOptions) -> Result<Margina
     let t = Instant::now();
     let fixed = propagate_hard(problem)?;
     let flat = Flat::new(problem, &fixed);
+    // The hard formulas as WalkSAT factors, once for every chain's first world.
+    let hard: Vec<Factor> = problem
+        .factors
+        .iter()
+        .filter(|f| f.hard)
+        .map(|f| Factor {
+            weight: 1.0,
+            clauses: f.clauses.clone(),
+        })
+        .collect();
     let chains = options.chains.max(1);
     let runs: Vec<(Vec<f64>, u64, u64)> = (0..chains)
         .into_par_iter()
-        .map(|c| run_chain(problem, &flat, &fixed, options, c))
+        .map(|c| run_chain(problem, &hard, &flat, &fixed, options, c))
         .collect::<Result<_, _>>()?;
     let n = problem.atoms.len();
     let mut probabilities = vec![0.0; n];
