@@ -183,6 +183,9 @@ pub fn mln_infer(data: &[u8]) {
         mln::parse::parse_query_predicates(query.trim(), &program)
     };
     let Ok(query) = query else { return };
+    let Ok(program) = mln::ground::expand_per_constant(program, &evidence, &query) else {
+        return;
+    };
     let options = mln::ground::GroundOptions {
         max_groundings: MLN_INFER_MAX_GROUNDINGS,
     };

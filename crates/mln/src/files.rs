@@ -6,7 +6,7 @@
 //! folders, learnt programs) is the caller's, which gets their text from here.
 
 use crate::generate::{self, GenerateError, GeneratedMln};
-use crate::ground::{ground, GroundError, GroundOptions, GroundProblem};
+use crate::ground::{expand_per_constant, ground, GroundError, GroundOptions, GroundProblem};
 use crate::infer::MapResult;
 use crate::learn::{self, LearnError, LearnOptions, Learnt, Training};
 use crate::marginal::{Marginals, McSatOptions};
@@ -143,6 +143,7 @@ pub fn load_and_ground(files: &ProblemFiles) -> Result<Loaded, FilesError> {
     let t0 = Instant::now();
     let program = read_program(&files.program).map_err(FilesError::Program)?;
     let (evidence, query) = files.read_evidence_and_query(&program)?;
+    let program = expand_per_constant(program, &evidence, &query).map_err(FilesError::Ground)?;
     let parse_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let problem = ground(
@@ -419,10 +420,15 @@ pub fn learn_program(
     files: &ProblemFiles,
     options: &LearnOptions,
 ) -> Result<LearntProgram, FilesError> {
-    let source = read_data(&files.program)?;
-    let program = crate::parse::parse_program(&source, &files.program.display().to_string())
-        .map_err(FilesError::Program)?;
+    let program = read_program(&files.program).map_err(FilesError::Program)?;
     let (database, query) = files.read_evidence_and_query(&program)?;
+    let program = expand_per_constant(program, &database, &query).map_err(FilesError::Ground)?;
+    // The texts of the program's files, for writing the weights in.
+    let sources = program
+        .sources
+        .iter()
+        .map(|s| read_data(Path::new(&s.path)))
+        .collect::<Result<Vec<_>, _>>()?;
     let training = learn::training_problem(
         &program,
         &database,
@@ -431,7 +437,8 @@ pub fn learn_program(
     )
     .map_err(FilesError::Training)?;
     let learnt = learn::learn_weights(&program, &training, options);
-    let text = learn::with_weights(&source, &program, &learnt.weights);
+    let sources: Vec<&str> = sources.iter().map(String::as_str).collect();
+    let text = learn::with_weights(&sources, &program, &learnt.weights);
     Ok(LearntProgram {
         training,
         learnt,

@@ -31,7 +31,7 @@
 
 use crate::ground::{ground, GroundError, GroundOptions, GroundProblem};
 use crate::infer::{map_inference, InferOptions};
-use crate::parse::{Atom, EvidenceAtom, Program, Term, Weight};
+use crate::parse::{Atom, EvidenceAtom, Origin, Program, Term, Weight};
 use rustc_hash::{FxHashMap, FxHashSet};
 use thiserror::Error;
 
@@ -344,28 +344,78 @@ pub fn map_errors(training: &Training, weights: &[f64], infer: &InferOptions) ->
         .count()
 }
 
-/// The program's source text with the soft weights of its formulas replaced (formula i is
-/// on line `program.formulas[i].line`; a leading weight is replaced, an absent one added;
-/// hard formulas and fixed `@w` weights are left as written).
-pub fn with_weights(source: &str, program: &Program, weights: &[Option<f64>]) -> String {
-    let mut lines: Vec<String> = source.lines().map(str::to_owned).collect();
-    for (f, w) in program.formulas.iter().zip(weights) {
-        let (Some(w), false) = (w, f.fixed_weight) else {
-            continue;
-        };
-        let Some(line) = f.line.checked_sub(1).and_then(|i| lines.get_mut(i)) else {
-            continue;
-        };
-        let body = line.trim_start();
-        let first = body.split_whitespace().next().unwrap_or("");
-        let rest = if !first.is_empty() && first.parse::<f64>().is_ok() {
-            body[first.len()..].trim_start()
-        } else {
-            body
-        };
-        *line = format!("{w:.6} {rest}");
+/// The program's text with the soft weights of its formulas replaced. `sources[i]` is the
+/// text of `program.sources[i]`; formula i is on its source's line `program.formulas[i].line`.
+/// A written formula's leading weight is replaced (an absent one added); a line that Alchemy's
+/// `*` or `+` expands is written out as its formulas, one per line, each with its weight;
+/// hard formulas, fixed `@w` weights and `!` constraints are left as written; an
+/// `#include` line is replaced by the included file's text, weights written in.
+pub fn with_weights(sources: &[&str], program: &Program, weights: &[Option<f64>]) -> String {
+    let mut files: Vec<Vec<String>> = sources
+        .iter()
+        .map(|s| s.lines().map(str::to_owned).collect())
+        .collect();
+    // Formulas by (file, line), in program order.
+    let mut by_line: FxHashMap<(usize, usize), Vec<usize>> = FxHashMap::default();
+    for (i, f) in program.formulas.iter().enumerate() {
+        if f.origin != Origin::Block {
+            by_line.entry((f.source, f.line)).or_default().push(i);
+        }
     }
-    let mut out = lines.join("\n");
+    let mut keys: Vec<_> = by_line.keys().copied().collect();
+    keys.sort_unstable();
+    for key in keys {
+        let group = &by_line[&key];
+        let Some(line) = files
+            .get_mut(key.0)
+            .and_then(|f| key.1.checked_sub(1).and_then(|i| f.get_mut(i)))
+        else {
+            continue;
+        };
+        let first = &program.formulas[group[0]];
+        if first.origin == Origin::Written {
+            let (Some(Some(w)), false) = (weights.get(group[0]), first.fixed_weight) else {
+                continue;
+            };
+            let body = line.trim_start();
+            let head = body.split_whitespace().next().unwrap_or("");
+            let rest = if !head.is_empty() && head.parse::<f64>().is_ok() {
+                body[head.len()..].trim_start()
+            } else {
+                body
+            };
+            *line = format!("{w:.6} {rest}");
+            continue;
+        }
+        // An expanded line: its formulas written out.
+        let mut out = Vec::with_capacity(group.len());
+        for &i in group {
+            let f = &program.formulas[i];
+            let text = program.formula_text(&f.formula);
+            out.push(match (f.weight, weights.get(i).copied().flatten()) {
+                (Weight::Hard, _) => format!("{text}."),
+                (Weight::Soft(given), _) if f.fixed_weight => format!("@{given} {text}"),
+                (Weight::Soft(_), Some(w)) => format!("{w:.6} {text}"),
+                (Weight::Soft(given), None) => format!("{given} {text}"),
+            });
+        }
+        *line = out.join("\n");
+    }
+    // Included files into their #include lines, innermost first (a file's includes come
+    // after it in `sources`).
+    for j in (1..files.len()).rev() {
+        let Some((parent, line)) = program.sources.get(j).and_then(|s| s.included_at) else {
+            continue;
+        };
+        let text = std::mem::take(&mut files[j]).join("\n");
+        if let Some(l) = files
+            .get_mut(parent)
+            .and_then(|f| line.checked_sub(1).and_then(|i| f.get_mut(i)))
+        {
+            *l = text;
+        }
+    }
+    let mut out = files.first().map(|f| f.join("\n")).unwrap_or_default();
     out.push('\n');
     out
 }
@@ -503,7 +553,11 @@ mod tests {
         let source =
             "// c\nE(item)\nQ(item)\n1.5 E(x) => Q(x)\nQ(x) ^ E(x)\n@2 Q(x)\nE(x) => !Q(x).\n";
         let program = parse_program(source, "w.mln").unwrap();
-        let text = with_weights(source, &program, &[Some(-0.25), Some(3.0), Some(9.0), None]);
+        let text = with_weights(
+            &[source],
+            &program,
+            &[Some(-0.25), Some(3.0), Some(9.0), None],
+        );
         let back = parse_program(&text, "w2.mln").unwrap();
         let weights: Vec<Weight> = back.formulas.iter().map(|f| f.weight).collect();
         assert_eq!(

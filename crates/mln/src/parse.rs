@@ -9,7 +9,12 @@
 //!   and formulas without weight (weight 0, as Alchemy reads learning input). Connectives, by
 //!   increasing precedence: `<=>`, `=>`, `v`, `^`, `!`; parentheses; `EXIST x,y F` and
 //!   `FORALL x F` (scope to the end of the formula); `x = y` and `x != y`. Tuffy's `@w`
-//!   marks a weight that learning keeps fixed.
+//!   marks a weight that learning keeps fixed;
+//! - Alchemy's `!` after a declared argument type (exactly one true atom per combination of
+//!   the other arguments: two hard formulas, [`Origin::Block`]), `+x` on a variable (one
+//!   formula per constant, written out by [`crate::ground::expand_per_constant`]) and `*P(…)`
+//!   (the formula with every sign of the starred atoms, [`Origin::Expanded`]);
+//! - `#include "file.mln"`, relative to the including file ([`read_program`]).
 //!
 //! Variables start with a lower-case letter; constants start with an upper-case letter or a
 //! digit, or are quoted (`"Networking"`, stored without the quotes). Evidence lines are
@@ -71,6 +76,9 @@ pub struct Predicate {
     pub arg_types: Vec<String>,
     /// Tuffy's `*`: evidence-only, closed world.
     pub closed_world: bool,
+    /// Alchemy's `!` after an argument type: the positions whose values are mutually
+    /// exclusive and exhaustive (exactly one true atom per combination of the other arguments).
+    pub block_args: Vec<usize>,
     /// 1-based line of the declaration.
     pub line: usize,
 }
@@ -136,8 +144,35 @@ pub struct WeightedFormula {
     pub formula: Formula,
     /// Tuffy's `@w`: weight learning must not change this weight.
     pub fixed_weight: bool,
-    /// 1-based line in the program file.
+    /// Alchemy's `+x`: variables that get one formula (and one weight) per constant of their
+    /// type; [`crate::ground::expand_per_constant`] writes those formulas out.
+    pub per_constant: Vec<String>,
+    /// What wrote the formula: the source text, or a construct that expands into formulas.
+    pub origin: Origin,
+    /// Index into [`Program::sources`] of the file the formula is in.
+    pub source: usize,
+    /// 1-based line in that file.
     pub line: usize,
+}
+
+/// Where a formula of a program comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Origin {
+    /// Written as it is.
+    Written,
+    /// One of the formulas of a line with `*` atoms or `+` variables (Alchemy expands them).
+    Expanded,
+    /// The exactly-one constraint of a predicate declared with `!` arguments.
+    Block,
+}
+
+/// A program file and where it was included from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Source {
+    /// The file's label in messages.
+    pub path: String,
+    /// The file and 1-based line of the `#include` that read it (`None` for the main file).
+    pub included_at: Option<(usize, usize)>,
 }
 
 /// A parsed MLN program.
@@ -151,12 +186,112 @@ pub struct Program {
     pub formulas: Vec<WeightedFormula>,
     /// The file label used in messages.
     pub path: String,
+    /// The main file (index 0) and the files it includes, in reading order.
+    pub sources: Vec<Source>,
 }
 
 impl Program {
     /// The index of a predicate by name.
     pub fn predicate_index(&self, name: &str) -> Option<usize> {
         self.predicates.iter().position(|p| p.name == name)
+    }
+
+    /// The label of the file a formula is written in.
+    pub fn file_of(&self, f: &WeightedFormula) -> &str {
+        self.sources.get(f.source).map_or(&self.path, |s| &s.path)
+    }
+
+    /// A formula in the program language (parenthesised so that it reads back the same).
+    pub fn formula_text(&self, f: &Formula) -> String {
+        let mut out = String::new();
+        self.write_formula(f, &mut out);
+        out
+    }
+
+    fn write_formula(&self, f: &Formula, out: &mut String) {
+        // Binding strength: a child binding no tighter than its parent gets parentheses.
+        fn strength(f: &Formula) -> u8 {
+            match f {
+                Formula::Exists(..) | Formula::Forall(..) => 0,
+                Formula::Iff(..) => 1,
+                Formula::Implies(..) => 2,
+                Formula::Or(..) => 3,
+                Formula::And(..) => 4,
+                Formula::Not(..) => 5,
+                Formula::Atom(_) | Formula::Equal(..) => 6,
+            }
+        }
+        let child = |g: &Formula, parent: u8, out: &mut String| {
+            if strength(g) <= parent {
+                out.push('(');
+                self.write_formula(g, out);
+                out.push(')');
+            } else {
+                self.write_formula(g, out);
+            }
+        };
+        let join = |parts: &[Formula], op: &str, parent: u8, out: &mut String| {
+            for (i, g) in parts.iter().enumerate() {
+                if i > 0 {
+                    out.push_str(op);
+                }
+                child(g, parent, out);
+            }
+        };
+        match f {
+            Formula::Atom(a) => {
+                out.push_str(&self.predicates[a.predicate].name);
+                out.push('(');
+                for (i, t) in a.args.iter().enumerate() {
+                    if i > 0 {
+                        out.push_str(", ");
+                    }
+                    write_term(t, out);
+                }
+                out.push(')');
+            }
+            Formula::Equal(a, b) => {
+                write_term(a, out);
+                out.push_str(" = ");
+                write_term(b, out);
+            }
+            Formula::Not(g) => {
+                out.push('!');
+                child(g, 5, out);
+            }
+            Formula::And(v) => join(v, " ^ ", 4, out),
+            Formula::Or(v) => join(v, " v ", 3, out),
+            Formula::Implies(a, b) => join(&[(**a).clone(), (**b).clone()], " => ", 2, out),
+            Formula::Iff(a, b) => join(&[(**a).clone(), (**b).clone()], " <=> ", 1, out),
+            Formula::Exists(vars, g) | Formula::Forall(vars, g) => {
+                out.push_str(if matches!(f, Formula::Exists(..)) {
+                    "EXIST "
+                } else {
+                    "FORALL "
+                });
+                out.push_str(&vars.join(","));
+                out.push(' ');
+                self.write_formula(g, out);
+            }
+        }
+    }
+}
+
+/// A term as written: a constant that would not read back as one is quoted.
+fn write_term(t: &Term, out: &mut String) {
+    match t {
+        Term::Var(v) => out.push_str(v),
+        Term::Const(c) => {
+            let bare = c.starts_with(|ch: char| ch.is_ascii_uppercase() || ch.is_ascii_digit())
+                && c.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_');
+            if bare {
+                out.push_str(c);
+            } else {
+                out.push('"');
+                out.push_str(c);
+                out.push('"');
+            }
+        }
     }
 }
 
@@ -176,7 +311,16 @@ pub struct EvidenceAtom {
 /// Reads a program file.
 pub fn read_program(path: &Path) -> Result<Program, ParseError> {
     let label = path.display().to_string();
-    parse_program(&read(path)?, &label)
+    parse_program_with(&read(path)?, &label, &mut |including, name| {
+        let file = Path::new(including)
+            .parent()
+            .unwrap_or(Path::new(""))
+            .join(name);
+        match std::fs::read_to_string(&file) {
+            Ok(text) => Ok((text, file.display().to_string())),
+            Err(e) => Err(format!("cannot read {}: {e}", file.display())),
+        }
+    })
 }
 
 /// Reads an evidence file for a program.
@@ -363,6 +507,18 @@ fn lex<'s>(
                     i = j + 1;
                     continue;
                 }
+                ':' if next == Some('-') => {
+                    return Err(err(
+                        col,
+                        "Tuffy's datalog rules (`head :- body`) are not supported: write the rule as a hard formula, `body => head.`".into(),
+                    ))
+                }
+                '[' => {
+                    return Err(err(
+                        col,
+                        "Tuffy's bracketed conditions (`[x > 1]`) are not supported".into(),
+                    ))
+                }
                 other => return Err(err(col, format!("unexpected character {other:?}"))),
             }
         };
@@ -435,12 +591,34 @@ struct Cursor<'a, 's> {
     line_len: usize,
     /// Nesting depth of the formula being parsed (parentheses, negations, quantifiers).
     depth: usize,
+    /// A formula (where Alchemy's `+x` and `*P(…)` are allowed), not evidence or a query.
+    formula: bool,
+    /// Variables written `+x`, in order.
+    plus_vars: Vec<String>,
+    /// Atoms parsed so far (their pre-order ordinal).
+    atoms: usize,
+    /// Ordinals of the atoms written `*P(…)`.
+    star_atoms: Vec<usize>,
 }
 
 /// Deepest formula nesting parsed; deeper input is an error, not a stack overflow.
 const MAX_NESTING: usize = 200;
 
 impl<'a, 's> Cursor<'a, 's> {
+    fn new(toks: &'a [Spanned<'s>], path: &'a str, line: usize, line_len: usize) -> Self {
+        Cursor {
+            toks,
+            pos: 0,
+            path,
+            line,
+            line_len,
+            depth: 0,
+            formula: false,
+            plus_vars: Vec::new(),
+            atoms: 0,
+            star_atoms: Vec::new(),
+        }
+    }
     fn peek(&self) -> Option<&'a Tok<'s>> {
         self.toks.get(self.pos).map(|(t, _)| t)
     }
@@ -500,98 +678,171 @@ fn is_variable(name: &str) -> bool {
     name.starts_with(|c: char| c.is_lowercase())
 }
 
-/// Parses a program's text; `path` labels messages.
+/// Parses a program's text; `path` labels messages. `#include` needs files: use
+/// [`read_program`].
 pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
-    let text = &*blank_block_comments(text);
-    let mut program = Program {
-        path: path.to_owned(),
-        ..Program::default()
+    parse_program_with(text, path, &mut |_, _| {
+        Err("`#include` reads a file: read the program from a file".to_owned())
+    })
+}
+
+/// Deepest chain of `#include`s followed (a file that includes itself ends here).
+const MAX_INCLUDE_DEPTH: usize = 16;
+
+/// Opens an included file: (including file's label, the name written) → (text, label), or
+/// why not.
+type Resolver<'r> = dyn FnMut(&str, &str) -> Result<(String, String), String> + 'r;
+
+/// Parses a program whose `#include "name"` lines are read through `resolve`.
+fn parse_program_with(
+    text: &str,
+    path: &str,
+    resolve: &mut Resolver<'_>,
+) -> Result<Program, ParseError> {
+    let mut b = Builder {
+        program: Program {
+            path: path.to_owned(),
+            sources: vec![Source {
+                path: path.to_owned(),
+                included_at: None,
+            }],
+            ..Program::default()
+        },
+        pred_index: FxHashMap::default(),
+        buf: LexBuf::default(),
     };
-    let mut pred_index: PredIndex<'_> = FxHashMap::default();
-    // Every declaration and formula is one line: sized once, so a large program's lists are
-    // not copied on growth (unused capacity is never touched, and is released at the end).
-    let lines = text.bytes().filter(|&b| b == b'\n').count() + 1;
-    program.predicates.reserve(lines);
-    program.formulas.reserve(lines);
-    let (mut buf, mut toks) = (LexBuf::default(), Vec::new());
-    for (i, raw) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let line = strip_comment(raw);
-        if line.trim().is_empty() {
-            continue;
+    b.parse_source(text, 0, resolve, 0)?;
+    b.program.predicates.shrink_to_fit();
+    b.program.formulas.shrink_to_fit();
+    Ok(b.program)
+}
+
+/// A program being read, with what its files share.
+struct Builder {
+    program: Program,
+    pred_index: PredIndex,
+    buf: LexBuf,
+}
+
+/// Most formulas one line may expand into (`*` atoms: 2^k formulas).
+const MAX_STAR_ATOMS: usize = 12;
+
+impl Builder {
+    /// Reads one file's statements into the program.
+    fn parse_source(
+        &mut self,
+        text: &str,
+        source: usize,
+        resolve: &mut Resolver<'_>,
+        depth: usize,
+    ) -> Result<(), ParseError> {
+        let path = self.program.sources[source].path.clone();
+        let path = path.as_str();
+        let text = &*blank_block_comments(text);
+        // Every declaration and formula is one line: sized once, so a large program's lists
+        // are not copied on growth (unused capacity is released at the end).
+        let lines = text.bytes().filter(|&b| b == b'\n').count() + 1;
+        self.program.predicates.reserve(lines);
+        self.program.formulas.reserve(lines);
+        let mut toks = Vec::new();
+        for (i, raw) in text.lines().enumerate() {
+            let line_no = i + 1;
+            let line = strip_comment(raw);
+            if line.trim().is_empty() {
+                continue;
+            }
+            if let Some(rest) = line.trim_start().strip_prefix("#include") {
+                self.include(rest, path, line_no, line, source, resolve, depth)?;
+                continue;
+            }
+            lex(line, path, line_no, &mut self.buf, &mut toks)?;
+            let mut cur = Cursor::new(&toks, path, line_no, self.buf.chars.len());
+            self.statement(&mut cur, source)?;
         }
-        lex(line, path, line_no, &mut buf, &mut toks)?;
-        let mut cur = Cursor {
-            toks: &toks,
-            pos: 0,
-            path,
+        Ok(())
+    }
+
+    /// Reads the file an `#include` line names (`rest`: what follows `#include`).
+    #[allow(clippy::too_many_arguments)]
+    fn include(
+        &mut self,
+        rest: &str,
+        path: &str,
+        line_no: usize,
+        line: &str,
+        source: usize,
+        resolve: &mut Resolver<'_>,
+        depth: usize,
+    ) -> Result<(), ParseError> {
+        let col = line.len() - rest.len() + 1;
+        let error = |message: String| ParseError::Syntax {
+            path: path.to_owned(),
             line: line_no,
-            line_len: buf.chars.len(),
-            depth: 0,
+            col,
+            message,
         };
+        let name = rest.trim();
+        let Some(name) = name
+            .strip_prefix('"')
+            .and_then(|n| n.strip_suffix('"'))
+            .filter(|n| !n.is_empty() && !n.contains('"'))
+        else {
+            return Err(error(format!(
+                "`#include` takes a quoted file name, like #include \"rules.mln\"; found `{name}`"
+            )));
+        };
+        if depth >= MAX_INCLUDE_DEPTH {
+            return Err(error(format!(
+                "`#include \"{name}\"`: includes nested deeper than {MAX_INCLUDE_DEPTH} (does a file include itself?)"
+            )));
+        }
+        let (text, label) =
+            resolve(path, name).map_err(|why| error(format!("`#include \"{name}\"`: {why}")))?;
+        self.program.sources.push(Source {
+            path: label,
+            included_at: Some((source, line_no)),
+        });
+        let child = self.program.sources.len() - 1;
+        self.parse_source(&text, child, resolve, depth + 1)
+    }
+
+    /// Reads one statement: a type domain, a predicate declaration or a formula.
+    fn statement(&mut self, cur: &mut Cursor<'_, '_>, source: usize) -> Result<(), ParseError> {
+        let line_no = cur.line;
         // Type domain: name = { … }
         if let (Some(Tok::Ident(name)), Some(Tok::Eq), Some(Tok::LBrace)) =
             (cur.peek(), cur.peek_at(1), cur.peek_at(2))
         {
             cur.pos += 3;
-            let constants = parse_domain(&mut cur)?;
-            program.types.push(TypeDecl {
+            let constants = parse_domain(cur)?;
+            self.program.types.push(TypeDecl {
                 name: (*name).to_owned(),
                 constants,
                 line: line_no,
             });
-            continue;
+            return Ok(());
         }
-        // Declaration: [*] Name(type, …) with the name not yet declared.
+        if let (Some(Tok::Ident(ty)), Some(Tok::Ident(f)), Some(Tok::LParen)) =
+            (cur.peek(), cur.peek_at(1), cur.peek_at(2))
+        {
+            if !is_or(cur.peek_at(1)) {
+                return Err(cur.error(format!(
+                    "Alchemy's function declarations (`{ty} {f}(…)`) are not supported"
+                )));
+            }
+        }
+        // Declaration: [*] Name(type[!], …) with the name not yet declared.
         let star = cur.peek() == Some(&Tok::Star);
         let decl_at = usize::from(star);
         if let (Some(Tok::Ident(name)), Some(Tok::LParen)) =
             (cur.peek_at(decl_at), cur.peek_at(decl_at + 1))
         {
-            if !pred_index.contains_key(*name) {
+            if !self.pred_index.contains_key(*name) {
                 cur.pos += decl_at + 2;
-                let mut arg_types = Vec::new();
-                loop {
-                    match cur.bump() {
-                        Some(Tok::Ident(t)) => arg_types.push((*t).to_owned()),
-                        _ => {
-                            cur.pos -= 1;
-                            return Err(cur.error(format!(
-                                "expected a type name in the declaration of {name}, found {}",
-                                cur.found()
-                            )));
-                        }
-                    }
-                    if !list_continues(&mut cur, &Tok::RParen)? {
-                        break;
-                    }
-                }
-                if cur.peek().is_some() {
-                    return Err(cur.error(format!(
-                        "unexpected {} after the declaration of {name}",
-                        cur.found()
-                    )));
-                }
-                pred_index.insert(name, program.predicates.len());
-                program.predicates.push(Predicate {
-                    name: (*name).to_owned(),
-                    arg_types,
-                    closed_world: star,
-                    line: line_no,
-                });
-                continue;
+                return self.declaration(cur, name, star, source);
             }
         }
-        if star {
-            return Err(cur.error(format!(
-                "`*` marks a predicate declaration, but {} is already declared",
-                match cur.peek_at(1) {
-                    Some(t) => t.describe(),
-                    None => "nothing".into(),
-                }
-            )));
-        }
-        // Formula: [weight] F [.]
+        // Formula: [@][weight] F [.]
         let mut weight = Weight::Soft(0.0);
         // Tuffy's `@w`: a weight that learning keeps fixed; for inference it is just w.
         let fixed_weight = cur.peek() == Some(&Tok::At);
@@ -604,6 +855,7 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
                 )));
             }
         }
+        let mut weighted = false;
         if let Some(Tok::Number(w)) = cur.peek() {
             let value: f64 = w
                 .parse()
@@ -612,18 +864,15 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
                 return Err(cur.error(format!("weight {w} is not a finite number")));
             }
             weight = Weight::Soft(value);
+            weighted = true;
             cur.pos += 1;
         }
+        let toks = cur.toks;
         let hard = toks.last().map(|(t, _)| t) == Some(&Tok::Dot);
         let end = if hard { toks.len() - 1 } else { toks.len() };
-        let mut body = Cursor {
-            toks: &toks[..end],
-            pos: cur.pos,
-            path,
-            line: line_no,
-            line_len: cur.line_len,
-            depth: 0,
-        };
+        let mut body = Cursor::new(&toks[..end], cur.path, line_no, cur.line_len);
+        body.pos = cur.pos;
+        body.formula = true;
         if hard {
             if matches!(weight, Weight::Soft(w) if w != 0.0) {
                 return Err(cur.error(
@@ -632,23 +881,191 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
             }
             weight = Weight::Hard;
         }
-        let formula = parse_iff(&mut body, &program, &pred_index)?;
+        let formula = parse_iff(&mut body, &self.program, &self.pred_index)?;
         if body.peek().is_some() {
             return Err(body.error(format!(
                 "expected a connective (^ v => <=>) or the end of the formula, found {}",
                 body.found()
             )));
         }
-        program.formulas.push(WeightedFormula {
-            weight,
-            formula,
-            fixed_weight,
-            line: line_no,
-        });
+        if star && !weighted && !hard && matches!(formula, Formula::Atom(_)) {
+            // `*P(t)` alone reads as Tuffy's closed-world mark on a second declaration.
+            return Err(cur.error(format!(
+                "`*` marks a predicate declaration, but {} is already declared",
+                match toks.get(1) {
+                    Some((t, _)) => t.describe(),
+                    None => "nothing".into(),
+                }
+            )));
+        }
+        if body.star_atoms.len() > MAX_STAR_ATOMS {
+            return Err(cur.error(format!(
+                "{} `*` atoms expand into 2^{} formulas; at most {MAX_STAR_ATOMS} are supported",
+                body.star_atoms.len(),
+                body.star_atoms.len()
+            )));
+        }
+        let mut per_constant = std::mem::take(&mut body.plus_vars);
+        per_constant.dedup();
+        let expanded = !body.star_atoms.is_empty() || !per_constant.is_empty();
+        let origin = if expanded {
+            Origin::Expanded
+        } else {
+            Origin::Written
+        };
+        let formulas: Vec<Formula> = if body.star_atoms.is_empty() {
+            vec![formula]
+        } else {
+            (0..1usize << body.star_atoms.len())
+                .map(|mask| negate_starred(&formula, &body.star_atoms, mask, &mut 0))
+                .collect()
+        };
+        for formula in formulas {
+            self.program.formulas.push(WeightedFormula {
+                weight,
+                formula,
+                fixed_weight,
+                per_constant: per_constant.clone(),
+                origin,
+                source,
+                line: line_no,
+            });
+        }
+        Ok(())
     }
-    program.predicates.shrink_to_fit();
-    program.formulas.shrink_to_fit();
-    Ok(program)
+
+    /// Reads a declaration's argument types (after `Name(`) and adds the predicate, with the
+    /// exactly-one constraints of its `!` arguments.
+    fn declaration(
+        &mut self,
+        cur: &mut Cursor<'_, '_>,
+        name: &str,
+        star: bool,
+        source: usize,
+    ) -> Result<(), ParseError> {
+        let mut arg_types = Vec::new();
+        let mut block_args = Vec::new();
+        loop {
+            match cur.bump() {
+                Some(Tok::Ident(t)) => arg_types.push((*t).to_owned()),
+                _ => {
+                    cur.pos -= 1;
+                    return Err(cur.error(format!(
+                        "expected a type name in the declaration of {name}, found {}",
+                        cur.found()
+                    )));
+                }
+            }
+            if cur.peek() == Some(&Tok::Not) {
+                cur.pos += 1;
+                block_args.push(arg_types.len() - 1);
+            }
+            if !list_continues(cur, &Tok::RParen)? {
+                break;
+            }
+        }
+        if cur.peek().is_some() {
+            return Err(cur.error(format!(
+                "unexpected {} after the declaration of {name}",
+                cur.found()
+            )));
+        }
+        let predicate = self.program.predicates.len();
+        self.pred_index.insert(name.into(), predicate);
+        self.program.predicates.push(Predicate {
+            name: name.to_owned(),
+            arg_types,
+            closed_world: star,
+            block_args,
+            line: cur.line,
+        });
+        for formula in block_constraints(&self.program.predicates[predicate], predicate) {
+            self.program.formulas.push(WeightedFormula {
+                weight: Weight::Hard,
+                formula,
+                fixed_weight: false,
+                per_constant: Vec::new(),
+                origin: Origin::Block,
+                source,
+                line: cur.line,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Alchemy's `!` arguments as hard formulas: for every combination of the other arguments,
+/// at least one combination of the `!` arguments is true (`EXIST`), and no two are.
+fn block_constraints(p: &Predicate, predicate: usize) -> Vec<Formula> {
+    if p.block_args.is_empty() {
+        return Vec::new();
+    }
+    let atom = |block_var: &str| {
+        Formula::Atom(Atom {
+            predicate,
+            args: (0..p.arg_types.len())
+                .map(|i| {
+                    Term::Var(if p.block_args.contains(&i) {
+                        format!("{block_var}{i}")
+                    } else {
+                        format!("u{i}")
+                    })
+                })
+                .collect(),
+        })
+    };
+    let vars = |block_var: &str| -> Vec<String> {
+        p.block_args
+            .iter()
+            .map(|i| format!("{block_var}{i}"))
+            .collect()
+    };
+    let at_least_one = Formula::Exists(vars("v"), Box::new(atom("v")));
+    let mut same: Vec<Formula> = vars("v")
+        .into_iter()
+        .zip(vars("w"))
+        .map(|(v, w)| Formula::Equal(Term::Var(v), Term::Var(w)))
+        .collect();
+    let same = if same.len() == 1 {
+        same.swap_remove(0)
+    } else {
+        Formula::And(same)
+    };
+    let at_most_one = Formula::Or(vec![
+        Formula::Not(Box::new(atom("v"))),
+        Formula::Not(Box::new(atom("w"))),
+        same,
+    ]);
+    vec![at_least_one, at_most_one]
+}
+
+/// `f` with the starred atoms (by pre-order atom ordinal) whose bit in `mask` is set negated.
+fn negate_starred(f: &Formula, starred: &[usize], mask: usize, ordinal: &mut usize) -> Formula {
+    let mut go = |g: &Formula| negate_starred(g, starred, mask, ordinal);
+    match f {
+        Formula::Atom(_) => {
+            let k = *ordinal;
+            *ordinal += 1;
+            match starred.iter().position(|&s| s == k) {
+                Some(bit) if mask >> bit & 1 == 1 => Formula::Not(Box::new(f.clone())),
+                _ => f.clone(),
+            }
+        }
+        Formula::Equal(..) => f.clone(),
+        Formula::Not(g) => Formula::Not(Box::new(go(g))),
+        Formula::And(v) => Formula::And(v.iter().map(go).collect()),
+        Formula::Or(v) => Formula::Or(v.iter().map(go).collect()),
+        Formula::Implies(a, b) => {
+            let a = go(a);
+            Formula::Implies(Box::new(a), Box::new(go(b)))
+        }
+        Formula::Iff(a, b) => {
+            let a = go(a);
+            Formula::Iff(Box::new(a), Box::new(go(b)))
+        }
+        Formula::Exists(v, g) => Formula::Exists(v.clone(), Box::new(go(g))),
+        Formula::Forall(v, g) => Formula::Forall(v.clone(), Box::new(go(g))),
+    }
 }
 
 fn parse_domain(cur: &mut Cursor<'_, '_>) -> Result<Vec<String>, ParseError> {
@@ -702,12 +1119,12 @@ fn parse_domain(cur: &mut Cursor<'_, '_>) -> Result<Vec<String>, ParseError> {
 }
 
 /// Predicate names (borrowed from the program text or the parsed program) → index.
-type PredIndex<'n> = FxHashMap<&'n str, usize>;
+type PredIndex = FxHashMap<Box<str>, usize>;
 
 fn parse_iff(
     cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
     let mut left = parse_implies(cur, p, idx)?;
     while cur.peek() == Some(&Tok::Iff) {
@@ -721,7 +1138,7 @@ fn parse_iff(
 fn parse_implies(
     cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
     // `a => b => c` is `a => (b => c)`: read the chain in a loop (a long chain must not
     // recurse once per arrow), then fold from the right.
@@ -748,11 +1165,7 @@ fn is_or(t: Option<&Tok<'_>>) -> bool {
     matches!(t, Some(Tok::Ident(s)) if *s == "v")
 }
 
-fn parse_or(
-    cur: &mut Cursor<'_, '_>,
-    p: &Program,
-    idx: &PredIndex<'_>,
-) -> Result<Formula, ParseError> {
+fn parse_or(cur: &mut Cursor<'_, '_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
     let mut parts = vec![parse_and(cur, p, idx)?];
     while is_or(cur.peek()) {
         cur.pos += 1;
@@ -768,7 +1181,7 @@ fn parse_or(
 fn parse_and(
     cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
     let mut parts = vec![parse_unary(cur, p, idx)?];
     while cur.peek() == Some(&Tok::And) {
@@ -785,7 +1198,7 @@ fn parse_and(
 fn parse_unary(
     cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
     if cur.depth >= MAX_NESTING {
         return Err(cur.error(format!(
@@ -801,7 +1214,7 @@ fn parse_unary(
 fn parse_unary_inner(
     cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
     match cur.peek() {
         Some(Tok::Not) => {
@@ -846,6 +1259,32 @@ fn parse_unary_inner(
 }
 
 fn parse_term(cur: &mut Cursor<'_, '_>) -> Result<Term, ParseError> {
+    if cur.peek() == Some(&Tok::Plus) {
+        if !cur.formula {
+            return Err(cur.error(
+                "`+` (Alchemy's per-constant weights) marks a variable of a formula; it cannot be used here".into(),
+            ));
+        }
+        cur.pos += 1;
+        return match cur.bump() {
+            Some(Tok::Ident(s)) if is_variable(s) => {
+                cur.plus_vars.push((*s).to_owned());
+                Ok(Term::Var((*s).to_owned()))
+            }
+            _ => {
+                cur.pos -= 1;
+                Err(cur.error(format!(
+                    "expected a variable after `+` (per-constant weights), found {}",
+                    cur.found()
+                )))
+            }
+        };
+    }
+    if let (Some(Tok::Ident(f)), Some(Tok::LParen)) = (cur.peek(), cur.peek_at(1)) {
+        return Err(cur.error(format!(
+            "Alchemy's functions (`{f}(…)` as an argument) are not supported"
+        )));
+    }
     match cur.bump() {
         Some(Tok::Ident(s)) if is_variable(s) => Ok(Term::Var((*s).to_owned())),
         Some(Tok::Ident(s)) | Some(Tok::Number(s)) | Some(Tok::Quoted(s)) => {
@@ -864,9 +1303,24 @@ fn parse_term(cur: &mut Cursor<'_, '_>) -> Result<Term, ParseError> {
 fn parse_primary(
     cur: &mut Cursor<'_, '_>,
     p: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
     match (cur.peek(), cur.peek_at(1)) {
+        (Some(Tok::Star), Some(Tok::Ident(_))) if cur.formula => {
+            // Alchemy's `*P(…)`: the formula is expanded with P(…) and with !P(…).
+            cur.pos += 1;
+            cur.star_atoms.push(cur.atoms);
+            let col = cur.col();
+            match parse_primary(cur, p, idx)? {
+                f @ Formula::Atom(_) => Ok(f),
+                _ => Err(ParseError::Syntax {
+                    path: cur.path.to_owned(),
+                    line: cur.line,
+                    col,
+                    message: "`*` must stand before an atom, like *P(x)".into(),
+                }),
+            }
+        }
         (Some(Tok::LParen), _) => {
             cur.pos += 1;
             let f = parse_iff(cur, p, idx)?;
@@ -876,9 +1330,20 @@ fn parse_primary(
         (Some(Tok::Ident(name)), Some(Tok::LParen)) => {
             let col = cur.col();
             let Some(&pred) = idx.get(*name) else {
-                return Err(cur.error(format!(
-                    "undeclared predicate {name}: declare it first, e.g. {name}(type1, type2)"
-                )));
+                let internal = [
+                    "greaterThan",
+                    "lessThan",
+                    "greaterThanEq",
+                    "lessThanEq",
+                    "substr",
+                ];
+                return Err(cur.error(if internal.contains(name) {
+                    format!("Alchemy's internal predicate {name} is not supported")
+                } else {
+                    format!(
+                        "undeclared predicate {name}: declare it first, e.g. {name}(type1, type2)"
+                    )
+                }));
             };
             cur.pos += 2;
             let mut args = Vec::new();
@@ -905,6 +1370,7 @@ fn parse_primary(
                     ),
                 });
             }
+            cur.atoms += 1;
             Ok(Formula::Atom(Atom {
                 predicate: pred,
                 args,
@@ -920,6 +1386,7 @@ fn parse_primary(
         (Some(Tok::Ident(name)), _) => match idx.get(*name) {
             Some(&pred) if p.predicates[pred].arg_types.is_empty() => {
                 cur.pos += 1;
+                cur.atoms += 1;
                 Ok(Formula::Atom(Atom {
                     predicate: pred,
                     args: Vec::new(),
@@ -950,7 +1417,7 @@ fn parse_atom_lines<T>(
         .predicates
         .iter()
         .enumerate()
-        .map(|(i, p)| (p.name.as_str(), i))
+        .map(|(i, p)| (p.name.as_str().into(), i))
         .collect();
     // One entry per line at most: sized once, so a large file's output is not copied on growth.
     let mut out = Vec::with_capacity(text.bytes().filter(|&b| b == b'\n').count() + 1);
@@ -965,14 +1432,7 @@ fn parse_atom_lines<T>(
             continue;
         }
         lex(line, path, i + 1, &mut buf, &mut toks)?;
-        let mut cur = Cursor {
-            toks: &toks,
-            pos: 0,
-            path,
-            line: i + 1,
-            line_len: buf.chars.len(),
-            depth: 0,
-        };
+        let mut cur = Cursor::new(&toks, path, i + 1, buf.chars.len());
         out.push(per_line(&mut cur, &idx)?);
     }
     Ok(out)
@@ -982,7 +1442,7 @@ fn parse_atom_lines<T>(
 fn parse_whole_line_atom(
     cur: &mut Cursor<'_, '_>,
     program: &Program,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
     what: &str,
 ) -> Result<(Atom, usize), ParseError> {
     let col = cur.col();
@@ -1007,7 +1467,7 @@ fn parse_whole_line_atom(
 fn fast_evidence_line(
     line: &str,
     line_no: usize,
-    idx: &PredIndex<'_>,
+    idx: &PredIndex,
     program: &Program,
 ) -> Option<EvidenceAtom> {
     let b = line.trim().as_bytes();

@@ -215,6 +215,7 @@ fn cnf(n: &Nnf) -> Vec<Vec<ClauseLit>> {
 pub(super) fn free_variables(
     f: &Formula,
     program: &Program,
+    path: &str,
     line: usize,
 ) -> Result<(Vec<String>, Vec<String>), GroundError> {
     let mut names: Vec<String> = Vec::new();
@@ -300,7 +301,7 @@ pub(super) fn free_variables(
     );
     if let Some((var, first, second)) = err {
         return Err(GroundError::TypeClash {
-            path: program.path.clone(),
+            path: path.to_owned(),
             line,
             var,
             first,
@@ -313,7 +314,7 @@ pub(super) fn free_variables(
             Some(t) => out_types.push(t),
             None => {
                 return Err(GroundError::UntypedVariable {
-                    path: program.path.clone(),
+                    path: path.to_owned(),
                     line,
                     var: n.clone(),
                 })

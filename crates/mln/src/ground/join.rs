@@ -146,14 +146,14 @@ pub(super) fn ground_formula(
     options: &GroundOptions,
 ) -> Result<FormulaGroundings, GroundError> {
     let program = world.program;
-    let (names, types) = free_variables(&wf.formula, program, wf.line)?;
+    let (names, types) = free_variables(&wf.formula, program, program.file_of(wf), wf.line)?;
     let mut domains: Vec<&[u32]> = Vec::with_capacity(types.len());
     for (n, t) in names.iter().zip(&types) {
         match world.domains.get(t) {
             Some(d) if !d.is_empty() => domains.push(d),
             _ => {
                 return Err(GroundError::EmptyDomain {
-                    path: program.path.clone(),
+                    path: program.file_of(wf).to_owned(),
                     line: wf.line,
                     var: n.clone(),
                     type_name: t.clone(),
@@ -209,7 +209,7 @@ pub(super) fn ground_formula(
                 .saturating_mul(clause_vars.len().max(1)),
         )
         .map_err(|()| GroundError::TooLarge {
-            path: program.path.clone(),
+            path: program.file_of(wf).to_owned(),
             line: wf.line,
             limit: options.max_groundings,
         })?;
@@ -233,7 +233,7 @@ pub(super) fn ground_formula(
             });
             if num_sorted.max(bindings.len()) > options.max_groundings {
                 return Err(GroundError::TooLarge {
-                    path: program.path.clone(),
+                    path: program.file_of(wf).to_owned(),
                     line: wf.line,
                     limit: options.max_groundings,
                 });

@@ -24,10 +24,12 @@
 //! parallel (rayon).
 
 mod cnf;
+mod expand;
 mod join;
 
 use crate::parse::{Atom, EvidenceAtom, Program, Term, Weight};
 use cnf::for_each_atom;
+pub use expand::expand_per_constant;
 use join::{ground_formula, AtomMap, Constants, FormulaGroundings, World};
 use pbo::polynomial::{Literal, Polynomial};
 use rayon::prelude::*;
@@ -86,6 +88,26 @@ pub enum GroundError {
         constant: String,
         /// The declared type.
         type_name: String,
+    },
+    /// A formula with Alchemy's `+x` reached grounding unexpanded.
+    #[error("{path}:{line}: the formula has per-constant variables (`+`): expand them first (mln::ground::expand_per_constant)")]
+    PerConstantUnexpanded {
+        /// Program file.
+        path: String,
+        /// Line of the formula.
+        line: usize,
+    },
+    /// Alchemy's `+x` would write out too many formulas.
+    #[error("{path}:{line}: the per-constant variables (`+`) expand into {count} formulas, more than the {limit} supported")]
+    TooManyPerConstant {
+        /// Program file.
+        path: String,
+        /// Line of the formula.
+        line: usize,
+        /// Formulas the expansion would write.
+        count: u64,
+        /// The limit.
+        limit: usize,
     },
     /// Grounding would exceed the configured size limit.
     #[error("formula at {path}:{line} has more than {limit} groundings; raise GroundOptions::max_groundings if this is intended")]
@@ -288,6 +310,12 @@ pub fn ground(
     query: &[Atom],
     options: &GroundOptions,
 ) -> Result<GroundProblem, GroundError> {
+    if let Some(f) = program.formulas.iter().find(|f| !f.per_constant.is_empty()) {
+        return Err(GroundError::PerConstantUnexpanded {
+            path: program.file_of(f).to_owned(),
+            line: f.line,
+        });
+    }
     let np = program.predicates.len();
     let mut consts = Constants::default();
     // Domains: declared constants, then constants seen in evidence, formulas and queries.
