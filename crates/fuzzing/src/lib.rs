@@ -188,6 +188,7 @@ pub fn mln_infer(data: &[u8]) {
     };
     let options = mln::ground::GroundOptions {
         max_groundings: MLN_INFER_MAX_GROUNDINGS,
+        lazy: true,
     };
     let Ok(problem) = mln::ground::ground(&program, &evidence, "fuzz.db", &query, &options) else {
         return;

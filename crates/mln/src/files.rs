@@ -139,7 +139,10 @@ pub struct Loaded {
 }
 
 /// Reads program, evidence and query and grounds them.
-pub fn load_and_ground(files: &ProblemFiles) -> Result<Loaded, FilesError> {
+pub fn load_and_ground(
+    files: &ProblemFiles,
+    options: &GroundOptions,
+) -> Result<Loaded, FilesError> {
     let t0 = Instant::now();
     let program = read_program(&files.program).map_err(FilesError::Program)?;
     let (evidence, query) = files.read_evidence_and_query(&program)?;
@@ -151,7 +154,7 @@ pub fn load_and_ground(files: &ProblemFiles) -> Result<Loaded, FilesError> {
         &evidence,
         &files.evidence_label("(no evidence)"),
         &query,
-        &GroundOptions::default(),
+        options,
     )
     .map_err(FilesError::Ground)?;
     Ok(Loaded {
@@ -172,6 +175,9 @@ pub struct AnswerAssignment {
     pub atoms: usize,
     /// Answer atoms that are not unknown atoms of the ground problem.
     pub not_unknown: usize,
+    /// True answer atoms of predicates the problem grounded lazily (fixed false there):
+    /// score such an answer on an eagerly grounded problem.
+    pub lazily_false: usize,
 }
 
 /// The assignment an answer's atoms (true ones, `!` ones false) give the unknown atoms of
@@ -186,6 +192,7 @@ pub fn assignment_from_atoms(
         .collect();
     let mut assignment = vec![false; problem.atoms.len()];
     let mut not_unknown = 0usize;
+    let mut lazily_false = 0usize;
     for a in answer {
         let name = format!(
             "{}({})",
@@ -194,13 +201,19 @@ pub fn assignment_from_atoms(
         );
         match index.get(&name) {
             Some(&i) => assignment[i] = a.value,
-            None => not_unknown += 1,
+            None => {
+                not_unknown += 1;
+                if a.value && problem.inactive_predicates.contains(&a.predicate) {
+                    lazily_false += 1;
+                }
+            }
         }
     }
     AnswerAssignment {
         assignment,
         atoms: answer.len(),
         not_unknown,
+        lazily_false,
     }
 }
 
@@ -492,6 +505,8 @@ pub struct InferReport {
     pub persistent_fraction: f64,
     /// Atoms true in the MAP state.
     pub true_atoms: usize,
+    /// Open predicates that lazy grounding left false (no formula gains from them true).
+    pub lazily_false_predicates: Vec<String>,
     /// Seconds per phase.
     pub seconds: InferSeconds,
 }
@@ -520,6 +535,12 @@ impl InferReport {
             higher_order_factors: loaded.problem.higher_order_factors(),
             persistent_fraction: result.persistent_fraction,
             true_atoms: result.assignment.iter().filter(|&&v| v).count(),
+            lazily_false_predicates: loaded
+                .problem
+                .inactive_predicates
+                .iter()
+                .map(|&p| loaded.program.predicates[p].name.clone())
+                .collect(),
             seconds: InferSeconds {
                 parse: loaded.parse_seconds,
                 ground: loaded.ground_seconds,
@@ -542,6 +563,13 @@ impl InferReport {
         let _ = writeln!(out, "cost              {}", self.cost);
         let _ = writeln!(out, "violated weight   {}", self.violated_weight);
         let _ = writeln!(out, "hard violations   {}", self.hard_violations);
+        if !self.lazily_false_predicates.is_empty() {
+            let _ = writeln!(
+                out,
+                "left false        {} (lazy grounding: no formula gains from their atoms true)",
+                self.lazily_false_predicates.join(", ")
+            );
+        }
         if let Some(lb) = self.lower_bound {
             let _ = writeln!(
                 out,
@@ -896,7 +924,7 @@ mod tests {
             evidence: vec![],
             query: QuerySource::Predicates("Cancer".into()),
         };
-        let err = load_and_ground(&files).unwrap_err();
+        let err = load_and_ground(&files, &GroundOptions::default()).unwrap_err();
         assert!(matches!(err, FilesError::Program(_)), "{err}");
         let err = benchmark_problem(Benchmark::Ie, None, 0, Path::new("/nonexistent")).unwrap_err();
         assert!(

@@ -51,6 +51,11 @@ impl std::str::FromStr for Method {
 /// Terms with more negated literals stay in literal form in the multinomial representation.
 const MULTINOMIAL_MAX_NEGATED: usize = 12;
 
+/// Tabu-search flips per chain and residue variable at most: PR's residue is 1 773
+/// components of about 40 atoms, each at its best cost within 2 000 flips (Tuffy's answer's
+/// cost); 20 000 each took 124 s. Components above 200 atoms keep the full budget.
+const TABU_MOVES_PER_VAR: usize = 100;
+
 /// Which polynomial form QSSR minimises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Representation {
@@ -207,6 +212,7 @@ pub fn map_inference(problem: &GroundProblem, options: &InferOptions) -> MapResu
                     qssr.exact_residue_vars,
                     &TabuOptions {
                         moves: options.tabu_moves,
+                        moves_per_var: TABU_MOVES_PER_VAR,
                         chains: options.walksat.chains,
                         seed: options.walksat.seed,
                         ..TabuOptions::default()

@@ -171,6 +171,7 @@ mod tests {
             hard_weight: 1e3,
             constant_violated_weight: 0.0,
             constant_hard_violations: 0,
+            inactive_predicates: Vec::new(),
         }
     }
 

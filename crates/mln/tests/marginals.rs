@@ -25,6 +25,7 @@ fn problem(n: usize, factors: Vec<GroundFactor>) -> GroundProblem {
         hard_weight: 100.0,
         constant_violated_weight: 0.0,
         constant_hard_violations: 0,
+        inactive_predicates: Vec::new(),
     }
 }
 

@@ -39,6 +39,9 @@ use rayon::prelude::*;
 pub struct TabuOptions {
     /// Flips per chain.
     pub moves: usize,
+    /// At most this many flips per chain and variable (0: no cap): a small component of a
+    /// residue with thousands of components needs no full `moves` each.
+    pub moves_per_var: usize,
     /// Independent chains, run in parallel; chain 0 starts from the given assignment, the
     /// others from it with `perturb_fraction` of the variables flipped at random.
     pub chains: usize,
@@ -57,6 +60,7 @@ impl Default for TabuOptions {
     fn default() -> Self {
         TabuOptions {
             moves: 200_000,
+            moves_per_var: 0,
             chains: 2,
             tenure: 0,
             stall_moves: 0,
@@ -390,7 +394,12 @@ fn tabu_chain(
     let mut best = (s.energy(), s.values().to_vec());
     let mut last_best = 0usize;
     const EPS: f64 = 1e-9;
-    for it in 1..=options.moves {
+    let moves = if options.moves_per_var == 0 {
+        options.moves
+    } else {
+        options.moves.min(options.moves_per_var.saturating_mul(n))
+    };
+    for it in 1..=moves {
         while let Some(&(until, v)) = tabu_list.front() {
             if until > it {
                 break;

@@ -7,6 +7,7 @@ use mln::files::{
     load_and_ground, query_probabilities, query_values, InferReport, MarginalReport, ProblemFiles,
     QuerySource,
 };
+use mln::ground::GroundOptions;
 use mln::infer::{map_inference, InferOptions, Method, Representation};
 use mln::marginal::{mc_sat, McSatOptions};
 use pbo::quadratize::Quadratizer;
@@ -88,7 +89,7 @@ fn mln_infer<'py>(
     let (values, report) = py
         .detach(|| {
             let t0 = Instant::now();
-            let loaded = load_and_ground(&files)?;
+            let loaded = load_and_ground(&files, &GroundOptions::map())?;
             let r = map_inference(&loaded.problem, &options);
             let report =
                 InferReport::new(&loaded, &program, &options, &r, t0.elapsed().as_secs_f64());
@@ -143,7 +144,8 @@ fn mln_marginals<'py>(
     let (values, report) = py
         .detach(|| {
             let t0 = Instant::now();
-            let loaded = load_and_ground(&files).map_err(|e| crate::error::chain(&e))?;
+            let loaded = load_and_ground(&files, &GroundOptions::default())
+                .map_err(|e| crate::error::chain(&e))?;
             let m = mc_sat(&loaded.problem, &options).map_err(|e| crate::error::chain(&e))?;
             let report =
                 MarginalReport::new(&loaded, &program, &options, &m, t0.elapsed().as_secs_f64());

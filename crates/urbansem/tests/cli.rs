@@ -926,3 +926,52 @@ fn mln_infer_marginal_writes_tuffy_results_and_json_marginals() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn mln_infer_grounds_lazily_and_names_the_grounding_cap() {
+    // Interaction has a negative prior and occurs only where its default (false) satisfies
+    // the formula: MAP grounds it not at all, as on RockIt's PR.
+    let program = temp_file(
+        "lazy.mln",
+        "interaction(p, p)\nfp(p, f)\n-4 interaction(a, b)\n0.5 fp(a, x)\n\
+         0.2 !interaction(a, b) v fp(b, x) v !fp(a, x)\n",
+    );
+    let evidence = temp_file("lazy.db", "fp(P1, F1)\nfp(P2, F2)\nfp(P3, F1)\n");
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let out = stdout_of(
+            urbansem()
+                .args(["mln", "infer", "--json", "-i"])
+                .arg(&program)
+                .arg("-e")
+                .arg(&evidence)
+                .args(["-q", "interaction,fp"])
+                .args(extra),
+        );
+        serde_json::from_slice(&out).unwrap()
+    };
+    let lazy = run(&[]);
+    assert_eq!(
+        lazy["lazily_false_predicates"],
+        serde_json::json!(["interaction"])
+    );
+    assert_eq!(lazy["ground_atoms"], 3); // fp's 6 atoms less 3 in the evidence
+    let eager = run(&["--eager"]);
+    assert_eq!(eager["lazily_false_predicates"], serde_json::json!([]));
+    assert_eq!(eager["ground_atoms"], 3 + 9);
+    assert_eq!(lazy["violated_weight"], eager["violated_weight"]);
+    // The cap is an option, and the refusal names it with the memory it stands for.
+    let out = urbansem()
+        .args(["mln", "infer", "--eager", "--max-groundings", "4", "-i"])
+        .arg(&program)
+        .arg("-e")
+        .arg(&evidence)
+        .args(["-q", "interaction,fp"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("lazy.mln:3") && err.contains("--max-groundings") && err.contains(" kB"),
+        "{err}"
+    );
+}

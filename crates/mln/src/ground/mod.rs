@@ -26,6 +26,7 @@
 mod cnf;
 mod expand;
 mod join;
+mod lazy;
 
 use crate::parse::{Atom, EvidenceAtom, Program, Term, Weight};
 use cnf::for_each_atom;
@@ -110,7 +111,7 @@ pub enum GroundError {
         limit: usize,
     },
     /// Grounding would exceed the configured size limit.
-    #[error("formula at {path}:{line} has more than {limit} groundings; raise GroundOptions::max_groundings if this is intended")]
+    #[error("formula at {path}:{line} has more than {limit} groundings (at about 100 bytes each, {} or more); raise the cap (`--max-groundings N`, GroundOptions::max_groundings) if the memory is there", memory_text(*limit as f64 * 100.0))]
     TooLarge {
         /// Program file.
         path: String,
@@ -121,6 +122,17 @@ pub enum GroundError {
     },
 }
 
+/// Bytes as a short text: `2.0 GB`, `95 MB`, `3 kB`.
+fn memory_text(bytes: f64) -> String {
+    if bytes >= 1e9 {
+        format!("{:.1} GB", bytes / 1e9)
+    } else if bytes >= 1e6 {
+        format!("{:.0} MB", bytes / 1e6)
+    } else {
+        format!("{:.0} kB", (bytes / 1e3).max(1.0))
+    }
+}
+
 /// Options of [`ground`].
 #[derive(Debug, Clone)]
 pub struct GroundOptions {
@@ -128,12 +140,27 @@ pub struct GroundOptions {
     /// kept grounding costs some 100 bytes, and the largest benchmark, KB, has 0.5 million;
     /// PR's formulas over two open predicates would enumerate billions and exhaust memory).
     pub max_groundings: usize,
+    /// Ground lazily for MAP inference: open predicates that no formula could profit from
+    /// making true are grounded closed-world (a per-predicate active closure); MAP-exact, not for
+    /// marginals or learning.
+    pub lazy: bool,
 }
 
 impl Default for GroundOptions {
     fn default() -> Self {
         GroundOptions {
             max_groundings: 20_000_000,
+            lazy: false,
+        }
+    }
+}
+
+impl GroundOptions {
+    /// The defaults of MAP inference: lazy.
+    pub fn map() -> Self {
+        GroundOptions {
+            lazy: true,
+            ..GroundOptions::default()
         }
     }
 }
@@ -186,6 +213,9 @@ pub struct GroundProblem {
     pub constant_violated_weight: f64,
     /// Hard groundings violated by evidence alone.
     pub constant_hard_violations: usize,
+    /// Open predicates grounded lazily: their atoms outside the evidence are false
+    /// ([`GroundOptions::lazy`]).
+    pub inactive_predicates: Vec<usize>,
 }
 
 /// Cost measures of an assignment (see the module documentation).
@@ -285,6 +315,7 @@ impl GroundProblem {
             hard_weight,
             constant_violated_weight: self.constant_violated_weight,
             constant_hard_violations: self.constant_hard_violations,
+            inactive_predicates: self.inactive_predicates.clone(),
         }
     }
 
@@ -422,6 +453,17 @@ pub fn ground(
             true_facts[*p].push(args.clone());
         }
     }
+    let mut inactive = Vec::new();
+    if options.lazy {
+        let has_true: Vec<bool> = true_facts.iter().map(|f| !f.is_empty()).collect();
+        let active = lazy::active_predicates(program, &open, &has_true);
+        for p in 0..np {
+            if open[p] && !active[p] {
+                open[p] = false;
+                inactive.push(p);
+            }
+        }
+    }
     for facts in &mut true_facts {
         facts.sort_unstable();
     }
@@ -536,6 +578,7 @@ pub fn ground(
         hard_weight,
         constant_violated_weight,
         constant_hard_violations,
+        inactive_predicates: inactive,
     })
 }
 

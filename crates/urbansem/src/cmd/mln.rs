@@ -71,6 +71,19 @@ pub struct ProblemArgs {
     /// A query file: one atom per line (variables allowed; ground atoms list a canopy).
     #[arg(long)]
     pub query_file: Option<PathBuf>,
+    /// Refuse a formula with more groundings than this (about 100 bytes each).
+    #[arg(long, default_value_t = mln::ground::GroundOptions::default().max_groundings, value_name = "N")]
+    pub max_groundings: usize,
+}
+
+impl ProblemArgs {
+    /// Grounding options: the cap, and lazy grounding (MAP-exact) when `lazy`.
+    fn ground_options(&self, lazy: bool) -> mln::ground::GroundOptions {
+        mln::ground::GroundOptions {
+            max_groundings: self.max_groundings,
+            lazy,
+        }
+    }
 }
 
 /// Options of `urbansem mln score`.
@@ -137,6 +150,11 @@ pub struct InferArgs {
     /// atom by MC-SAT, instead of the MAP state.
     #[arg(long)]
     pub marginal: bool,
+    /// MAP: ground every atom of the open predicates. By default, predicates that no formula
+    /// could profit from making true are left false without grounding them (lazy, MAP-exact);
+    /// marginal inference always grounds every atom.
+    #[arg(long)]
+    pub eager: bool,
     /// Marginal inference: counted samples per chain.
     #[arg(long, default_value_t = 5000, requires = "marginal")]
     pub samples: usize,
@@ -239,8 +257,14 @@ impl From<Problem> for Benchmark {
 }
 
 fn score(args: &ScoreArgs) -> anyhow::Result<()> {
-    let loaded = load_and_ground(&args.problem.files()?)?;
-    let a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
+    // Lazily, unless the answer makes an atom true that lazy grounding fixed false.
+    let files = args.problem.files()?;
+    let mut loaded = load_and_ground(&files, &args.problem.ground_options(true))?;
+    let mut a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
+    if a.lazily_false > 0 {
+        loaded = load_and_ground(&files, &args.problem.ground_options(false))?;
+        a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
+    }
     let s = loaded.problem.score(&a.assignment);
     let report = ScoreReport {
         answer: args.answer.display().to_string(),
@@ -315,7 +339,8 @@ fn learn(args: &LearnArgs) -> anyhow::Result<()> {
 
 fn infer(args: &InferArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let loaded = load_and_ground(&args.problem.files()?)?;
+    let lazy = !args.marginal && !args.eager;
+    let loaded = load_and_ground(&args.problem.files()?, &args.problem.ground_options(lazy))?;
     let problem = &loaded.problem;
     if let Some(path) = &args.export_wcnf {
         let mut w = geodata::fsio::AtomicFile::create(path)
