@@ -449,7 +449,8 @@ pub fn learn_program(
         &query,
     )
     .map_err(FilesError::Training)?;
-    let learnt = learn::learn_weights(&program, &training, options);
+    let learnt =
+        learn::learn_weights(&program, &training, options).map_err(FilesError::Training)?;
     let sources: Vec<&str> = sources.iter().map(String::as_str).collect();
     let text = learn::with_weights(&sources, &program, &learnt.weights);
     Ok(LearntProgram {
@@ -782,9 +783,11 @@ pub struct LearnReport {
     pub labels_unused: usize,
     /// Unknown atoms labelled true.
     pub true_atoms: usize,
+    /// The method and its expectations (`perceptron/map`, `perceptron/mcsat`, `newton/mcsat`).
+    pub method: String,
     /// The learning curve.
     pub epochs: Vec<LearnEpoch>,
-    /// Training errors of the MAP state under the starting weights.
+    /// Training errors under the starting weights (MAP state, or rounded MC-SAT marginals).
     pub errors_start: usize,
     /// Training errors of the MAP state under the learnt weights.
     pub errors_learnt: usize,
@@ -808,6 +811,7 @@ impl LearnReport {
             labels: training.labels,
             labels_unused: training.labels_unused,
             true_atoms: training.truth.iter().filter(|&&v| v).count(),
+            method: learnt.method.to_owned(),
             epochs: learnt
                 .epochs
                 .iter()
@@ -827,7 +831,7 @@ impl LearnReport {
     pub fn text(&self) -> String {
         format!(
             "{}: {} unknown atoms ({} true in the labels), {} ground formulas; {} labels ({} not unknown atoms)\n\
-             training errors   {} (MAP under the starting weights) -> {} (MAP under the learnt weights), {} epochs\n\
+             training errors   {} (starting weights) -> {} (MAP under the learnt weights), {} epochs of {}\n\
              wrote {} in {:.2} s\n",
             self.program,
             self.ground_atoms,
@@ -838,6 +842,7 @@ impl LearnReport {
             self.errors_start,
             self.errors_learnt,
             self.epochs.len(),
+            self.method,
             self.output,
             self.seconds
         )

@@ -688,7 +688,11 @@ fn hard_world(
     Ok(x)
 }
 
-/// One chain's estimates and its (proposed, kept) moves.
+/// One chain's estimates, its (proposed, kept) moves, and per counted sample the true
+/// counts of the first `formulas` formulas (none when 0).
+type ChainRun = (Vec<f64>, u64, u64, Vec<Vec<f64>>);
+
+/// Runs one chain (see [`ChainRun`]).
 fn run_chain(
     problem: &GroundProblem,
     hard: &[Factor],
@@ -696,7 +700,8 @@ fn run_chain(
     fixed: &[Option<bool>],
     options: &McSatOptions,
     chain: usize,
-) -> Result<(Vec<f64>, u64, u64), MarginalError> {
+    formulas: usize,
+) -> Result<ChainRun, MarginalError> {
     let seed = options
         .seed
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
@@ -718,6 +723,7 @@ fn run_chain(
             .div_ceil(8)
             .max(4096);
     let mut sums = vec![0.0f64; problem.atoms.len()];
+    let mut counts = Vec::new();
     let (mut proposed, mut kept) = (0u64, 0u64);
     for step in 0..options.burn_in + options.samples {
         let (p, k) = c.slice_step(pairs, budget);
@@ -734,6 +740,9 @@ fn run_chain(
                 c.flip(v);
             }
         }
+        if counting && formulas > 0 {
+            counts.push(problem.true_counts(formulas, &c.x));
+        }
     }
     let denom = options.samples.max(1) as f64;
     let mut p: Vec<f64> = sums.into_iter().map(|s| s / denom).collect();
@@ -742,11 +751,31 @@ fn run_chain(
             p[v] = if *b { 1.0 } else { 0.0 };
         }
     }
-    Ok((p, proposed, kept))
+    Ok((p, proposed, kept, counts))
 }
 
 /// Marginal probabilities of every unknown atom by MC-SAT.
 pub fn mc_sat(problem: &GroundProblem, options: &McSatOptions) -> Result<Marginals, MarginalError> {
+    Ok(sample(problem, options, 0)?.0)
+}
+
+/// MC-SAT's samples as the true counts n_i(x) of the first `formulas` formulas' soft ground
+/// factors (the sufficient statistics of weight learning), one vector per counted sample of
+/// every chain, with the marginals.
+pub fn mc_sat_counts(
+    problem: &GroundProblem,
+    formulas: usize,
+    options: &McSatOptions,
+) -> Result<(Marginals, Vec<Vec<f64>>), MarginalError> {
+    sample(problem, options, formulas.max(1))
+}
+
+/// Runs the chains; counts per sample when `formulas` > 0.
+fn sample(
+    problem: &GroundProblem,
+    options: &McSatOptions,
+    formulas: usize,
+) -> Result<(Marginals, Vec<Vec<f64>>), MarginalError> {
     let t = Instant::now();
     let fixed = propagate_hard(problem)?;
     let flat = Flat::new(problem, &fixed);
@@ -761,10 +790,14 @@ pub fn mc_sat(problem: &GroundProblem, options: &McSatOptions) -> Result<Margina
         })
         .collect();
     let chains = options.chains.max(1);
-    let runs: Vec<(Vec<f64>, u64, u64)> = (0..chains)
+    let mut runs: Vec<ChainRun> = (0..chains)
         .into_par_iter()
-        .map(|c| run_chain(problem, &hard, &flat, &fixed, options, c))
+        .map(|c| run_chain(problem, &hard, &flat, &fixed, options, c, formulas))
         .collect::<Result<_, _>>()?;
+    let counts: Vec<Vec<f64>> = runs
+        .iter_mut()
+        .flat_map(|r| std::mem::take(&mut r.3))
+        .collect();
     let n = problem.atoms.len();
     let mut probabilities = vec![0.0; n];
     let (mut max_spread, mut sum_spread) = (0.0f64, 0.0f64);
@@ -781,7 +814,7 @@ pub fn mc_sat(problem: &GroundProblem, options: &McSatOptions) -> Result<Margina
     }
     let proposed: u64 = runs.iter().map(|r| r.1).sum();
     let kept: u64 = runs.iter().map(|r| r.2).sum();
-    Ok(Marginals {
+    let marginals = Marginals {
         probabilities,
         fixed_atoms: fixed.iter().filter(|f| f.is_some()).count(),
         chains,
@@ -794,7 +827,8 @@ pub fn mc_sat(problem: &GroundProblem, options: &McSatOptions) -> Result<Margina
             kept as f64 / proposed as f64
         },
         seconds: t.elapsed().as_secs_f64(),
-    })
+    };
+    Ok((marginals, counts))
 }
 
 /// The most unknown atoms [`exact_marginals`] enumerates.

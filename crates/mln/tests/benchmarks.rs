@@ -145,7 +145,7 @@ fn kb3_weights_learnt_on_the_labelled_pages_beat_zero_weights() {
     let t = training_problem(&program, &db, "training.db", &query).unwrap();
     assert_eq!(t.labels_unused, 0);
     assert!(t.problem.higher_order_factors() > 0);
-    let learnt = learn_weights(&program, &t, &LearnOptions::default());
+    let learnt = learn_weights(&program, &t, &LearnOptions::default()).unwrap();
     let start = learnt.epochs[0].errors;
     assert!(
         (learnt.final_errors as f64) < 0.8 * start as f64,

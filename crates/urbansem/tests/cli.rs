@@ -975,3 +975,67 @@ fn mln_infer_grounds_lazily_and_names_the_grounding_cap() {
         "{err}"
     );
 }
+
+#[test]
+fn mln_learn_writes_weights_with_each_method() {
+    let program = temp_file("learn.mln", "E(item)\nQ(item)\n0 E(x) => Q(x)\n0 Q(x)\n");
+    // Q follows E on 9 of 10 items with E, and is false on the items without E.
+    let mut db = String::new();
+    for i in 0..20 {
+        if i < 10 {
+            db += &format!("E(I{i})\n");
+            db += &format!("{}Q(I{i})\n", if i == 0 { "!" } else { "" });
+        } else {
+            db += &format!("!Q(I{i})\n");
+        }
+    }
+    let training = temp_file("learn.db", &db);
+    for (method, extra, name) in [
+        ("perceptron", vec![], "perceptron/map"),
+        (
+            "perceptron",
+            vec!["--expectations", "mcsat"],
+            "perceptron/mcsat",
+        ),
+        ("newton", vec!["--samples", "300"], "newton/mcsat"),
+    ] {
+        let out_file = program.with_file_name(format!("learnt-{}.mln", name.replace('/', "-")));
+        let out = stdout_of(
+            urbansem()
+                .args(["mln", "learn", "--json", "--method", method])
+                .args(&extra)
+                .arg("-i")
+                .arg(&program)
+                .arg("-e")
+                .arg(&training)
+                .args(["-q", "Q", "-o"])
+                .arg(&out_file),
+        );
+        let j: serde_json::Value = serde_json::from_slice(&out).unwrap();
+        assert_eq!(j["method"], name);
+        for key in [
+            "epochs",
+            "errors_start",
+            "errors_learnt",
+            "weights",
+            "seconds",
+        ] {
+            assert!(j.get(key).is_some(), "{name}: missing {key}: {j}");
+        }
+        let w = j["weights"][0].as_f64().unwrap();
+        assert!(w > 0.0, "{name}: E => Q weight {w}");
+        assert!(j["errors_learnt"].as_u64().unwrap() <= 1, "{name}: {j}");
+        let text = std::fs::read_to_string(&out_file).unwrap();
+        assert!(text.contains("E(x) => Q(x)"), "{text}");
+    }
+    let err = urbansem()
+        .args(["mln", "learn", "--method", "gradient", "-i"])
+        .arg(&program)
+        .arg("-e")
+        .arg(&training)
+        .args(["-q", "Q", "-o", "/dev/null"])
+        .output()
+        .unwrap();
+    assert!(!err.status.success());
+    assert!(String::from_utf8_lossy(&err.stderr).contains("perceptron or newton"));
+}

@@ -36,7 +36,17 @@ pub struct LearnArgs {
     /// Write the program with the learnt weights here.
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
-    /// Perceptron epochs (one MAP inference each).
+    /// Learning method: perceptron (voted perceptron) or newton (diagonal Newton, Lowd &
+    /// Domingos 2007; always on MC-SAT samples).
+    #[arg(long, default_value = "perceptron", value_parser = parse_learn_method)]
+    pub method: mln::learn::LearnMethod,
+    /// Expected counts of the perceptron from the MAP state (map) or MC-SAT samples (mcsat).
+    #[arg(long, default_value = "map", value_parser = parse_expectations)]
+    pub expectations: mln::learn::Expectations,
+    /// MC-SAT samples per chain and epoch (mcsat expectations, newton).
+    #[arg(long, default_value_t = 500)]
+    pub samples: usize,
+    /// Epochs (one MAP inference or MC-SAT run each).
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
     /// Base learning rate (per formula divided by its number of ground factors).
@@ -206,6 +216,14 @@ pub struct InferArgs {
     pub json: bool,
 }
 
+fn parse_learn_method(s: &str) -> Result<mln::learn::LearnMethod, String> {
+    s.parse()
+}
+
+fn parse_expectations(s: &str) -> Result<mln::learn::Expectations, String> {
+    s.parse()
+}
+
 fn parse_method(s: &str) -> Result<Method, String> {
     s.parse()
 }
@@ -317,9 +335,13 @@ fn learn(args: &LearnArgs) -> anyhow::Result<()> {
         learning_rate: args.rate,
         l2: args.l2,
         start_from_program: args.warm_start,
+        method: args.method,
+        expectations: args.expectations,
         ..mln::learn::LearnOptions::default()
     };
     options.infer.walksat.seed = args.seed;
+    options.mcsat.seed = args.seed;
+    options.mcsat.samples = args.samples;
     let learnt = learn_program(&args.problem.files()?, &options)?;
     geodata::fsio::write_atomic(&args.output, &learnt.text)
         .with_context(|| format!("writing {}", args.output.display()))?;
