@@ -72,16 +72,19 @@ from pracmln import MLN, Database, MLNQuery
 mln = MLN(grammar="StandardGrammar", logic="FirstOrderLogic", mlnfile=args["mln"])
 db = Database(mln, dbfile=args["db"], ignore_unknown_preds=False)
 params = {}
-if args["method"] == "SAMaxWalkSAT" and args["maxsteps"] > 0:
+if args["method"] in ("SAMaxWalkSAT", "MC-SAT") and args["maxsteps"] > 0:
     params["maxsteps"] = args["maxsteps"]
 q = MLNQuery(mln=mln, db=db, method=args["method"], queries=args["queries"], cw=True,
              multicore=False, verbose=False, **params)
 res = q.run()
 t1 = time.time()
 with open(args["answer"], "w") as f:
-    for atom, value in sorted(res.results.items()):
-        if value is not None and value >= 0.5:
-            f.write(atom + "\n")
+    if args.get("marginal"):
+        json.dump({a: v for a, v in res.results.items() if v is not None}, f)
+    else:
+        for atom, value in sorted(res.results.items()):
+            if value is not None and value >= 0.5:
+                f.write(atom + "\n")
 unknown = sum(1 for q in res.queries if res.mrf.evidence[q.gndatom.idx] is None)
 print(json.dumps({"seconds": t1 - t0, "unknown_atoms": unknown}))
 '''
@@ -280,7 +283,8 @@ def convert(prog, evidence, query_file, queries, out_dir):
 # ---------------------------------------------------------------------------------------------
 # Running
 
-def run_pracmln(py, env, work, conv, queries, method, timeout, seed, maxsteps, mem_gb):
+def run_pracmln(py, env, work, conv, queries, method, timeout, seed, maxsteps, mem_gb,
+                marginal=False):
     answer = os.path.join(work, f"pracmln-{method}.answer")
     if os.path.exists(answer):
         os.remove(answer)
@@ -288,7 +292,7 @@ def run_pracmln(py, env, work, conv, queries, method, timeout, seed, maxsteps, m
     with open(cfg, "w") as f:
         json.dump({"mln": os.path.join(conv, "prog.mln"), "db": os.path.join(conv, "evidence.db"),
                    "queries": queries, "method": method, "answer": answer, "seed": seed,
-                   "maxsteps": maxsteps, "mem_gb": mem_gb}, f)
+                   "maxsteps": maxsteps, "mem_gb": mem_gb, "marginal": marginal}, f)
     runner = os.path.join(work, "..", "pracmln_runner.py")
     with open(runner, "w") as f:
         f.write(RUNNER)
@@ -326,6 +330,79 @@ def ours(urbansem, files, seed):
     out = subprocess.check_output([urbansem, "mln", "infer", *qargs(files), "--seed", str(seed),
                                    "--json"], stderr=subprocess.DEVNULL)
     return json.loads(out)
+
+
+def ours_marginal(urbansem, files, seed, samples):
+    out = subprocess.check_output([urbansem, "mln", "infer", *qargs(files), "--seed", str(seed),
+                                   "--marginal", "--samples", str(samples), "--json"],
+                                  stderr=subprocess.DEVNULL)
+    return json.loads(out)
+
+
+def max_diff(a, b):
+    """Largest |a − b| over the atoms both give (names compared without spaces)."""
+    norm = lambda d: {k.replace(" ", "").replace('"', ""): v for k, v in d.items()}
+    a, b = norm(a), norm(b)
+    common = set(a) & set(b)
+    return (max((abs(a[k] - b[k]) for k in common), default=float("nan")), len(common))
+
+
+def marginal_main(args, py, env):
+    """Marginal inference: urbansem's MC-SAT beside pracmln's MC-SAT and, where it finishes,
+    pracmln's exact EnumerationAsk."""
+    methods = args.methods.split(",")
+    rows = []
+    if not args.json:
+        say("| problem | unknown atoms | urbansem s | " +
+            " | ".join(f"pracmln {m}: max abs. diff. from urbansem | s" for m in methods) +
+            " | urbansem's / pracmln MC-SAT's max error vs exact |")
+        say("|---|---|---|" + "---|---|" * len(methods) + "---|")
+    for name in args.problems.split(","):
+        files = problem_files(name, args)
+        pw = os.path.join(args.work, name)
+        os.makedirs(pw, exist_ok=True)
+        conv = os.path.join(pw, "pracmln")
+        pq, notes = convert(files[0], files[1], files[2], files[3], conv)
+        mine = ours_marginal(args.urbansem, files, args.seed, args.samples)
+        row = {"problem": name, "urbansem_seconds": mine["seconds"]["total"],
+               "ground_atoms": mine["ground_atoms"], "conversion": notes}
+        for method in methods:
+            r = run_pracmln(py, env, pw, conv, pq, method, args.timeout, args.seed,
+                            args.samples if method == "MC-SAT" else 0, args.mem_gb,
+                            marginal=True)
+            if r["status"] == "ok":
+                theirs = json.load(open(r["answer"]))
+                r["max_abs_diff"], r["atoms_compared"] = max_diff(mine["marginals"], theirs)
+                r["marginals"] = theirs
+            row[method] = r
+        exact = row.get("EnumerationAsk")
+        if exact and exact["status"] == "ok":
+            row["urbansem_max_error"] = exact["max_abs_diff"]
+            mc = row.get("MC-SAT")
+            if mc and mc["status"] == "ok":
+                row["pracmln_mcsat_max_error"] = max_diff(mc["marginals"], exact["marginals"])[0]
+        for m in methods:
+            row[m].pop("marginals", None)
+        rows.append(row)
+        with open(os.path.join(args.work, "marginal-results.jsonl"), "a") as f:
+            f.write(json.dumps(row) + "\n")
+        if not args.json:
+            cells = [name, str(mine["ground_atoms"]), f"{mine['seconds']['total']:.2f}"]
+            for m in methods:
+                r = row[m]
+                if r["status"] == "ok":
+                    cells += [f"{r['max_abs_diff']:.3f} ({r['atoms_compared']} atoms)",
+                              f"{r['seconds']:.1f}"]
+                else:
+                    cells += fmt(r)
+            if "urbansem_max_error" in row:
+                cells.append(f"{row['urbansem_max_error']:.3f} / "
+                             f"{row.get('pracmln_mcsat_max_error', float('nan')):.3f}")
+            else:
+                cells.append("–")
+            say("| " + " | ".join(cells) + " |")
+    if args.json:
+        print(json.dumps({"problems": rows}, indent=2))
 
 
 def score(urbansem, files, answer):
@@ -370,7 +447,14 @@ def main():
     ap.add_argument("--work", default="target/bench-data/mln-pracmln")
     ap.add_argument("--venv", default="target/pracmln-venv")
     ap.add_argument("--problems", default=DEFAULT_PROBLEMS)
-    ap.add_argument("--methods", default="SAMaxWalkSAT,WCSPInference")
+    ap.add_argument("--methods", default=None,
+                    help="pracmln methods (default SAMaxWalkSAT,WCSPInference; with "
+                         "--marginal MC-SAT,EnumerationAsk)")
+    ap.add_argument("--marginal", action="store_true",
+                    help="marginal inference: urbansem's MC-SAT beside pracmln's MC-SAT and "
+                         "exact EnumerationAsk")
+    ap.add_argument("--samples", type=int, default=5000,
+                    help="--marginal: samples per chain for urbansem, MC-SAT steps for pracmln")
     ap.add_argument("--timeout", type=float, default=600.0,
                     help="seconds per problem and pracmln method, parsing and grounding included")
     ap.add_argument("--maxsteps", type=int, default=0,
@@ -386,6 +470,11 @@ def main():
     args.venv = os.path.abspath(args.venv)
     os.makedirs(args.work, exist_ok=True)
     py, env = ensure_pracmln(args.venv, args.work)
+    if args.methods is None:
+        args.methods = ("MC-SAT,EnumerationAsk" if args.marginal
+                        else "SAMaxWalkSAT,WCSPInference")
+    if args.marginal:
+        return marginal_main(args, py, env)
     methods = args.methods.split(",")
     rows = []
     if not args.json:

@@ -913,14 +913,7 @@ impl Builder {
         } else {
             Origin::Written
         };
-        let formulas: Vec<Formula> = if body.star_atoms.is_empty() {
-            vec![formula]
-        } else {
-            (0..1usize << body.star_atoms.len())
-                .map(|mask| negate_starred(&formula, &body.star_atoms, mask, &mut 0))
-                .collect()
-        };
-        for formula in formulas {
+        let mut push = |formula: Formula| {
             self.program.formulas.push(WeightedFormula {
                 weight,
                 formula,
@@ -929,7 +922,14 @@ impl Builder {
                 origin,
                 source,
                 line: line_no,
-            });
+            })
+        };
+        if body.star_atoms.is_empty() {
+            push(formula);
+        } else {
+            for mask in 0..1usize << body.star_atoms.len() {
+                push(negate_starred(&formula, &body.star_atoms, mask, &mut 0));
+            }
         }
         Ok(())
     }
