@@ -689,6 +689,13 @@ pub fn parse_program(text: &str, path: &str) -> Result<Program, ParseError> {
 /// Deepest chain of `#include`s followed (a file that includes itself ends here).
 const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// Most files one program reads through `#include` (a file that includes itself twice would
+/// otherwise be read 2^16 times).
+const MAX_INCLUDED_FILES: usize = 1_000;
+
+/// Most formulas the `*` atoms of a whole program expand into.
+const MAX_STAR_FORMULAS: usize = 1_000_000;
+
 /// Opens an included file: (including file's label, the name written) → (text, label), or
 /// why not.
 type Resolver<'r> = dyn FnMut(&str, &str) -> Result<(String, String), String> + 'r;
@@ -710,6 +717,7 @@ fn parse_program_with(
         },
         pred_index: FxHashMap::default(),
         buf: LexBuf::default(),
+        star_formulas: 0,
     };
     b.parse_source(text, 0, resolve, 0)?;
     b.program.predicates.shrink_to_fit();
@@ -722,6 +730,8 @@ struct Builder {
     program: Program,
     pred_index: PredIndex,
     buf: LexBuf,
+    /// Formulas written out for `*` atoms so far.
+    star_formulas: usize,
 }
 
 /// Most formulas one line may expand into (`*` atoms: 2^k formulas).
@@ -791,6 +801,11 @@ impl Builder {
                 "`#include` takes a quoted file name, like #include \"rules.mln\"; found `{name}`"
             )));
         };
+        if self.program.sources.len() > MAX_INCLUDED_FILES {
+            return Err(error(format!(
+                "`#include \"{name}\"`: more than {MAX_INCLUDED_FILES} files included in all"
+            )));
+        }
         if depth >= MAX_INCLUDE_DEPTH {
             return Err(error(format!(
                 "`#include \"{name}\"`: includes nested deeper than {MAX_INCLUDE_DEPTH} (does a file include itself?)"
@@ -904,6 +919,14 @@ impl Builder {
                 body.star_atoms.len(),
                 body.star_atoms.len()
             )));
+        }
+        if !body.star_atoms.is_empty() {
+            self.star_formulas += 1 << body.star_atoms.len();
+            if self.star_formulas > MAX_STAR_FORMULAS {
+                return Err(cur.error(format!(
+                    "the `*` atoms of the program expand into more than {MAX_STAR_FORMULAS} formulas"
+                )));
+            }
         }
         let mut per_constant = std::mem::take(&mut body.plus_vars);
         per_constant.dedup();

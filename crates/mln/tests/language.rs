@@ -217,6 +217,20 @@ fn include_reads_relative_files_and_names_them_in_errors() {
     std::fs::write(d.join("loop.mln"), "#include \"loop.mln\"\n").unwrap();
     let e = read_program(&d.join("loop.mln")).unwrap_err().to_string();
     assert!(e.contains("nested deeper"), "{e}");
+    // Files that each include the next twice: 2^12 reads; the total is capped.
+    for i in 0..12 {
+        std::fs::write(
+            d.join(format!("twice{i}.mln")),
+            format!(
+                "#include \"twice{0}.mln\"\n#include \"twice{0}.mln\"\n",
+                i + 1
+            ),
+        )
+        .unwrap();
+    }
+    std::fs::write(d.join("twice12.mln"), "P(t)\n").unwrap();
+    let e = read_program(&d.join("twice0.mln")).unwrap_err().to_string();
+    assert!(e.contains("files included in all"), "{e}");
 }
 
 #[test]

@@ -5,8 +5,8 @@ use super::GroundError;
 use crate::parse::{Atom, EvidenceAtom, Formula, Program, Term};
 use rustc_hash::{FxHashMap, FxHashSet};
 
-/// Most formulas one `+` formula may expand into.
-const MAX_PER_CONSTANT: usize = 100_000;
+/// Most formulas the `+` formulas of a program may expand into, all together.
+const MAX_PER_CONSTANT: usize = 1_000_000;
 
 /// The program with every formula that has `+` variables replaced by one formula per
 /// combination of their constants (the type's declared constants, then those in evidence,
@@ -20,6 +20,7 @@ pub fn expand_per_constant(
         return Ok(program);
     }
     let constants = type_constants(&program, evidence, query);
+    let mut written: u64 = 0;
     let mut formulas = Vec::with_capacity(program.formulas.len());
     for f in &program.formulas {
         if f.per_constant.is_empty() {
@@ -52,11 +53,12 @@ pub fn expand_per_constant(
             count = count.saturating_mul(domain.len() as u64);
             choices.push((v, domain));
         }
-        if count > MAX_PER_CONSTANT as u64 {
+        written = written.saturating_add(count);
+        if written > MAX_PER_CONSTANT as u64 {
             return Err(GroundError::TooManyPerConstant {
                 path: path.to_owned(),
                 line: f.line,
-                count,
+                count: written,
                 limit: MAX_PER_CONSTANT,
             });
         }

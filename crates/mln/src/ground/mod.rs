@@ -99,7 +99,7 @@ pub enum GroundError {
         line: usize,
     },
     /// Alchemy's `+x` would write out too many formulas.
-    #[error("{path}:{line}: the per-constant variables (`+`) expand into {count} formulas, more than the {limit} supported")]
+    #[error("{path}:{line}: the per-constant variables (`+`) of the program expand into {count} formulas by this one, more than the {limit} supported")]
     TooManyPerConstant {
         /// Program file.
         path: String,
