@@ -1,7 +1,7 @@
 //! GRD: generalized roof duality restricted to the diagonal (Kahl & Strandmark,
-//! "Generalized roof duality for pseudo-Boolean optimization", ICCV 2011,
-//! doi:10.1109/ICCV.2011.6126333; and "Generalized roof duality", Discrete Applied
-//! Mathematics 160(16–17), 2012, doi:10.1016/j.dam.2012.06.009).
+//! "Generalized roof duality for pseudo-Boolean optimization", ICCV 2011; and
+//! "Generalized roof duality", Discrete Applied Mathematics 160(16–17):2419–2434, 2012;
+//! reference code PetterS/submodular).
 //!
 //! GRD relaxes f(x) to a symmetric submodular g(x, y) with g(x, x̄) = f(x). Following the
 //! authors' code (PetterS/submodular, `PseudoBoolean_create_g.cpp`), each cubic or quartic
@@ -29,6 +29,11 @@
 //! - No iteration (label, substitute, re-solve): QSSR's rounds do that outside.
 //! - Terms of degree > 4 (as literal monomials) are reduced by ISH and take no part in
 //!   the LP. Terms of degree ≤ 4 are expanded into positive literals (≤ 16 monomials).
+//!
+//! - ρ is returned with every quadratic term expanded into positive literals, so each
+//!   variable pair is one QPBO edge: QPBO keeps x_u·x_v and x̄_u·x_v as two parallel edges
+//!   and its bound on that form is weaker (−4 instead of the tight −2 on the paper's cubic
+//!   example).
 //!
 //! Cost: one LP with 4 variables per cubic, 8 per quartic and one per pair, plus
 //! O(2^d·d²) output terms per monomial.

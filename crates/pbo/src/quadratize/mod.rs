@@ -14,7 +14,7 @@
 //! - [`fix`]: Fix, Gruber, Boros & Zabih (ICCV 2011, doi:10.1109/ICCV.2011.6126347),
 //!   positive terms sharing a literal reduced together with one shared slack.
 //!
-//! - [`grd`]: Kahl & Strandmark (ICCV 2011, doi:10.1109/ICCV.2011.6126333), generalized
+//! - [`grd`]: Kahl & Strandmark (ICCV 2011; DAM 160(16–17), 2012), generalized
 //!   roof duality on the diagonal: each cubic/quartic term split over sign-restricted types
 //!   chosen by the paper's LP (ISH for degree ≥ 5).
 //!
