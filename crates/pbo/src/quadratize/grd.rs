@@ -114,6 +114,11 @@ fn contributions(d: usize, mask: u32, sign: f64) -> Vec<((usize, usize), f64, f6
 
 /// Quadratizes `f`: degree-3/4 monomials by GRD with LP-chosen types, the rest by ISH.
 pub fn quadratize(f: &Polynomial) -> Quadratization {
+    quadratize_with_lp_limit(f, LP_MAX_TERMS)
+}
+
+/// [`quadratize`] with groups of more than `lp_max_terms` terms solved term by term.
+fn quadratize_with_lp_limit(f: &Polynomial, lp_max_terms: usize) -> Quadratization {
     let mut low = Polynomial::new(f.num_vars());
     low.add_constant(f.constant());
     let mut pool = Polynomial::new(f.num_vars());
@@ -144,7 +149,7 @@ pub fn quadratize(f: &Polynomial) -> Quadratization {
         }
     }
     terms.sort_by(|x, y| x.vars.cmp(&y.vars));
-    let weights = choose_weights(&terms, &pair_coeff);
+    let weights = choose_weights(&terms, &pair_coeff, lp_max_terms);
     for (term, w) in terms.iter().zip(&weights) {
         emit(&mut pool, term, w);
     }
@@ -189,7 +194,11 @@ fn emit(pool: &mut Polynomial, term: &Term, weights: &[f64]) {
 }
 
 /// The weights w_φ of every term (in [`type_masks`] order), summing to the term's a.
-fn choose_weights(terms: &[Term], pair_coeff: &FxHashMap<Pair, f64>) -> Vec<Vec<f64>> {
+fn choose_weights(
+    terms: &[Term],
+    pair_coeff: &FxHashMap<Pair, f64>,
+    lp_max_terms: usize,
+) -> Vec<Vec<f64>> {
     // Connected groups: terms sharing a pair.
     let mut parent: Vec<usize> = (0..terms.len()).collect();
     fn root(parent: &mut [usize], mut v: usize) -> usize {
@@ -222,7 +231,7 @@ fn choose_weights(terms: &[Term], pair_coeff: &FxHashMap<Pair, f64>) -> Vec<Vec<
     let mut cache: FxHashMap<Vec<u64>, Vec<f64>> = FxHashMap::default();
     let no_offsets: FxHashMap<Pair, (f64, f64)> = FxHashMap::default();
     for group in groups {
-        if group.len() == 1 || group.len() > LP_MAX_TERMS {
+        if group.len() == 1 || group.len() > lp_max_terms {
             // Term by term, each seeing the rows its predecessors used.
             let mut used: FxHashMap<Pair, (f64, f64)> = FxHashMap::default();
             for &t in &group {
@@ -517,6 +526,20 @@ mod tests {
             let q = quadratize(&f);
             prop_assert!(q.num_slacks() <= 20);
             assert_exact(&f, &q)?;
+            let (min, _) = f.brute_force_minimum();
+            prop_assert!(qpbo_bound(&q) <= min + 1e-9);
+        }
+
+        /// The term-by-term path (used above [`LP_MAX_TERMS`]) is exact as well, and its
+        /// bound is below the minimum.
+        #[test]
+        fn term_by_term_path_is_exact(seed in any::<u64>(), n in 3usize..=6, quartic in any::<bool>()) {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let f = random_multilinear(&mut rng, n, quartic);
+            let q = quadratize_with_lp_limit(&f, 0);
+            if q.num_slacks() <= 12 {
+                assert_exact(&f, &q)?;
+            }
             let (min, _) = f.brute_force_minimum();
             prop_assert!(qpbo_bound(&q) <= min + 1e-9);
         }
