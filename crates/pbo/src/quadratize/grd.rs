@@ -22,8 +22,9 @@
 //! - Terms are coupled only through shared pairs, so the LP is solved per connected group
 //!   of terms; a group with more than [`LP_MAX_TERMS`] terms is solved term by term
 //!   instead (each term's LP sees the pair rows left by the terms before it, in
-//!   lexicographic order), which replaces the authors' greedy heuristic. Single-term LPs
-//!   are cached by their data, so repeated patterns cost nothing.
+//!   lexicographic order), which replaces the authors' greedy heuristic. LPs are cached
+//!   by their data (a group's with its variables renamed), so repeated patterns cost
+//!   nothing.
 //! - The LP's objective is the paper's proxy g(0, 0), not min g; ties are resolved by
 //!   microlp's deterministic simplex on a fixed variable order.
 //! - No iteration (label, substitute, re-solve): QSSR's rounds do that outside.
@@ -230,6 +231,7 @@ fn choose_weights(
     let mut weights: Vec<Vec<f64>> = vec![Vec::new(); terms.len()];
     let mut cache: FxHashMap<Vec<u64>, Vec<f64>> = FxHashMap::default();
     let no_offsets: FxHashMap<Pair, (f64, f64)> = FxHashMap::default();
+    let mut group_cache: FxHashMap<Vec<u64>, Vec<Vec<f64>>> = FxHashMap::default();
     for group in groups {
         if group.len() == 1 || group.len() > lp_max_terms {
             // Term by term, each seeing the rows its predecessors used.
@@ -250,7 +252,16 @@ fn choose_weights(
             }
         } else {
             let refs: Vec<&Term> = group.iter().map(|&t| &terms[t]).collect();
-            for (&t, w) in group.iter().zip(solve_lp(&refs, pair_coeff, &no_offsets)) {
+            let key = group_key(&refs, pair_coeff);
+            let ws = match group_cache.get(&key) {
+                Some(ws) => ws.clone(),
+                None => {
+                    let ws = solve_lp(&refs, pair_coeff, &no_offsets);
+                    group_cache.insert(key, ws.clone());
+                    ws
+                }
+            };
+            for (&t, w) in group.iter().zip(ws) {
                 weights[t] = w;
             }
         }
@@ -270,6 +281,26 @@ fn cache_key(
             let (b, g) = used.get(&(u, v)).copied().unwrap_or((0.0, 0.0));
             let a = pair_coeff.get(&(u, v)).copied().unwrap_or(0.0);
             key.extend([a.to_bits(), b.to_bits(), g.to_bits()]);
+        }
+    }
+    key
+}
+
+/// The LP data of a group with its variables renamed by first appearance: two groups with
+/// the same key have the same LP (up to the renaming), hence the same solution.
+fn group_key(group: &[&Term], pair_coeff: &FxHashMap<Pair, f64>) -> Vec<u64> {
+    let mut rename: FxHashMap<u32, u64> = FxHashMap::default();
+    let mut key = Vec::new();
+    for term in group {
+        key.extend([term.vars.len() as u64, term.a.to_bits()]);
+        for &v in &term.vars {
+            let next = rename.len() as u64;
+            key.push(*rename.entry(v).or_insert(next));
+        }
+        for (i, &u) in term.vars.iter().enumerate() {
+            for &v in &term.vars[i + 1..] {
+                key.push(pair_coeff.get(&(u, v)).copied().unwrap_or(0.0).to_bits());
+            }
         }
     }
     key
@@ -516,6 +547,50 @@ mod tests {
         for method in [Quadratizer::Ish, Quadratizer::Asm, Quadratizer::Fix] {
             assert!((bound_of(&f, method) + 3.0).abs() < 1e-9, "{method}");
         }
+    }
+
+    #[test]
+    fn cached_group_solution_is_reused_on_a_renamed_copy() {
+        // Two disjoint copies of the paper's cubic example (a 1-term group with 3 pairs)
+        // plus a 2-term group copied once: the second copies come from the caches and
+        // must be as tight as the first (bound = sum of the copies' bounds).
+        let paper = |o: u32| -> Vec<(Vec<u32>, f64)> {
+            vec![
+                (vec![o], -2.0),
+                (vec![o + 1], 1.0),
+                (vec![o + 2], -1.0),
+                (vec![o, o + 1], 4.0),
+                (vec![o, o + 2], 4.0),
+                (vec![o + 1, o + 2], -2.0),
+                (vec![o, o + 1, o + 2], -2.0),
+            ]
+        };
+        let pair = |o: u32| -> Vec<(Vec<u32>, f64)> {
+            vec![
+                (vec![o, o + 1, o + 2], 3.0),
+                (vec![o, o + 1, o + 3], -2.0),
+                (vec![o + 2], 1.0),
+            ]
+        };
+        let build = |parts: &[Vec<(Vec<u32>, f64)>], n: usize| {
+            let mut f = Polynomial::new(n);
+            for (vars, a) in parts.iter().flatten() {
+                let lits: Vec<Literal> = vars.iter().map(|&v| Literal::pos(v)).collect();
+                f.add_term(*a, &lits);
+            }
+            f
+        };
+        let one = bound_of(&build(&[paper(0), pair(3)], 7), Quadratizer::Grd);
+        let f = build(&[paper(0), pair(3), paper(7), pair(10)], 14);
+        let q = quadratize(&f);
+        assert!(
+            (qpbo_bound(&q) - 2.0 * one).abs() < 1e-9,
+            "{} vs 2·{one}",
+            qpbo_bound(&q)
+        );
+        let two = build(&[paper(0), pair(3)], 7);
+        assert_exact(&two, &quadratize(&two)).unwrap();
+        assert!((one + 2.0 - bound_of(&build(&[pair(0)], 4), Quadratizer::Grd)).abs() < 1e-9);
     }
 
     proptest! {
