@@ -36,7 +36,7 @@ pub struct MlnBenchArgs {
     /// MAP methods to run per set (comma-separated): qpbo, maxwalksat, maxwalksat-monomials.
     #[arg(long, value_delimiter = ',', default_value = "qpbo", value_parser = parse_mln_method)]
     methods: Vec<mln::infer::Method>,
-    /// Quadratizers for the qpbo method (comma-separated): ish, asm, fix.
+    /// Quadratizers for the qpbo method (comma-separated): ish, asm, fix, grd.
     #[arg(long, value_delimiter = ',', default_value = "asm", value_parser = parse_quadratizer)]
     quadratizers: Vec<Quadratizer>,
     /// Flips per MaxWalkSAT chain (maxwalksat methods).

@@ -174,7 +174,7 @@ pub struct InferArgs {
     /// MAP algorithm: qpbo, maxwalksat, maxwalksat-monomials.
     #[arg(long, default_value = "qpbo", value_parser = parse_method)]
     pub method: Method,
-    /// Order reduction for the qpbo method: ish, asm, fix.
+    /// Order reduction for the qpbo method: ish, asm, fix, grd.
     #[arg(long, default_value = "asm", value_parser = parse_quadratizer)]
     pub quadratize: Quadratizer,
     /// Run probing (QPBO-P) in the QSSR rounds of the qpbo method (slower; rarely lowers the cost).

@@ -19,7 +19,7 @@ pub enum PboCommand {
 pub struct SolveArgs {
     /// The pseudo-Boolean competition .opb file (objective only, non-linear terms allowed).
     pub file: PathBuf,
-    /// Order reduction for terms of degree ≥ 3.
+    /// Order reduction for terms of degree ≥ 3: ish, asm, fix, grd.
     #[arg(long, default_value = "ish", value_parser = parse_quadratizer)]
     pub quadratize: Quadratizer,
     /// Run probing (QPBO-P) in every round.
