@@ -219,7 +219,7 @@ impl std::str::FromStr for LearnMethod {
     }
 }
 
-/// Where the expected counts E_w[n_i] come from.
+/// Where the expected counts E_w\[nᵢ\] come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Expectations {
     /// The counts of the MAP state (the voted perceptron's approximation).
