@@ -326,17 +326,22 @@ def qargs(files):
     return a + (["--query-file", query_file] if query_file else ["-q", queries])
 
 
-def ours(urbansem, files, seed):
+def ours(urbansem, files, seed, extra=()):
+    """`urbansem mln infer … --json` (MAP, or with extra `--marginal …`)."""
     out = subprocess.check_output([urbansem, "mln", "infer", *qargs(files), "--seed", str(seed),
-                                   "--json"], stderr=subprocess.DEVNULL)
+                                   *extra, "--json"], stderr=subprocess.DEVNULL)
     return json.loads(out)
 
 
-def ours_marginal(urbansem, files, seed, samples):
-    out = subprocess.check_output([urbansem, "mln", "infer", *qargs(files), "--seed", str(seed),
-                                   "--marginal", "--samples", str(samples), "--json"],
-                                  stderr=subprocess.DEVNULL)
-    return json.loads(out)
+def prepare(name, args):
+    """A problem's files, its work folder, and its conversion to pracmln (folder, queries,
+    notes)."""
+    files = problem_files(name, args)
+    pw = os.path.join(args.work, name)
+    os.makedirs(pw, exist_ok=True)
+    conv = os.path.join(pw, "pracmln")
+    pq, notes = convert(files[0], files[1], files[2], files[3], conv)
+    return files, pw, conv, pq, notes
 
 
 def max_diff(a, b):
@@ -358,12 +363,9 @@ def marginal_main(args, py, env):
             " | urbansem's / pracmln MC-SAT's max error vs exact |")
         say("|---|---|---|" + "---|---|" * len(methods) + "---|")
     for name in args.problems.split(","):
-        files = problem_files(name, args)
-        pw = os.path.join(args.work, name)
-        os.makedirs(pw, exist_ok=True)
-        conv = os.path.join(pw, "pracmln")
-        pq, notes = convert(files[0], files[1], files[2], files[3], conv)
-        mine = ours_marginal(args.urbansem, files, args.seed, args.samples)
+        files, pw, conv, pq, notes = prepare(name, args)
+        mine = ours(args.urbansem, files, args.seed,
+                    ("--marginal", "--samples", str(args.samples)))
         row = {"problem": name, "urbansem_seconds": mine["seconds"]["total"],
                "ground_atoms": mine["ground_atoms"], "conversion": notes}
         for method in methods:
@@ -482,11 +484,7 @@ def main():
             " | ".join(f"pracmln {m} cost | s" for m in methods) + " |")
         say("|---|---|---|---|" + "---|---|" * len(methods))
     for name in args.problems.split(","):
-        files = problem_files(name, args)
-        pw = os.path.join(args.work, name)
-        os.makedirs(pw, exist_ok=True)
-        conv = os.path.join(pw, "pracmln")
-        pq, notes = convert(files[0], files[1], files[2], files[3], conv)
+        files, pw, conv, pq, notes = prepare(name, args)
         mine = ours(args.urbansem, files, args.seed)
         row = {"problem": name, "urbansem_cost": mine["cost"],
                "urbansem_lower_bound": mine["lower_bound"],

@@ -9,7 +9,7 @@ use crate::pbo::fmt_opt;
 use anyhow::{bail, Context};
 use clap::Args;
 use mln::files::{
-    benchmark_problem, learn_program, load_and_ground, read_answer, AnswerAssignment, Benchmark,
+    benchmark_problem, learn_program, load_and_ground, score_answer, AnswerAssignment, Benchmark,
     LearntProgram, Loaded, ProblemFiles, QuerySource,
 };
 use mln::ground::GroundOptions;
@@ -298,34 +298,28 @@ pub fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
             let mut reference = serde_json::Value::Null;
             for run in 0..args.repeat.max(1) {
                 let t0 = Instant::now();
+                let loaded = load_and_ground(&problem_files, &grounding)
+                    .with_context(|| format!("set {}", set.name))?;
+                let r = map_inference(&loaded.problem, &options);
+                let total_s = t0.elapsed().as_secs_f64();
                 let Loaded {
-                    program,
                     problem,
                     parse_seconds: parse_s,
                     ground_seconds: ground_s,
                     ..
-                } = load_and_ground(&problem_files, &grounding)
-                    .with_context(|| format!("set {}", set.name))?;
-                let r = map_inference(&problem, &options);
-                let total_s = t0.elapsed().as_secs_f64();
+                } = &loaded;
                 if run == 0 {
                     if let Some(rel) = set.reference {
                         let path = args.data.join(rel);
-                        let mut answer = read_answer(&program, &problem, &path)?;
-                        let mut eager = None;
-                        if answer.lazily_false > 0 {
-                            // The answer sets atoms lazy grounding left out: score it eagerly.
-                            let e = load_and_ground(&problem_files, &GroundOptions::default())?;
-                            answer = read_answer(&e.program, &e.problem, &path)?;
-                            eager = Some(e.problem);
-                        }
-                        let AnswerAssignment {
-                            assignment: x,
-                            atoms: lines,
-                            not_unknown,
-                            ..
-                        } = answer;
-                        let s = eager.as_ref().unwrap_or(&problem).score(&x);
+                        // Scored eagerly if it sets atoms lazy grounding left out.
+                        let (
+                            AnswerAssignment {
+                                atoms: lines,
+                                not_unknown,
+                                ..
+                            },
+                            s,
+                        ) = score_answer(&problem_files, &loaded, &path, grounding.max_groundings)?;
                         reference = serde_json::json!({
                             "answer": path.display().to_string(),
                             "answer_atoms": lines,

@@ -6,12 +6,14 @@
 //! folders, learnt programs) is the caller's, which gets their text from here.
 
 use crate::generate::{self, GenerateError, GeneratedMln};
-use crate::ground::{expand_per_constant, ground, GroundError, GroundOptions, GroundProblem};
+use crate::ground::{
+    expand_per_constant, ground, GroundError, GroundOptions, GroundProblem, Scores,
+};
 use crate::infer::MapResult;
 use crate::learn::{self, LearnError, LearnOptions, Learnt, Training};
 use crate::marginal::{Marginals, McSatOptions};
 use crate::parse::{
-    parse_query_predicates, read_evidence, read_program, read_query, Atom, EvidenceAtom,
+    parse_query_predicates, read_evidence, read_program_sources, read_query, Atom, EvidenceAtom,
     ParseError, Program,
 };
 use serde::Serialize;
@@ -138,15 +140,49 @@ pub struct Loaded {
     pub ground_seconds: f64,
 }
 
+impl ProblemFiles {
+    /// Reads program, evidence and query, with the program's `+` formulas written out for
+    /// the evidence's constants; also the text of every program file (`Program::sources`).
+    pub fn read(&self) -> Result<ReadProblem, FilesError> {
+        let (program, sources) =
+            read_program_sources(&self.program).map_err(FilesError::Program)?;
+        let (evidence, query) = self.read_evidence_and_query(&program)?;
+        let program =
+            expand_per_constant(program, &evidence, &query).map_err(FilesError::Ground)?;
+        Ok(ReadProblem {
+            program,
+            sources,
+            evidence,
+            query,
+        })
+    }
+}
+
+/// A problem's files as read ([`ProblemFiles::read`]).
+#[derive(Debug, Clone)]
+pub struct ReadProblem {
+    /// The program, `+` formulas written out.
+    pub program: Program,
+    /// The text of each of `program.sources`.
+    pub sources: Vec<String>,
+    /// The evidence (or training database).
+    pub evidence: Vec<EvidenceAtom>,
+    /// The query atoms.
+    pub query: Vec<Atom>,
+}
+
 /// Reads program, evidence and query and grounds them.
 pub fn load_and_ground(
     files: &ProblemFiles,
     options: &GroundOptions,
 ) -> Result<Loaded, FilesError> {
     let t0 = Instant::now();
-    let program = read_program(&files.program).map_err(FilesError::Program)?;
-    let (evidence, query) = files.read_evidence_and_query(&program)?;
-    let program = expand_per_constant(program, &evidence, &query).map_err(FilesError::Ground)?;
+    let ReadProblem {
+        program,
+        evidence,
+        query,
+        ..
+    } = files.read()?;
     let parse_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let problem = ground(
@@ -226,6 +262,31 @@ pub fn read_answer(
 ) -> Result<AnswerAssignment, FilesError> {
     let answer = read_evidence(path, program).map_err(FilesError::Answer)?;
     Ok(assignment_from_atoms(program, problem, &answer))
+}
+
+/// Scores another engine's MAP answer on `loaded`, or, when it makes atoms true that lazy
+/// grounding left out there, on `files` grounded eagerly with the same cap.
+pub fn score_answer(
+    files: &ProblemFiles,
+    loaded: &Loaded,
+    path: &Path,
+    max_groundings: usize,
+) -> Result<(AnswerAssignment, Scores), FilesError> {
+    let a = read_answer(&loaded.program, &loaded.problem, path)?;
+    if a.lazily_false == 0 {
+        let s = loaded.problem.score(&a.assignment);
+        return Ok((a, s));
+    }
+    let eager = load_and_ground(
+        files,
+        &GroundOptions {
+            max_groundings,
+            lazy: false,
+        },
+    )?;
+    let a = read_answer(&eager.program, &eager.problem, path)?;
+    let s = eager.problem.score(&a.assignment);
+    Ok((a, s))
 }
 
 /// The MAP state of the query atoms in Alchemy's result format (`Atom(A,B) 1`, one per
@@ -433,15 +494,12 @@ pub fn learn_program(
     files: &ProblemFiles,
     options: &LearnOptions,
 ) -> Result<LearntProgram, FilesError> {
-    let program = read_program(&files.program).map_err(FilesError::Program)?;
-    let (database, query) = files.read_evidence_and_query(&program)?;
-    let program = expand_per_constant(program, &database, &query).map_err(FilesError::Ground)?;
-    // The texts of the program's files, for writing the weights in.
-    let sources = program
-        .sources
-        .iter()
-        .map(|s| read_data(Path::new(&s.path)))
-        .collect::<Result<Vec<_>, _>>()?;
+    let ReadProblem {
+        program,
+        sources,
+        evidence: database,
+        query,
+    } = files.read()?;
     let training = learn::training_problem(
         &program,
         &database,

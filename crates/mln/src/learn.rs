@@ -82,6 +82,13 @@ pub struct Training {
     pub labels_unused: usize,
 }
 
+impl Training {
+    /// Unknown atoms whose value in `x` differs from the label.
+    pub fn errors(&self, x: &[bool]) -> usize {
+        x.iter().zip(&self.truth).filter(|(a, b)| a != b).count()
+    }
+}
+
 /// Splits a training database into evidence and labels (the atoms of query predicates).
 pub fn split_labels(
     database: &[EvidenceAtom],
@@ -370,13 +377,6 @@ impl<'a> Setup<'a> {
             .collect()
     }
 
-    fn errors_of(&self, x: &[bool]) -> usize {
-        x.iter()
-            .zip(&self.training.truth)
-            .filter(|(a, b)| a != b)
-            .count()
-    }
-
     fn map_under(&self, w: &[f64]) -> Vec<bool> {
         let p = self
             .training
@@ -398,13 +398,13 @@ impl<'a> Setup<'a> {
         };
         let (m, samples) = mc_sat_counts(&p, self.k, &options)?;
         let rounded: Vec<bool> = m.probabilities.iter().map(|&q| q > 0.5).collect();
-        Ok((self.errors_of(&rounded), samples))
+        Ok((self.training.errors(&rounded), samples))
     }
 
     /// The learnt weights as reported: learnable ones from `w`, `None` for hard formulas.
     fn finish(&self, w: &[f64], epochs: Vec<EpochStats>) -> Learnt {
         let w = effective(self.program, w);
-        let final_errors = self.errors_of(&self.map_under(&w));
+        let final_errors = self.training.errors(&self.map_under(&w));
         Learnt {
             weights: self
                 .program
@@ -469,7 +469,7 @@ fn perceptron(setup: &Setup<'_>) -> Result<Learnt, LearnError> {
             Expectations::Map => {
                 let y = setup.map_under(&w);
                 (
-                    setup.errors_of(&y),
+                    setup.training.errors(&y),
                     setup.training.problem.true_counts(k, &y),
                 )
             }
@@ -593,12 +593,7 @@ fn diagonal_newton(setup: &Setup<'_>) -> Result<Learnt, LearnError> {
 /// Errors of the MAP state under the given per-formula weights (hard formulas ignored).
 pub fn map_errors(training: &Training, weights: &[f64], infer: &InferOptions) -> usize {
     let p = training.problem.with_formula_weights(weights);
-    map_inference(&p, infer)
-        .assignment
-        .iter()
-        .zip(&training.truth)
-        .filter(|(a, b)| a != b)
-        .count()
+    training.errors(&map_inference(&p, infer).assignment)
 }
 
 /// The program's text with the soft weights of its formulas replaced. `sources[i]` is the

@@ -51,7 +51,7 @@
 //! order, so a seed gives the same bytes on every run.
 
 use crate::ground::GroundProblem;
-use crate::walksat::{max_walk_sat_frozen, Factor, WalkSatOptions};
+use crate::walksat::{max_walk_sat_frozen, satisfied_after_flip, Factor, WalkSatOptions};
 use pbo::polynomial::Literal;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -497,19 +497,9 @@ impl<'a> Chain<'a> {
         let mut k = 0;
         while k < occ.len() {
             let f = occ[k].0 as usize;
-            let mut sat = self.sat[f] as i64;
-            while k < occ.len() && occ[k].0 as usize == f {
-                // A clause's occurrences are adjacent too; a variable may occur in a clause
-                // more than once (x ∨ x̄ from groundings with equal arguments).
-                let c = occ[k].1;
-                let t = i64::from(self.true_lits[c as usize]);
-                let mut after = t;
-                while k < occ.len() && occ[k].1 == c {
-                    after += if occ[k].2.eval(now) { -1 } else { 1 };
-                    k += 1;
-                }
-                sat += i64::from(after > 0) - i64::from(t > 0);
-            }
+            let sat = satisfied_after_flip(occ, &mut k, now, self.sat[f] as i64, |c| {
+                self.true_lits[c as usize]
+            });
             let before = self.holds(f);
             let after = sat == i64::from(flat.num_clauses(f));
             if before == after {

@@ -230,14 +230,15 @@ impl Program {
                 self.write_formula(g, out);
             }
         };
-        let join = |parts: &[Formula], op: &str, parent: u8, out: &mut String| {
-            for (i, g) in parts.iter().enumerate() {
-                if i > 0 {
-                    out.push_str(op);
+        let join =
+            |parts: &mut dyn Iterator<Item = &Formula>, op: &str, parent: u8, out: &mut String| {
+                for (i, g) in parts.enumerate() {
+                    if i > 0 {
+                        out.push_str(op);
+                    }
+                    child(g, parent, out);
                 }
-                child(g, parent, out);
-            }
-        };
+            };
         match f {
             Formula::Atom(a) => {
                 out.push_str(&self.predicates[a.predicate].name);
@@ -259,10 +260,10 @@ impl Program {
                 out.push('!');
                 child(g, 5, out);
             }
-            Formula::And(v) => join(v, " ^ ", 4, out),
-            Formula::Or(v) => join(v, " v ", 3, out),
-            Formula::Implies(a, b) => join(&[(**a).clone(), (**b).clone()], " => ", 2, out),
-            Formula::Iff(a, b) => join(&[(**a).clone(), (**b).clone()], " <=> ", 1, out),
+            Formula::And(v) => join(&mut v.iter(), " ^ ", 4, out),
+            Formula::Or(v) => join(&mut v.iter(), " v ", 3, out),
+            Formula::Implies(a, b) => join(&mut [&**a, &**b].into_iter(), " => ", 2, out),
+            Formula::Iff(a, b) => join(&mut [&**a, &**b].into_iter(), " <=> ", 1, out),
             Formula::Exists(vars, g) | Formula::Forall(vars, g) => {
                 out.push_str(if matches!(f, Formula::Exists(..)) {
                     "EXIST "
@@ -310,17 +311,42 @@ pub struct EvidenceAtom {
 
 /// Reads a program file.
 pub fn read_program(path: &Path) -> Result<Program, ParseError> {
+    Ok(read_program_keeping(path, false)?.0)
+}
+
+/// Reads a program file, and returns with it the text of each of its files (the main file and
+/// those it includes, as `Program::sources`).
+pub fn read_program_sources(path: &Path) -> Result<(Program, Vec<String>), ParseError> {
+    read_program_keeping(path, true)
+}
+
+/// Reads a program file, keeping its files' texts (else an empty list) when `keep`.
+fn read_program_keeping(path: &Path, keep: bool) -> Result<(Program, Vec<String>), ParseError> {
     let label = path.display().to_string();
-    parse_program_with(&read(path)?, &label, &mut |including, name| {
+    let main = read(path)?;
+    let mut included = Vec::new();
+    let program = parse_program_with(&main, &label, &mut |including, name| {
         let file = Path::new(including)
             .parent()
             .unwrap_or(Path::new(""))
             .join(name);
         match std::fs::read_to_string(&file) {
-            Ok(text) => Ok((text, file.display().to_string())),
+            Ok(text) => {
+                // Resolved in the order `Program::sources` lists the files.
+                if keep {
+                    included.push(text.clone());
+                }
+                Ok((text, file.display().to_string()))
+            }
             Err(e) => Err(format!("cannot read {}: {e}", file.display())),
         }
-    })
+    })?;
+    let texts = if keep {
+        std::iter::once(main).chain(included).collect()
+    } else {
+        Vec::new()
+    };
+    Ok((program, texts))
 }
 
 /// Reads an evidence file for a program.
@@ -1141,7 +1167,7 @@ fn parse_domain(cur: &mut Cursor<'_, '_>) -> Result<Vec<String>, ParseError> {
     Ok(out)
 }
 
-/// Predicate names (borrowed from the program text or the parsed program) → index.
+/// Predicate names → index.
 type PredIndex = FxHashMap<Box<str>, usize>;
 
 fn parse_iff(

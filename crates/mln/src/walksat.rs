@@ -127,6 +127,32 @@ struct Chain<'a> {
 
 const NOT_BAD: u32 = u32::MAX;
 
+/// The satisfied-clause count of one factor after flipping a variable of value `value`:
+/// `occ[*k..]` starts with the factor's run of the variable's occurrences (factor, clause,
+/// literal; a factor's and a clause's occurrences adjacent, a clause may hold the variable
+/// more than once, as x ∨ x̄ from groundings with equal arguments), `sat` is the factor's
+/// count now and `true_lits(clause)` a clause's true literals now; `*k` moves past the run.
+pub(crate) fn satisfied_after_flip(
+    occ: &[(u32, u32, Literal)],
+    k: &mut usize,
+    value: bool,
+    mut sat: i64,
+    true_lits: impl Fn(u32) -> u32,
+) -> i64 {
+    let f = occ[*k].0;
+    while *k < occ.len() && occ[*k].0 == f {
+        let c = occ[*k].1;
+        let t = i64::from(true_lits(c));
+        let mut after = t;
+        while *k < occ.len() && occ[*k].0 == f && occ[*k].1 == c {
+            after += if occ[*k].2.eval(value) { -1 } else { 1 };
+            *k += 1;
+        }
+        sat += i64::from(after > 0) - i64::from(t > 0);
+    }
+    sat
+}
+
 impl<'a> Chain<'a> {
     fn new(factors: &'a [Factor], n: usize, start: Option<&[bool]>, seed: u64) -> Chain<'a> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -208,20 +234,10 @@ impl<'a> Chain<'a> {
         let mut k = 0;
         while k < occ.len() {
             let fi = occ[k].0 as usize;
-            let mut sat = self.sat_clauses[fi] as i64;
-            // All occurrences of this factor are adjacent (built factor by factor).
-            while k < occ.len() && occ[k].0 as usize == fi {
-                // A clause's occurrences are adjacent; a variable may occur in a clause
-                // more than once (x ∨ x̄ from groundings with equal arguments).
-                let ci = occ[k].1;
-                let t = i64::from(self.true_lits[fi][ci as usize]);
-                let mut after = t;
-                while k < occ.len() && occ[k].0 as usize == fi && occ[k].1 == ci {
-                    after += if occ[k].2.eval(self.x[v]) { -1 } else { 1 };
-                    k += 1;
-                }
-                sat += i64::from(after > 0) - i64::from(t > 0);
-            }
+            let sat =
+                satisfied_after_flip(occ, &mut k, self.x[v], self.sat_clauses[fi] as i64, |ci| {
+                    self.true_lits[fi][ci as usize]
+                });
             let before = self.is_true(fi);
             let after = sat as usize == self.factors[fi].clauses.len();
             if before != after {

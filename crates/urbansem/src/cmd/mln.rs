@@ -3,7 +3,7 @@
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use mln::files::{
-    benchmark_problem, learn_program, load_and_ground, marginal_text, read_answer, result_text,
+    benchmark_problem, learn_program, load_and_ground, marginal_text, result_text, score_answer,
     Benchmark, InferReport, LearnReport, MarginalReport, ProblemFiles, QuerySource, ScoreReport,
 };
 use mln::infer::{map_inference, InferOptions, Method, Representation};
@@ -277,13 +277,8 @@ impl From<Problem> for Benchmark {
 fn score(args: &ScoreArgs) -> anyhow::Result<()> {
     // Lazily, unless the answer makes an atom true that lazy grounding fixed false.
     let files = args.problem.files()?;
-    let mut loaded = load_and_ground(&files, &args.problem.ground_options(true))?;
-    let mut a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
-    if a.lazily_false > 0 {
-        loaded = load_and_ground(&files, &args.problem.ground_options(false))?;
-        a = read_answer(&loaded.program, &loaded.problem, &args.answer)?;
-    }
-    let s = loaded.problem.score(&a.assignment);
+    let loaded = load_and_ground(&files, &args.problem.ground_options(true))?;
+    let (a, s) = score_answer(&files, &loaded, &args.answer, args.problem.max_groundings)?;
     let report = ScoreReport {
         answer: args.answer.display().to_string(),
         answer_atoms: a.atoms,
