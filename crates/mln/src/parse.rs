@@ -954,8 +954,13 @@ impl Builder {
                 )));
             }
         }
-        let mut per_constant = std::mem::take(&mut body.plus_vars);
-        per_constant.dedup();
+        // Each `+` variable once, in first-written order (`+x … +y … +x` is x and y).
+        let mut per_constant: Vec<String> = Vec::new();
+        for v in std::mem::take(&mut body.plus_vars) {
+            if !per_constant.contains(&v) {
+                per_constant.push(v);
+            }
+        }
         let expanded = !body.star_atoms.is_empty() || !per_constant.is_empty();
         let origin = if expanded {
             Origin::Expanded

@@ -111,6 +111,10 @@ fn per_constant_variables_write_one_formula_per_constant() {
     let two = "R(a, b)\n1 R(+x, +y)\n";
     let (p, _) = problem(two, "R(A, B)\nR(C, D)\n", "R");
     assert_eq!(p.formulas.len(), 4);
+    // A variable marked twice, not next to each other, is still one variable.
+    let again = "R(a, b)\nS(a)\n1 R(+x, +y) ^ S(+x)\n";
+    let (p, _) = problem(again, "R(A, B)\nR(C, D)\n", "R,S");
+    assert_eq!(p.formulas.len(), 4);
     // Unexpanded, grounding refuses rather than ignoring the `+`.
     let raw = parse_program(two, "t.mln").unwrap();
     let err = ground(&raw, &[], "t.db", &[], &GroundOptions::default()).unwrap_err();
