@@ -684,6 +684,10 @@ pub struct MarginalReport {
     pub ground_factors: usize,
     /// Atoms the hard formulas force (probability exactly 0 or 1).
     pub fixed_atoms: usize,
+    /// Atoms in no formula with another unforced atom (exact probability, not sampled).
+    pub independent_atoms: usize,
+    /// Distinct ground formulas over two or more unforced atoms, which the chains sample.
+    pub slice_formulas: usize,
     /// The largest difference between two chains' estimates of one atom.
     pub max_chain_spread: f64,
     /// Its mean over atoms.
@@ -715,6 +719,8 @@ impl MarginalReport {
             ground_atoms: loaded.problem.atoms.len(),
             ground_factors: loaded.problem.factors.len(),
             fixed_atoms: result.fixed_atoms,
+            independent_atoms: result.independent_atoms,
+            slice_formulas: result.slice_formulas,
             max_chain_spread: result.max_chain_spread,
             mean_chain_spread: result.mean_chain_spread,
             acceptance: result.acceptance,
@@ -753,6 +759,11 @@ impl MarginalReport {
             out,
             "fixed by hard     {} atoms (probability 0 or 1)",
             self.fixed_atoms
+        );
+        let _ = writeln!(
+            out,
+            "independent       {} atoms (exact, not sampled); {} distinct formulas sampled",
+            self.independent_atoms, self.slice_formulas
         );
         let _ = writeln!(
             out,

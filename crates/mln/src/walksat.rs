@@ -287,7 +287,12 @@ impl<'a> Chain<'a> {
 
     fn run(mut self, options: &WalkSatOptions, frozen: Option<&[bool]>) -> (Vec<bool>, f64) {
         let is_frozen = |v: usize| frozen.is_some_and(|f| f.get(v).copied().unwrap_or(false));
-        let mut best = (self.x.clone(), self.cost);
+        // The best world is kept as the flips made since it (undone at the end), so an
+        // improvement costs nothing instead of a copy of the world; once that log is as long
+        // as the world, the best world is copied out and the log restarts.
+        let mut best_cost = self.cost;
+        let mut since_best: Vec<u32> = Vec::new();
+        let mut snapshot: Option<Vec<bool>> = None;
         for _ in 0..options.max_flips {
             if self.bad.is_empty() {
                 break;
@@ -323,13 +328,37 @@ impl<'a> Chain<'a> {
                 best_v
             };
             self.flip(v);
-            if self.cost < best.1 - 1e-12 {
-                best = (self.x.clone(), self.cost);
+            if self.cost < best_cost - 1e-12 {
+                best_cost = self.cost;
+                since_best.clear();
+                snapshot = None;
+            } else {
+                since_best.push(v as u32);
+                if since_best.len() >= self.x.len().max(64) {
+                    if snapshot.is_none() {
+                        let mut b = self.x.clone();
+                        for &u in &since_best {
+                            b[u as usize] = !b[u as usize];
+                        }
+                        snapshot = Some(b);
+                    }
+                    since_best.clear();
+                }
             }
         }
+        let best = match snapshot {
+            Some(b) => b,
+            None => {
+                let mut b = self.x;
+                for &u in since_best.iter().rev() {
+                    b[u as usize] = !b[u as usize];
+                }
+                b
+            }
+        };
         // Recompute exactly to avoid accumulated round-off in the reported cost.
-        let c = cost(self.factors, &best.0);
-        (best.0, c)
+        let c = cost(self.factors, &best);
+        (best, c)
     }
 }
 

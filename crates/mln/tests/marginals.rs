@@ -245,3 +245,41 @@ fn friends_and_smokers_marginals_match_enumeration() {
     let e = max_error(&m.probabilities, &exact);
     assert!(e <= 0.03, "max error {e}");
 }
+
+#[test]
+fn equal_formulas_merge_forced_atoms_drop_out_and_the_marginals_stay_exact() {
+    let (p, n) = (Literal::pos, Literal::neg);
+    // Atom 0 forced true. Over 1, 2, 3: the same clause three times in other literal
+    // orders (with a repeated literal, and with ¬0 which is false), a weight pair that
+    // cancels, a tautology, a conjunction written in two clause orders, and a clause
+    // that atom 0 satisfies.
+    let prob = problem(
+        5,
+        vec![
+            factor(100.0, true, vec![vec![p(0)]]),
+            factor(0.7, false, vec![vec![p(1), n(2)]]),
+            factor(0.4, false, vec![vec![n(2), p(1), p(1)]]),
+            factor(-1.5, false, vec![vec![n(0), n(2), p(1)]]),
+            factor(0.8, false, vec![vec![p(2), p(3)]]),
+            factor(-0.8, false, vec![vec![p(3), p(2)]]),
+            factor(2.0, false, vec![vec![p(3), n(3), p(1)]]),
+            factor(1.2, false, vec![vec![p(1)], vec![n(3)]]),
+            factor(-0.5, false, vec![vec![n(3)], vec![p(1)]]),
+            factor(3.0, false, vec![vec![p(0), p(2), p(3)]]),
+            factor(-0.9, false, vec![vec![p(3)]]),
+        ],
+    );
+    let m = mc_sat(&prob, &McSatOptions::default()).unwrap();
+    // Left: (1 ∨ ¬2) with weight −0.4 and (1 ∧ ¬3) with 0.7; atom 4 is in no formula.
+    assert_eq!(m.slice_formulas, 2);
+    assert_eq!(m.fixed_atoms, 1);
+    assert_eq!(m.independent_atoms, 1);
+    assert_eq!(m.probabilities[4], 0.5);
+    let exact = exact_marginals(&prob).unwrap();
+    let e = max_error(&m.probabilities, &exact);
+    assert!(
+        e <= 0.03,
+        "max error {e}: {:?} vs {exact:?}",
+        m.probabilities
+    );
+}

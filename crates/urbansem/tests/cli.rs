@@ -888,6 +888,8 @@ fn mln_infer_marginal_writes_tuffy_results_and_json_marginals() {
         "chains",
         "max_chain_spread",
         "fixed_atoms",
+        "independent_atoms",
+        "slice_formulas",
         "seconds",
     ] {
         assert!(j.get(key).is_some(), "missing {key}: {j}");
