@@ -132,6 +132,7 @@ fn exactly_one_constraints_mix_through_paired_moves() {
     let exact = exact_marginals(&p).unwrap();
     let m = mc_sat(&p, &McSatOptions::default()).unwrap();
     let e = max_error(&m.probabilities, &exact);
+    eprintln!("exactly-one constraint: max error {e:.4}");
     assert!(
         e <= 0.03,
         "max error {e}: {exact:?} vs {:?}",
@@ -243,6 +244,10 @@ fn friends_and_smokers_marginals_match_enumeration() {
     let exact = exact_marginals(&p).unwrap();
     let m = mc_sat(&p, &McSatOptions::default()).unwrap();
     let e = max_error(&m.probabilities, &exact);
+    eprintln!(
+        "friends and smokers ({} atoms): max error {e:.4}",
+        p.atoms.len()
+    );
     assert!(e <= 0.03, "max error {e}");
 }
 
@@ -277,6 +282,7 @@ fn equal_formulas_merge_forced_atoms_drop_out_and_the_marginals_stay_exact() {
     assert_eq!(m.probabilities[4], 0.5);
     let exact = exact_marginals(&prob).unwrap();
     let e = max_error(&m.probabilities, &exact);
+    eprintln!("merged and forced formulas: max error {e:.4}");
     assert!(
         e <= 0.03,
         "max error {e}: {:?} vs {exact:?}",
