@@ -175,6 +175,22 @@ def mln_marginals(
     chains: int = 2,
     seed: int = 0,
 ) -> Tuple[Dict[str, float], Dict[str, Any]]: ...
+def mln_learn(
+    program: _Path,
+    training: Sequence[_Path],
+    queries: Optional[Sequence[str]] = None,
+    *,
+    query_file: Optional[_Path] = None,
+    output: Optional[_Path] = None,
+    method: str = "perceptron",
+    expectations: str = "map",
+    samples: int = 500,
+    epochs: int = 30,
+    rate: float = 1.0,
+    l2: float = 0.0,
+    warm_start: bool = False,
+    seed: int = 0,
+) -> Tuple[str, Dict[str, Any]]: ...
 
 # --- semantic map (srtree) ----------------------------------------------------------------
 

@@ -1,4 +1,5 @@
-"""Markov logic networks: MAP and marginal inference from Alchemy/Tuffy-style files.
+"""Markov logic networks: MAP and marginal inference and weight learning from
+Alchemy/Tuffy-style files.
 
     >>> from urbansem import mln
     >>> values = mln.infer("prog.mln", ["evidence.db"], ["Smokes", "Cancer"])
@@ -6,6 +7,7 @@
     1
     >>> mln.marginals("prog.mln", ["evidence.db"], ["Cancer"])["Cancer(Anna)"]
     0.6224593312017901
+    >>> text = mln.learn("prog.mln", ["training.db"], ["Smokes"], output="learnt.mln")
 """
 
 from __future__ import annotations
@@ -14,9 +16,10 @@ import os
 from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 from ._urbansem import mln_infer as _infer
+from ._urbansem import mln_learn as _learn
 from ._urbansem import mln_marginals as _marginals
 
-__all__ = ["infer", "infer_report", "marginals", "marginals_report"]
+__all__ = ["infer", "infer_report", "learn", "learn_report", "marginals", "marginals_report"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -114,3 +117,57 @@ def marginals(
 ) -> Dict[str, float]:
     """Marginal inference: each unknown query atom → P(true) (options: :func:`marginals_report`)."""
     return marginals_report(program, evidence, queries, **options)[0]
+
+
+def learn_report(
+    program: PathLike,
+    training: Sequence[PathLike] = (),
+    queries: Optional[Union[str, Sequence[str]]] = None,
+    *,
+    query_file: Optional[PathLike] = None,
+    output: Optional[PathLike] = None,
+    method: str = "perceptron",
+    expectations: str = "map",
+    samples: int = 500,
+    epochs: int = 30,
+    rate: float = 1.0,
+    l2: float = 0.0,
+    warm_start: bool = False,
+    seed: int = 0,
+) -> Tuple[str, Dict[str, Any]]:
+    """Discriminative weight learning: ``(text, report)``.
+
+    ``training`` holds the evidence and the labels (every atom of a query predicate listed
+    in it is a label; unlisted ones are false). ``text`` is the program with the learnt
+    weights (written to ``output`` too when given); ``report`` is the dict ``urbansem mln
+    learn --json`` prints (learning curve, training errors, weights). ``method`` is
+    ``perceptron`` or ``newton`` (diagonal Newton on MC-SAT samples), ``expectations`` ``map``
+    or ``mcsat``; the other options are the CLI's.
+    """
+    if isinstance(queries, str):
+        queries = [q.strip() for q in queries.split(",") if q.strip()]
+    return _learn(
+        os.fspath(program),
+        [os.fspath(t) for t in training],
+        list(queries) if queries is not None else None,
+        query_file=os.fspath(query_file) if query_file is not None else None,
+        output=os.fspath(output) if output is not None else None,
+        method=method,
+        expectations=expectations,
+        samples=samples,
+        epochs=epochs,
+        rate=rate,
+        l2=l2,
+        warm_start=warm_start,
+        seed=seed,
+    )
+
+
+def learn(
+    program: PathLike,
+    training: Sequence[PathLike] = (),
+    queries: Optional[Union[str, Sequence[str]]] = None,
+    **options: Any,
+) -> str:
+    """Weight learning: the program with the learnt weights (options: :func:`learn_report`)."""
+    return learn_report(program, training, queries, **options)[0]

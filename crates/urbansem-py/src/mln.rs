@@ -1,14 +1,15 @@
-//! `mln.infer` and `mln.marginals`: MAP and marginal inference on a Markov logic network from
-//! its files, returning every query atom's value or probability and the report
-//! `urbansem mln infer [--marginal] --json` prints.
+//! `mln.infer`, `mln.marginals` and `mln.learn`: MAP and marginal inference on a Markov logic
+//! network from its files, returning every query atom's value or probability and the report
+//! `urbansem mln infer [--marginal] --json` prints, and weight learning as `mln learn`.
 
 use crate::error::raise;
 use mln::files::{
-    load_and_ground, query_probabilities, query_values, InferReport, MarginalReport, ProblemFiles,
-    QuerySource,
+    learn_program, load_and_ground, query_probabilities, query_values, InferReport, LearnReport,
+    MarginalReport, ProblemFiles, QuerySource,
 };
 use mln::ground::GroundOptions;
 use mln::infer::{map_inference, InferOptions, Method, Representation};
+use mln::learn::{Expectations, LearnMethod, LearnOptions};
 use mln::marginal::{mc_sat, McSatOptions};
 use pbo::quadratize::Quadratizer;
 use pyo3::exceptions::PyValueError;
@@ -20,7 +21,8 @@ use std::time::Instant;
 /// Adds the mln functions to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mln_infer, m)?)?;
-    m.add_function(wrap_pyfunction!(mln_marginals, m)?)
+    m.add_function(wrap_pyfunction!(mln_marginals, m)?)?;
+    m.add_function(wrap_pyfunction!(mln_learn, m)?)
 }
 
 /// The query as predicates or a query file (exactly one of them).
@@ -163,4 +165,63 @@ fn mln_marginals<'py>(
         d.set_item(atom, p)?;
     }
     Ok((d, pythonize::pythonize(py, &report)?))
+}
+
+/// Discriminative weight learning: `(text, report)`, text the program with the learnt
+/// weights (also written to `output` when given), report the dict of `urbansem mln learn
+/// --json`.
+#[pyfunction]
+#[pyo3(name = "mln_learn", signature = (program, training, queries = None, *,
+    query_file = None, output = None, method = "perceptron", expectations = "map",
+    samples = 500, epochs = 30, rate = 1.0, l2 = 0.0, warm_start = false, seed = 0))]
+#[allow(clippy::too_many_arguments)]
+fn mln_learn<'py>(
+    py: Python<'py>,
+    program: PathBuf,
+    training: Vec<PathBuf>,
+    queries: Option<Vec<String>>,
+    query_file: Option<PathBuf>,
+    output: Option<PathBuf>,
+    method: &str,
+    expectations: &str,
+    samples: usize,
+    epochs: usize,
+    rate: f64,
+    l2: f64,
+    warm_start: bool,
+    seed: u64,
+) -> PyResult<(String, Bound<'py, PyAny>)> {
+    let method: LearnMethod = method.parse().map_err(PyValueError::new_err)?;
+    let expectations: Expectations = expectations.parse().map_err(PyValueError::new_err)?;
+    let files = ProblemFiles {
+        program: program.clone(),
+        evidence: training,
+        query: query_source(queries, query_file)?,
+    };
+    let mut options = LearnOptions {
+        epochs,
+        learning_rate: rate,
+        l2,
+        start_from_program: warm_start,
+        method,
+        expectations,
+        ..LearnOptions::default()
+    };
+    options.infer.walksat.seed = seed;
+    options.mcsat.seed = seed;
+    options.mcsat.samples = samples;
+    let (text, report) = py
+        .detach(|| {
+            let t0 = Instant::now();
+            let learnt = learn_program(&files, &options).map_err(|e| crate::error::chain(&e))?;
+            let out = output.clone().unwrap_or_default();
+            if let Some(path) = &output {
+                geodata::fsio::write_atomic(path, &learnt.text)
+                    .map_err(|e| format!("writing {}: {e}", path.display()))?;
+            }
+            let report = LearnReport::new(&program, &out, &learnt, t0.elapsed().as_secs_f64());
+            Ok::<_, String>((learnt.text, report))
+        })
+        .map_err(crate::error::MlnError::new_err)?;
+    Ok((text, pythonize::pythonize(py, &report)?))
 }
