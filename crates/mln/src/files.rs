@@ -694,11 +694,23 @@ pub struct MarginalReport {
     pub mean_chain_spread: f64,
     /// Share of the moves inside the slice that were kept.
     pub acceptance: f64,
+    /// Query atoms whose chains' estimates lie more than [`UNSETTLED_SPREAD`] apart: their
+    /// probability is not to be trusted without more samples.
+    pub unsettled_atoms: usize,
+    /// The least settled of them (at most [`UNSETTLED_LISTED`], largest spread first): atom
+    /// → spread between the chains' estimates.
+    pub unsettled: BTreeMap<String, f64>,
     /// Probability of every unknown query atom, by atom.
     pub marginals: BTreeMap<String, f64>,
     /// Seconds per phase.
     pub seconds: MarginalSeconds,
 }
+
+/// The chain spread above which a query atom counts as unsettled.
+pub const UNSETTLED_SPREAD: f64 = 0.1;
+
+/// How many unsettled atoms a marginal report lists.
+pub const UNSETTLED_LISTED: usize = 20;
 
 impl MarginalReport {
     /// The report of `result` on `loaded` (`total_seconds` from the start of reading).
@@ -709,6 +721,17 @@ impl MarginalReport {
         result: &Marginals,
         total_seconds: f64,
     ) -> Self {
+        let mut unsettled: Vec<(String, f64)> = query_atoms(
+            &loaded.program,
+            &loaded.problem,
+            &loaded.query,
+            &result.spread,
+            0.0,
+        )
+        .into_iter()
+        .filter(|(_, s)| *s > UNSETTLED_SPREAD)
+        .collect();
+        unsettled.sort_by(|a, b| b.1.total_cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
         Self {
             program: program.display().to_string(),
             method: "mc-sat".to_owned(),
@@ -724,6 +747,8 @@ impl MarginalReport {
             max_chain_spread: result.max_chain_spread,
             mean_chain_spread: result.mean_chain_spread,
             acceptance: result.acceptance,
+            unsettled_atoms: unsettled.len(),
+            unsettled: unsettled.into_iter().take(UNSETTLED_LISTED).collect(),
             marginals: query_probabilities(
                 &loaded.program,
                 &loaded.problem,
@@ -771,6 +796,16 @@ impl MarginalReport {
             self.max_chain_spread, self.mean_chain_spread
         );
         let _ = writeln!(out, "slice moves kept  {:.1} %", 100.0 * self.acceptance);
+        let _ = writeln!(
+            out,
+            "unsettled         {} query atoms (chains > {UNSETTLED_SPREAD} apart; more samples or chains)",
+            self.unsettled_atoms
+        );
+        let mut listed: Vec<(&String, &f64)> = self.unsettled.iter().collect();
+        listed.sort_by(|a, b| b.1.total_cmp(a.1).then_with(|| a.0.cmp(b.0)));
+        for (atom, s) in listed.into_iter().take(5) {
+            let _ = writeln!(out, "  spread {s:.3}  {atom}");
+        }
         let s = &self.seconds;
         let _ = writeln!(
             out,

@@ -164,6 +164,9 @@ pub struct Marginals {
     pub max_chain_spread: f64,
     /// The mean over atoms of that difference.
     pub mean_chain_spread: f64,
+    /// Per unknown atom: the largest difference between two chains' estimates of it (0
+    /// with one chain); where it is large the chains have not settled on the atom.
+    pub spread: Vec<f64>,
     /// Share of proposed moves inside the slice that were kept.
     pub acceptance: f64,
     /// Seconds sampling (all chains).
@@ -999,6 +1002,7 @@ fn sample(
         .collect();
     let n = problem.atoms.len();
     let mut probabilities = vec![0.0; n];
+    let mut spread = vec![0.0; n];
     let (mut max_spread, mut sum_spread) = (0.0f64, 0.0f64);
     for (i, p) in probabilities.iter_mut().enumerate() {
         let (mut lo, mut hi, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
@@ -1010,6 +1014,7 @@ fn sample(
         *p = sum / chains as f64;
         max_spread = max_spread.max(hi - lo);
         sum_spread += hi - lo;
+        spread[i] = hi - lo;
     }
     let proposed: u64 = runs.iter().map(|r| r.1).sum();
     let kept: u64 = runs.iter().map(|r| r.2).sum();
@@ -1022,6 +1027,7 @@ fn sample(
         samples: options.samples,
         max_chain_spread: max_spread,
         mean_chain_spread: if n == 0 { 0.0 } else { sum_spread / n as f64 },
+        spread,
         acceptance: if proposed == 0 {
             1.0
         } else {

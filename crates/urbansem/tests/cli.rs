@@ -890,6 +890,8 @@ fn mln_infer_marginal_writes_tuffy_results_and_json_marginals() {
         "fixed_atoms",
         "independent_atoms",
         "slice_formulas",
+        "unsettled_atoms",
+        "unsettled",
         "seconds",
     ] {
         assert!(j.get(key).is_some(), "missing {key}: {j}");
@@ -927,6 +929,39 @@ fn mln_infer_marginal_writes_tuffy_results_and_json_marginals() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn mln_infer_marginal_names_the_atoms_its_chains_disagree_on() {
+    // Hard equivalences along a path: every world with positive probability has all four
+    // flags equal, and no single or paired flip keeps them so: each chain stays in the
+    // mode it starts in, and chains that start in different modes disagree by 1.
+    let program = temp_file(
+        "stuck.mln",
+        "Flag(node)\n*Next(node, node)\nNext(x, y) => (Flag(x) <=> Flag(y)).\n",
+    );
+    let evidence = temp_file("stuck.db", "Next(N1, N2)\nNext(N2, N3)\nNext(N3, N4)\n");
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let out = stdout_of(
+            urbansem()
+                .args(["mln", "infer", "--marginal", "--samples", "50", "--json"])
+                .args(extra)
+                .arg("-i")
+                .arg(&program)
+                .arg("-e")
+                .arg(&evidence)
+                .args(["-q", "Flag"]),
+        );
+        serde_json::from_slice(&out).unwrap()
+    };
+    let j = run(&["--chains", "8"]);
+    assert_eq!(j["unsettled_atoms"], 4, "{j}");
+    let listed = j["unsettled"].as_object().unwrap();
+    assert_eq!(listed.len(), 4, "{j}");
+    assert!(listed.values().all(|s| s.as_f64().unwrap() > 0.99), "{j}");
+    // One chain has nothing to compare with.
+    let j = run(&["--chains", "1"]);
+    assert_eq!(j["unsettled_atoms"], 0, "{j}");
 }
 
 #[test]
