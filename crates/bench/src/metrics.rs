@@ -33,11 +33,16 @@ pub fn cpu_seconds(clock: Clock) -> Option<f64> {
 
 /// Wall and thread CPU seconds of `f`.
 pub fn timed<R>(f: impl FnOnce() -> R) -> (R, f64, Option<f64>) {
-    let c0 = cpu_seconds(Clock::Thread);
+    timed_on(Clock::Thread, f)
+}
+
+/// Wall seconds of `f` and the CPU seconds `clock` counts while it runs.
+pub fn timed_on<R>(clock: Clock, f: impl FnOnce() -> R) -> (R, f64, Option<f64>) {
+    let c0 = cpu_seconds(clock);
     let t0 = Instant::now();
     let r = f();
     let wall = t0.elapsed().as_secs_f64();
-    let cpu = cpu_seconds(Clock::Thread).zip(c0).map(|(c1, c0)| c1 - c0);
+    let cpu = cpu_seconds(clock).zip(c0).map(|(c1, c0)| c1 - c0);
     (r, wall, cpu)
 }
 

@@ -5,7 +5,7 @@
 //! re-scores Tuffy's shipped MAP answers with the same evaluator, and quotes Tuffy's logged
 //! run time (another machine) and the time target (thesis Table 3.5 / 10).
 
-use crate::metrics::{cpu_seconds, Clock};
+use crate::metrics::{timed_on, Clock};
 use crate::pbo::fmt_opt;
 use anyhow::{bail, Context};
 use clap::Args;
@@ -284,8 +284,7 @@ pub fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
                 evidence: vec![dir.join("training.db")],
                 query: QuerySource::File(dir.join("query.db")),
             };
-            let mut options = mln::learn::LearnOptions::default();
-            options.infer.walksat.seed = args.seed;
+            let options = mln::learn::LearnOptions::default().seeded(args.seed);
             let LearntProgram {
                 training,
                 learnt,
@@ -497,14 +496,8 @@ pub fn bench_mln(args: &MlnBenchArgs) -> anyhow::Result<()> {
 
 /// Wall and process CPU seconds of `f` (CPU summed over threads; `NaN` off Linux).
 fn wall_and_cpu<R>(f: impl FnOnce() -> R) -> (R, f64, f64) {
-    let c0 = cpu_seconds(Clock::Process);
-    let t0 = Instant::now();
-    let r = f();
-    let wall = t0.elapsed().as_secs_f64();
-    let cpu = cpu_seconds(Clock::Process)
-        .zip(c0)
-        .map_or(f64::NAN, |(c1, c0)| c1 - c0);
-    (r, wall, cpu)
+    let (r, wall, cpu) = timed_on(Clock::Process, f);
+    (r, wall, cpu.unwrap_or(f64::NAN))
 }
 
 /// One set of `bench mln --marginal`: MAP as `mln infer` and MC-SAT as `mln infer

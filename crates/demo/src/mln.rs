@@ -1,6 +1,6 @@
 //! Demo stage of mln: MAP inference on the thesis' synthetic problems.
 
-use crate::pbo::image_png;
+use crate::pbo::{image_png, IMAGE_OFF, IMAGE_ON};
 use crate::report::Html;
 use crate::{DemoArgs, StageOutput};
 use serde::Serialize;
@@ -56,15 +56,17 @@ pub struct MarginalSummary {
     pub seconds: f64,
 }
 
-/// A probability image: each pixel between the light (0) and dark (1) colour of
+/// A probability image: each pixel between the "off" (0) and "on" (1) colour of
 /// [`image_png`].
 fn probability_png(side: usize, p: &[f64]) -> anyhow::Result<Vec<u8>> {
-    let (light, dark) = ([240.0, 236.0, 226.0], [30.0, 30.0, 40.0]);
     let rgb: Vec<u8> = p
         .iter()
         .flat_map(|&q| {
             let q = q.clamp(0.0, 1.0);
-            [0, 1, 2].map(|c| (light[c] + q * (dark[c] - light[c])).round() as u8)
+            [0, 1, 2].map(|c| {
+                let (off, on) = (f64::from(IMAGE_OFF[c]), f64::from(IMAGE_ON[c]));
+                (off + q * (on - off)).round() as u8
+            })
         })
         .collect();
     crate::report::encode_png_rgb(side as u32, side as u32, &rgb)

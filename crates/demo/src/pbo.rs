@@ -90,11 +90,16 @@ pub fn synthetic_image(side: usize, noise: f64, seed: u64) -> (Vec<bool>, Vec<bo
     (clean, noisy)
 }
 
+/// Colour of an "on" pixel in the demo's binary images.
+pub const IMAGE_ON: [u8; 3] = [30, 30, 40];
+/// Colour of an "off" pixel.
+pub const IMAGE_OFF: [u8; 3] = [240, 236, 226];
+
 /// A black-and-white image as a PNG file.
 pub fn image_png(side: usize, pixels: &[bool]) -> anyhow::Result<Vec<u8>> {
     let rgb: Vec<u8> = pixels
         .iter()
-        .flat_map(|&p| if p { [30, 30, 40] } else { [240, 236, 226] })
+        .flat_map(|&p| if p { IMAGE_ON } else { IMAGE_OFF })
         .collect();
     encode_png_rgb(side as u32, side as u32, &rgb)
 }

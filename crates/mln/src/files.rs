@@ -697,8 +697,8 @@ pub struct MarginalReport {
     /// Query atoms whose chains' estimates lie more than [`UNSETTLED_SPREAD`] apart: their
     /// probability is not to be trusted without more samples.
     pub unsettled_atoms: usize,
-    /// The least settled of them (at most [`UNSETTLED_LISTED`], largest spread first): atom
-    /// → spread between the chains' estimates.
+    /// The least settled of them (the [`UNSETTLED_LISTED`] of largest spread), by atom:
+    /// atom → spread between the chains' estimates.
     pub unsettled: BTreeMap<String, f64>,
     /// Probability of every unknown query atom, by atom.
     pub marginals: BTreeMap<String, f64>,

@@ -290,6 +290,16 @@ impl Default for LearnOptions {
     }
 }
 
+impl LearnOptions {
+    /// The same options with every random step seeded by `seed`: MAP inference's and
+    /// MC-SAT's.
+    pub fn seeded(mut self, seed: u64) -> Self {
+        self.infer.walksat.seed = seed;
+        self.mcsat.seed = seed;
+        self
+    }
+}
+
 /// What one epoch saw: the MAP state under the epoch's starting weights.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EpochStats {

@@ -350,13 +350,12 @@ impl Flat {
                 entry.1 += f.weight;
             }
         }
-        let mut merged: Vec<(Vec<Vec<Literal>>, f64, bool)> = Vec::with_capacity(distinct.len());
-        let mut position: Vec<(u32, usize)> = Vec::with_capacity(distinct.len());
-        for (clauses, (pos, w, hard)) in distinct {
-            position.push((pos, merged.len()));
-            merged.push((clauses, w, hard));
-        }
-        position.sort_unstable();
+        // Back in the order the atoms first reached them.
+        let mut merged: Vec<(u32, Vec<Vec<Literal>>, f64, bool)> = distinct
+            .into_iter()
+            .map(|(clauses, (pos, w, hard))| (pos, clauses, w, hard))
+            .collect();
+        merged.sort_unstable_by_key(|m| m.0);
         let mut weight = Vec::with_capacity(merged.len());
         let mut hard = Vec::with_capacity(merged.len());
         let mut keep = Vec::with_capacity(merged.len());
@@ -367,8 +366,7 @@ impl Flat {
         let mut vars = Vec::new();
         let mut pairable_var = vec![false; n];
         let mut occ_count = vec![0u32; n + 1];
-        for &(_, m) in &position {
-            let (clauses, w, is_hard) = &merged[m];
+        for (_, clauses, w, is_hard) in &merged {
             let w = if *is_hard { 0.0 } else { *w };
             if !*is_hard && w == 0.0 {
                 continue; // weights that cancel: the formula does not change the distribution

@@ -127,12 +127,13 @@ struct Chain<'a> {
 
 const NOT_BAD: u32 = u32::MAX;
 
-/// The satisfied-clause count of one factor after flipping a variable of value `value`:
+/// The satisfied-clause count of one factor after flipping a variable of value `value`
+/// (MaxWalkSAT's delta; MC-SAT's sampler has its own occurrence layout, `marginal::Occ`):
 /// `occ[*k..]` starts with the factor's run of the variable's occurrences (factor, clause,
 /// literal; a factor's and a clause's occurrences adjacent, a clause may hold the variable
 /// more than once, as x ∨ x̄ from groundings with equal arguments), `sat` is the factor's
 /// count now and `true_lits(clause)` a clause's true literals now; `*k` moves past the run.
-pub(crate) fn satisfied_after_flip(
+fn satisfied_after_flip(
     occ: &[(u32, u32, Literal)],
     k: &mut usize,
     value: bool,

@@ -206,9 +206,8 @@ fn mln_learn<'py>(
         method,
         expectations,
         ..LearnOptions::default()
-    };
-    options.infer.walksat.seed = seed;
-    options.mcsat.seed = seed;
+    }
+    .seeded(seed);
     options.mcsat.samples = samples;
     let (text, report) = py
         .detach(|| {

@@ -333,9 +333,8 @@ fn learn(args: &LearnArgs) -> anyhow::Result<()> {
         method: args.method,
         expectations: args.expectations,
         ..mln::learn::LearnOptions::default()
-    };
-    options.infer.walksat.seed = args.seed;
-    options.mcsat.seed = args.seed;
+    }
+    .seeded(args.seed);
     options.mcsat.samples = args.samples;
     let learnt = learn_program(&args.problem.files()?, &options)?;
     geodata::fsio::write_atomic(&args.output, &learnt.text)
