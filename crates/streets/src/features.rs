@@ -68,6 +68,13 @@ pub struct FeatureOptions {
     pub colour: bool,
     /// Half window of the local ground estimate, metres.
     pub ground_window_m: f64,
+    /// Standardise the geometric, intensity and density features per grid (a scan or a
+    /// corridor): minus their median, over their inter-quartile range, across the grid's
+    /// observed bins. What a street looks like then no longer depends on one sensor's
+    /// intensity scale, noise level or point density, so a classifier trained on one sensor
+    /// (or the simulator) transfers to another. Off by default (the models of issue 5).
+    #[serde(default)]
+    pub normalise: bool,
 }
 
 impl Default for FeatureOptions {
@@ -75,6 +82,7 @@ impl Default for FeatureOptions {
         FeatureOptions {
             colour: true,
             ground_window_m: 2.5,
+            normalise: false,
         }
     }
 }
@@ -300,6 +308,9 @@ pub fn bin_features(
         };
         row[4] = angle;
     }
+    if options.normalise {
+        standardise(&mut values, &observed);
+    }
     BinFeatures {
         values,
         observed,
@@ -307,10 +318,132 @@ pub fn bin_features(
     }
 }
 
+/// The features [`FeatureOptions::normalise`] standardises: z statistics, normal angle,
+/// intensity statistics, point count, lowest z (not the colour histograms).
+pub const NORMALISED_FEATURES: std::ops::RangeInclusive<usize> = 0..=10;
+
+/// Robust standardisation of [`NORMALISED_FEATURES`] over the observed bins: (x − median) / IQR
+/// (the IQR floored at 10⁻³ so that a constant feature stays finite).
+fn standardise(values: &mut [f32], observed: &[bool]) {
+    let rows: Vec<usize> = (0..observed.len()).filter(|&k| observed[k]).collect();
+    if rows.is_empty() {
+        return;
+    }
+    let mut column: Vec<f32> = Vec::with_capacity(rows.len());
+    for f in NORMALISED_FEATURES {
+        column.clear();
+        column.extend(rows.iter().map(|&k| values[k * FEATURE_DIMS + f]));
+        let n = column.len();
+        let q1 = *column.select_nth_unstable_by(n / 4, f32::total_cmp).1;
+        let median = *column.select_nth_unstable_by(n / 2, f32::total_cmp).1;
+        let q3 = *column.select_nth_unstable_by(3 * n / 4, f32::total_cmp).1;
+        let iqr = (q3 - q1).max(1e-3);
+        for &k in &rows {
+            let v = &mut values[k * FEATURE_DIMS + f];
+            *v = (*v - median) / iqr;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use geodata::cloud::{Columns, PointRecord, Precision};
+
+    /// A 6 × 6 grid of 0.5 m bins: street (z 0, intensity `i_street`) in columns 0..3, a kerb
+    /// 0.12 m up (intensity `i_kerb`) in 3..5, column 5 empty; `noise` roughens the heights.
+    fn kerb_scene(
+        i_street: f32,
+        i_kerb: f32,
+        points_per_bin: usize,
+        noise: f64,
+    ) -> (BinGrid, PointCloud) {
+        let cols = Columns {
+            intensity: true,
+            label: true,
+            ..Columns::default()
+        };
+        let mut cloud = PointCloud::with_columns(cols, Precision::F64, 0);
+        let mut pairs = Vec::new();
+        for r in 0..6 {
+            for c in 0..5 {
+                for k in 0..points_per_bin {
+                    let x = 0.5 * c as f64 + 0.05 + 0.4 * (k % 3) as f64 / 3.0;
+                    let y = 0.5 * r as f64 + 0.05 + 0.4 * (k / 3 % 3) as f64 / 3.0;
+                    let wobble = noise * (((r * 7 + c * 3 + k) % 5) as f64 - 2.0) / 2.0;
+                    let z = if c < 3 { 0.0 } else { 0.12 } + wobble;
+                    pairs.push(((r * 6 + c) as u32, cloud.len() as u32));
+                    cloud.push(&PointRecord {
+                        position: [x, y, z],
+                        intensity: if c < 3 { i_street } else { i_kerb },
+                        label: if c < 3 {
+                            Class::Street.id()
+                        } else {
+                            Class::Sidewalk.id()
+                        },
+                        ..PointRecord::default()
+                    });
+                }
+            }
+        }
+        (BinGrid::from_pairs(6, 6, 0.5, &pairs), cloud)
+    }
+
+    #[test]
+    fn normalised_features_do_not_depend_on_the_intensity_scale_or_the_density() {
+        let options = FeatureOptions {
+            normalise: true,
+            ..FeatureOptions::default()
+        };
+        let (grid, cloud) = kerb_scene(0.3, 0.5, 9, 0.0);
+        let a = bin_features(&grid, &cloud, [0.0; 3], &options);
+        // Another sensor: intensities on a 0–255 scale, a third of the points.
+        let (grid, cloud) = kerb_scene(0.3 * 255.0, 0.5 * 255.0, 3, 0.0);
+        let b = bin_features(&grid, &cloud, [0.0; 3], &options);
+        assert_eq!(a.observed, b.observed);
+        for k in (0..36).filter(|&k| a.observed[k]) {
+            for f in [0, 1, 5, 6, 9, 10] {
+                assert!(
+                    (a.row(k)[f] - b.row(k)[f]).abs() < 1e-4,
+                    "bin {k} feature {} differs: {} vs {}",
+                    FEATURE_NAMES[f],
+                    a.row(k)[f],
+                    b.row(k)[f]
+                );
+            }
+        }
+        // The raw features differ (the test could fail).
+        let raw = bin_features(&grid, &cloud, [0.0; 3], &FeatureOptions::default());
+        assert!((raw.row(0)[5] - a.row(0)[5]).abs() > 1.0);
+        // Standardised over the observed bins: median 0; the empty column stays zero.
+        for f in NORMALISED_FEATURES {
+            let mut col: Vec<f32> = (0..36)
+                .filter(|&k| a.observed[k])
+                .map(|k| a.row(k)[f])
+                .collect();
+            col.sort_unstable_by(f32::total_cmp);
+            assert!(col[col.len() / 2].abs() < 1e-6, "{}", FEATURE_NAMES[f]);
+        }
+        assert!(!a.observed[5] && a.row(5).iter().all(|&v| v == 0.0));
+        // The kerb stays above the street after standardisation, with or without noise.
+        let (grid, cloud) = kerb_scene(0.3, 0.5, 9, 0.02);
+        let c = bin_features(&grid, &cloud, [0.0; 3], &options);
+        for f in [&a, &c] {
+            assert!(f.row(4)[1] > f.row(0)[1]);
+        }
+    }
+
+    #[test]
+    fn an_empty_grid_normalises_to_nothing() {
+        let cloud = PointCloud::with_columns(Columns::default(), Precision::F64, 0);
+        let grid = BinGrid::from_pairs(3, 3, 0.5, &[]);
+        let options = FeatureOptions {
+            normalise: true,
+            ..FeatureOptions::default()
+        };
+        let f = bin_features(&grid, &cloud, [0.0; 3], &options);
+        assert!(f.values.iter().all(|&v| v == 0.0) && !f.observed.iter().any(|&o| o));
+    }
 
     #[test]
     fn flat_ground_and_a_wall_have_the_right_features() {

@@ -36,6 +36,7 @@ pub mod real;
 pub mod svm;
 pub mod synthetic;
 pub mod tiles;
+pub mod transfer;
 
 use std::path::PathBuf;
 use thiserror::Error;

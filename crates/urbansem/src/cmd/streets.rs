@@ -198,6 +198,32 @@ pub enum StreetsCommand {
         #[command(flatten)]
         training: TrainingArgs,
     },
+    /// Bin classifier across datasets: train on the labelled scans of some sequences
+    /// (simulated car LiDAR from `sim dataset --kind localization --sensor hdl64`, MCD,
+    /// KITTI-360, …), test on another sequence's scans.
+    Transfer {
+        /// Training sequences (comma-separated folders of any labelled layout).
+        #[arg(long, value_delimiter = ',', required = true)]
+        train: Vec<PathBuf>,
+        /// Test sequence folder.
+        #[arg(long)]
+        test: PathBuf,
+        /// Scans per training sequence, evenly spaced (0: all).
+        #[arg(long, default_value_t = 40)]
+        scans_per_source: usize,
+        /// Scans of the test sequence, evenly spaced (0: all).
+        #[arg(long, default_value_t = 0)]
+        test_scans: usize,
+        /// Raw features instead of features standardised per scan.
+        #[arg(long)]
+        raw_features: bool,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Training options.
+        #[command(flatten)]
+        training: TrainingArgs,
+    },
     /// Train our SVM on bins of a dataset and write the same bins in libsvm format
     /// (used by scripts/bench_streets_svm.py for the side-by-side comparison).
     BenchSvm {
@@ -350,6 +376,49 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
                 super::print_json(&report)?;
             } else {
                 print!("{}", report.text(&data));
+            }
+            Ok(())
+        }
+        StreetsCommand::Transfer {
+            train,
+            test,
+            scans_per_source,
+            test_scans,
+            raw_features,
+            json,
+            training,
+        } => {
+            let features = streets::features::FeatureOptions {
+                colour: false,
+                normalise: !raw_features,
+                ..Default::default()
+            };
+            let read = |dir: &PathBuf, scans: usize| -> anyhow::Result<_> {
+                eprintln!("streets transfer: reading {}", dir.display());
+                let seq = geosim::sequence::open_sequence(dir)
+                    .with_context(|| format!("opening {}", dir.display()))?;
+                Ok(streets::transfer::sequence_bins(
+                    seq.as_ref(),
+                    &dir.display().to_string(),
+                    scans,
+                    &features,
+                )?)
+            };
+            let sources = train
+                .iter()
+                .map(|d| read(d, scans_per_source))
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let test_bins = read(&test, test_scans)?;
+            let report = streets::transfer::transfer_eval(
+                &sources,
+                &test_bins,
+                !raw_features,
+                &training.classifier(),
+            )?;
+            if json {
+                super::print_json(&report)?;
+            } else {
+                print!("{}", report.text());
             }
             Ok(())
         }
