@@ -100,3 +100,37 @@ def test_bad_input_is_a_clear_error(small, tmp_path):
     with pytest.raises(urbansem.StreetsError, match="does not overlap"):
         far = {"xyz": np.full((100, 3), 1e6)}
         streets.estimate(d / "city.osm", far, d / "model.json")
+
+
+KITTI360 = REPO.parent / "shared" / "data" / "lidar" / "kitti360_2013_05_28_drive_0009"
+
+
+def test_transfer_equals_the_cli_report(cli, tmp_path):
+    """streets.transfer gives the report `urbansem streets transfer --json` prints."""
+    sim = tmp_path / "sim"
+    run(cli, "sim", "dataset", "--kind", "localization", "--sensor", "hdl64", "--scans", "6",
+        "--seed", "1", "--out", sim)
+    args = ["--scans-per-source", "4", "--test-scans", "3", "--max-train-bins", "800"]
+    done = subprocess.run(
+        [str(cli), "streets", "transfer", "--train", str(sim), "--test", str(KITTI360), *args, "--json"],
+        capture_output=True, text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    expected = json.loads(done.stdout)
+    got = streets.transfer(sim, KITTI360, scans_per_source=4, test_scans=3, max_train_bins=800)
+    for r in (expected, got):
+        del r["seconds"]
+    assert got == expected
+    assert got["normalised"] is True and got["test"]["layout"] == "kitti360"
+    assert got["driving_area"]["test_positives"] > 1000
+    raw = streets.transfer([sim], KITTI360, scans_per_source=4, test_scans=3,
+                           max_train_bins=800, raw_features=True)
+    assert raw["normalised"] is False
+
+
+def test_transfer_errors_name_the_folder(tmp_path):
+    with pytest.raises(urbansem.StreetsError, match="no/such/folder"):
+        streets.transfer("no/such/folder", KITTI360)
+    unlabelled = REPO.parent / "shared" / "data" / "lidar" / "kitti_raw_2011_09_26_drive_0005_frame0"
+    with pytest.raises(urbansem.StreetsError, match="no per-point labels"):
+        streets.transfer(KITTI360, unlabelled)

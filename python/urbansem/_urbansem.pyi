@@ -417,6 +417,19 @@ def streets_estimate(
 ) -> Dict[str, Any]:
     """Street offset and width per drivable segment: the GeoJSON ``urbansem streets estimate`` writes."""
 
+def streets_transfer(
+    train: List[_Path],
+    test: _Path,
+    *,
+    scans_per_source: int = 40,
+    test_scans: int = 0,
+    raw_features: bool = False,
+    max_train_bins: int = 3000,
+    svm_c: float = 4.0,
+    seed: int = 1,
+) -> Dict[str, Any]:
+    """The bin classifier trained on some labelled sequences, scored on another: ``urbansem streets transfer --json``."""
+
 # --- fleet shards ------------------------------------------------------------------------
 
 def shard_plan(

@@ -11,14 +11,15 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any, Dict, Mapping, Optional, Union
+from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
 from ._urbansem import OsmMap
 from ._urbansem import streets_estimate as _estimate
+from ._urbansem import streets_transfer as _transfer
 
-__all__ = ["estimate"]
+__all__ = ["estimate", "transfer"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -73,3 +74,38 @@ def estimate(
     if isinstance(model, (bytes, bytearray)):
         return _estimate(map, _cloud(cloud), model_json=bytes(model), cloud_frame=cloud_frame)
     return _estimate(map, _cloud(cloud), model_path=os.fspath(model), cloud_frame=cloud_frame)
+
+
+def transfer(
+    train: Union[PathLike, Sequence[PathLike]],
+    test: PathLike,
+    *,
+    scans_per_source: int = 40,
+    test_scans: int = 0,
+    raw_features: bool = False,
+    max_train_bins: int = 3000,
+    svm_c: float = 4.0,
+    seed: int = 1,
+) -> Dict[str, Any]:
+    """Trains the street bin classifier on the labelled scans of ``train`` (one sequence
+    folder or several: simulated car LiDAR from ``urbansem sim dataset --kind localization
+    --sensor hdl64``, MCD, KITTI-360) and scores it on the ``test`` sequence's scans.
+
+    Features are standardised per scan unless ``raw_features``. Returns the dict that
+    ``urbansem streets transfer --json`` prints: ``train`` and ``test`` (per sequence
+    ``name``, ``layout``, ``scans``, ``bins``, ``street_share``, ``sidewalk_share``),
+    ``normalised``, ``driving_area`` and ``with_sidewalk`` (``precision``, ``recall``,
+    ``f1``, ``train_positives``, ``test_positives``) and ``seconds``.
+    """
+    if isinstance(train, (str, os.PathLike)):
+        train = [train]
+    return _transfer(
+        [os.fspath(t) for t in train],
+        os.fspath(test),
+        scans_per_source=scans_per_source,
+        test_scans=test_scans,
+        raw_features=raw_features,
+        max_train_bins=max_train_bins,
+        svm_c=svm_c,
+        seed=seed,
+    )

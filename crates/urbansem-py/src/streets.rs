@@ -1,5 +1,7 @@
 //! `streets_estimate`: street offset and width per OSM segment from a point cloud and a
-//! trained model, as the GeoJSON `urbansem streets estimate` writes.
+//! trained model, as the GeoJSON `urbansem streets estimate` writes; `streets_transfer`: the
+//! bin classifier trained on some labelled sequences and scored on another, as
+//! `urbansem streets transfer --json` reports it.
 
 use crate::cloud::cloud_from_arrays;
 use crate::error::{chain, raise, StreetsError};
@@ -18,6 +20,7 @@ use streets::model::StreetModel;
 /// Adds the streets functions to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(streets_estimate, m)?)?;
+    m.add_function(wrap_pyfunction!(streets_transfer, m)?)?;
     Ok(())
 }
 
@@ -130,4 +133,65 @@ fn streets_estimate<'py>(
     });
     let fc = fc.map_err(StreetsError::new_err)?;
     Ok(pythonize::pythonize(py, &fc)?)
+}
+
+/// Trains the bin classifier on the labelled scans of the `train` sequences (folders of any
+/// labelled layout: simulated car LiDAR, MCD, KITTI-360) and scores it on the `test`
+/// sequence: the report `urbansem streets transfer --json` prints, as a dict.
+#[pyfunction]
+#[pyo3(name = "streets_transfer", signature = (train, test, *, scans_per_source = 40,
+    test_scans = 0, raw_features = false, max_train_bins = 3000, svm_c = 4.0, seed = 1))]
+#[allow(clippy::too_many_arguments)]
+fn streets_transfer<'py>(
+    py: Python<'py>,
+    train: Vec<PathBuf>,
+    test: PathBuf,
+    scans_per_source: usize,
+    test_scans: usize,
+    raw_features: bool,
+    max_train_bins: usize,
+    svm_c: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyAny>> {
+    if train.is_empty() {
+        return Err(PyValueError::new_err(
+            "train: give at least one sequence folder",
+        ));
+    }
+    let features = streets::features::FeatureOptions {
+        colour: false,
+        normalise: !raw_features,
+        ..Default::default()
+    };
+    let classifier = streets::model::ClassifierOptions {
+        svm: streets::svm::SvmOptions {
+            c: svm_c,
+            ..Default::default()
+        },
+        max_train_bins,
+        seed,
+        ..Default::default()
+    };
+    let report = py.detach(|| {
+        let read = |dir: &PathBuf, scans: usize| {
+            let seq = geosim::sequence::open_sequence(dir)
+                .map_err(|e| format!("opening {}: {}", dir.display(), chain(&e)))?;
+            streets::transfer::sequence_bins(
+                seq.as_ref(),
+                &dir.display().to_string(),
+                scans,
+                &features,
+            )
+            .map_err(|e| chain(&e))
+        };
+        let sources = train
+            .iter()
+            .map(|d| read(d, scans_per_source))
+            .collect::<Result<Vec<_>, String>>()?;
+        let test_bins = read(&test, test_scans)?;
+        streets::transfer::transfer_eval(&sources, &test_bins, !raw_features, &classifier)
+            .map_err(|e| chain(&e))
+    });
+    let report = report.map_err(StreetsError::new_err)?;
+    Ok(pythonize::pythonize(py, &report)?)
 }
