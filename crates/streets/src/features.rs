@@ -96,6 +96,9 @@ pub struct BinFeatures {
     pub observed: Vec<bool>,
     /// True class of the bin (majority label of its ground points), when labelled.
     pub truth: Vec<Option<Class>>,
+    /// Height of the bin's lowest point above the local ground, metres, as measured (not
+    /// standardised by [`FeatureOptions::normalise`]); NaN for bins without points.
+    pub z_min_above_ground_m: Vec<f32>,
 }
 
 impl BinFeatures {
@@ -308,6 +311,15 @@ pub fn bin_features(
         };
         row[4] = angle;
     }
+    let z_min_above_ground_m = (0..n)
+        .map(|k| {
+            if observed[k] {
+                values[k * FEATURE_DIMS + 10]
+            } else {
+                f32::NAN
+            }
+        })
+        .collect();
     if options.normalise {
         standardise(&mut values, &observed);
     }
@@ -315,6 +327,7 @@ pub fn bin_features(
         values,
         observed,
         truth,
+        z_min_above_ground_m,
     }
 }
 
@@ -412,9 +425,15 @@ mod tests {
                 );
             }
         }
-        // The raw features differ (the test could fail).
+        // The raw features differ (the test could fail); the measured height of the lowest
+        // point is kept as it is (corridors decide with it which bins saw the ground).
         let raw = bin_features(&grid, &cloud, [0.0; 3], &FeatureOptions::default());
         assert!((raw.row(0)[5] - a.row(0)[5]).abs() > 1.0);
+        for k in (0..36).filter(|&k| raw.observed[k]) {
+            assert_eq!(b.z_min_above_ground_m[k], raw.row(k)[10]);
+        }
+        assert!((b.z_min_above_ground_m[4] - 0.12).abs() < 1e-6);
+        assert!(b.z_min_above_ground_m[5].is_nan());
         // Standardised over the observed bins: median 0; the empty column stays zero.
         for f in NORMALISED_FEATURES {
             let mut col: Vec<f32> = (0..36)

@@ -264,7 +264,7 @@ impl SegmentBins {
         (0..self.corridor.grid.len()).filter(move |&k| {
             !self.corridor.masked[k]
                 && self.features.observed[k]
-                && self.features.row(k)[10] < GROUND_SEEN_M
+                && self.features.z_min_above_ground_m[k] < GROUND_SEEN_M
         })
     }
 
