@@ -148,6 +148,43 @@ pub struct TransferReport {
     pub seconds: f64,
 }
 
+/// Options of [`transfer`].
+#[derive(Debug, Clone)]
+pub struct TransferOptions {
+    /// Scans per training sequence, evenly spaced (0: all).
+    pub scans_per_source: usize,
+    /// Scans of the test sequence, evenly spaced (0: all).
+    pub test_scans: usize,
+    /// Standardise the features per scan ([`FeatureOptions::normalise`]).
+    pub normalise: bool,
+    /// The bin classifier's options.
+    pub classifier: ClassifierOptions,
+}
+
+/// A labelled sequence with the name the report gives it.
+pub type NamedSequence = (String, Box<dyn LidarSequence>);
+
+/// `urbansem streets transfer`: reads the training and test sequences' labelled bins (no
+/// colour; standardised per scan unless told otherwise), trains on the former and scores on
+/// the latter.
+pub fn transfer(
+    train: &[NamedSequence],
+    test: &NamedSequence,
+    options: &TransferOptions,
+) -> Result<TransferReport> {
+    let features = FeatureOptions {
+        colour: false,
+        normalise: options.normalise,
+        ..Default::default()
+    };
+    let sources = train
+        .iter()
+        .map(|(name, seq)| sequence_bins(seq.as_ref(), name, options.scans_per_source, &features))
+        .collect::<Result<Vec<_>>>()?;
+    let test_bins = sequence_bins(test.1.as_ref(), &test.0, options.test_scans, &features)?;
+    transfer_eval(&sources, &test_bins, options.normalise, &options.classifier)
+}
+
 /// Trains the bin classifier on the training sequences' bins (one seeded subset of their
 /// union, [`ClassifierOptions::max_train_bins`]) and scores both targets on the test bins.
 pub fn transfer_eval(

@@ -158,39 +158,29 @@ fn streets_transfer<'py>(
             "train: give at least one sequence folder",
         ));
     }
-    let features = streets::features::FeatureOptions {
-        colour: false,
+    let options = streets::transfer::TransferOptions {
+        scans_per_source,
+        test_scans,
         normalise: !raw_features,
-        ..Default::default()
-    };
-    let classifier = streets::model::ClassifierOptions {
-        svm: streets::svm::SvmOptions {
-            c: svm_c,
+        classifier: streets::model::ClassifierOptions {
+            svm: streets::svm::SvmOptions {
+                c: svm_c,
+                ..Default::default()
+            },
+            max_train_bins,
+            seed,
             ..Default::default()
         },
-        max_train_bins,
-        seed,
-        ..Default::default()
     };
     let report = py.detach(|| {
-        let read = |dir: &PathBuf, scans: usize| {
-            let seq = geosim::sequence::open_sequence(dir)
-                .map_err(|e| format!("opening {}: {}", dir.display(), chain(&e)))?;
-            streets::transfer::sequence_bins(
-                seq.as_ref(),
-                &dir.display().to_string(),
-                scans,
-                &features,
-            )
-            .map_err(|e| chain(&e))
+        let open = |dir: &PathBuf| {
+            geosim::sequence::open_sequence(dir)
+                .map(|seq| (dir.display().to_string(), seq))
+                .map_err(|e| format!("opening {}: {}", dir.display(), chain(&e)))
         };
-        let sources = train
-            .iter()
-            .map(|d| read(d, scans_per_source))
-            .collect::<Result<Vec<_>, String>>()?;
-        let test_bins = read(&test, test_scans)?;
-        streets::transfer::transfer_eval(&sources, &test_bins, !raw_features, &classifier)
-            .map_err(|e| chain(&e))
+        let sources = train.iter().map(open).collect::<Result<Vec<_>, String>>()?;
+        let test = open(&test)?;
+        streets::transfer::transfer(&sources, &test, &options).map_err(|e| chain(&e))
     });
     let report = report.map_err(StreetsError::new_err)?;
     Ok(pythonize::pythonize(py, &report)?)

@@ -388,32 +388,23 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             json,
             training,
         } => {
-            let features = streets::features::FeatureOptions {
-                colour: false,
-                normalise: !raw_features,
-                ..Default::default()
-            };
-            let read = |dir: &PathBuf, scans: usize| -> anyhow::Result<_> {
-                eprintln!("streets transfer: reading {}", dir.display());
+            let open = |dir: &PathBuf| -> anyhow::Result<streets::transfer::NamedSequence> {
+                eprintln!("streets transfer: opening {}", dir.display());
                 let seq = geosim::sequence::open_sequence(dir)
                     .with_context(|| format!("opening {}", dir.display()))?;
-                Ok(streets::transfer::sequence_bins(
-                    seq.as_ref(),
-                    &dir.display().to_string(),
-                    scans,
-                    &features,
-                )?)
+                Ok((dir.display().to_string(), seq))
             };
-            let sources = train
-                .iter()
-                .map(|d| read(d, scans_per_source))
-                .collect::<anyhow::Result<Vec<_>>>()?;
-            let test_bins = read(&test, test_scans)?;
-            let report = streets::transfer::transfer_eval(
+            let sources = train.iter().map(open).collect::<anyhow::Result<Vec<_>>>()?;
+            let test = open(&test)?;
+            let report = streets::transfer::transfer(
                 &sources,
-                &test_bins,
-                !raw_features,
-                &training.classifier(),
+                &test,
+                &streets::transfer::TransferOptions {
+                    scans_per_source,
+                    test_scans,
+                    normalise: !raw_features,
+                    classifier: training.classifier(),
+                },
             )?;
             if json {
                 super::print_json(&report)?;
