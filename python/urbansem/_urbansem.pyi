@@ -375,6 +375,7 @@ class _Localizer:
         window: int = 5,
         top: int = 5,
         names: Optional[Sequence[str]] = None,
+        history_m: float = 300.0,
     ) -> List[Dict[str, Any]]:
         """Localizes scans tied by (m, 3) odometry poses: the rows of ``localize track --json``."""
     def scan_segments(self, points: np.ndarray) -> Tuple[np.ndarray, Optional[Dict[str, Any]]]:

@@ -330,12 +330,15 @@ class Localizer:
         top: int = 5,
         names: Optional[Sequence[str]] = None,
         relative: bool = False,
+        history_m: float = 300.0,
     ) -> List[TrackRow]:
         """Localizes every scan with the window of ``window`` scans ending at it, tied by
         odometry: one pose per scan in any odometry frame, as (m, 3) ``x, y, yaw`` rows (the
         lines of ``localize track --odometry``) or (m, 4, 4) matrices, or with ``relative``
         the m − 1 steps between consecutive scans (each in the previous scan's frame); one
-        row per scan, as ``urbansem localize track --json`` lists them."""
+        row per scan, as ``urbansem localize track --json`` lists them. ``history_m``: the
+        odometry distance before the window through which a chain's consistency still counts
+        (``localize track --history-m``)."""
         arrays = [_points(s, f"scans[{i}]") for i, s in enumerate(scans)]
         rows = self._native.track(
             arrays,
@@ -343,6 +346,7 @@ class Localizer:
             window=window,
             top=top,
             names=list(names) if names is not None else None,
+            history_m=history_m,
         )
         return [TrackRow.from_dict(_json(r), self.cost) for r in rows]
 

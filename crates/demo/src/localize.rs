@@ -326,6 +326,7 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         scans_dir: ".track-hdl64".into(),
         odometry: "drifted truth".into(),
         window: WINDOW,
+        history_m: localize::track::TRACK_HISTORY_M,
         cost: results.first().map_or("reverse", |r| r.rank_by.name()),
         scans: results
             .iter()

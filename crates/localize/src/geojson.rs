@@ -230,6 +230,7 @@ pub(crate) mod tests {
             scans_dir: "scans".into(),
             odometry: "odo.txt".into(),
             window: 3,
+            history_m: crate::track::TRACK_HISTORY_M,
             cost: "reverse",
             scans: vec![
                 row(0, Some(candidate(map, 0, 0.0, 0.0, 0.1))),

@@ -289,6 +289,8 @@ pub struct TrackJob {
     pub odometry: PathBuf,
     /// Scans per window.
     pub window: usize,
+    /// Odometry distance before the window through which chains still count, metres.
+    pub history_m: f64,
     /// The localizer's options.
     pub options: LocalizeOptions,
     /// Candidates listed per scan.
@@ -334,15 +336,19 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
                 .context_with(|| format!("extracting walls from {}", f.display()))?,
         );
     }
-    let scans = track_rows(
-        &localizer, &names, &extracted, &odometry, job.window, job.top,
-    )?;
+    let track = TrackOptions {
+        window: job.window,
+        history_m: job.history_m,
+        ..Default::default()
+    };
+    let scans = track_rows(&localizer, &names, &extracted, &odometry, &track, job.top)?;
     let seconds = t.elapsed().as_secs_f64();
     Ok(TrackReport {
         map: job.map.display().to_string(),
         scans_dir: job.scans.display().to_string(),
         odometry: job.odometry.display().to_string(),
         window: job.window,
+        history_m: job.history_m,
         cost: job.options.rank_by.name(),
         scans,
         seconds: TrackSeconds {
@@ -373,6 +379,8 @@ pub struct BagTrackJob {
     pub max_gap_s: f64,
     /// Scans per window.
     pub window: usize,
+    /// Odometry distance before the window through which chains still count, metres.
+    pub history_m: f64,
     /// The localizer's options.
     pub options: LocalizeOptions,
     /// Candidates listed per scan.
@@ -464,15 +472,19 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
             ),
         });
     }
-    let scans = track_rows(
-        &localizer, &names, &extracted, &odometry, job.window, job.top,
-    )?;
+    let track = TrackOptions {
+        window: job.window,
+        history_m: job.history_m,
+        ..Default::default()
+    };
+    let scans = track_rows(&localizer, &names, &extracted, &odometry, &track, job.top)?;
     let seconds = t.elapsed().as_secs_f64();
     let report = TrackReport {
         map: job.map.display().to_string(),
         scans_dir: format!("{} {}", job.bag.display(), job.cloud_topic),
         odometry: format!("{} {}", job.bag.display(), job.odometry_topic),
         window: job.window,
+        history_m: job.history_m,
         cost: job.options.rank_by.name(),
         seconds: TrackSeconds {
             total: seconds,
@@ -484,21 +496,17 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
 }
 
 /// The rows of a track ([`track_folder`] and the Python package): the scans' extracted walls
-/// (`extracted`, named `names`) localized with the window of `window` scans ending at each,
+/// (`extracted`, named `names`) localized with the window of scans ending at each (`track`),
 /// tied by `odometry` (one pose per scan in any odometry frame); `top` candidates per row.
 pub fn track_rows(
     localizer: &Localizer<'_>,
     names: &[String],
     extracted: &[ScanSegments],
     odometry: &[crate::Pose2],
-    window: usize,
+    track: &TrackOptions,
     top: usize,
 ) -> Result<Vec<TrackRow>> {
-    let options = TrackOptions {
-        window,
-        ..Default::default()
-    };
-    let results = localizer.localize_track(extracted, odometry, &options)?;
+    let results = localizer.localize_track(extracted, odometry, track)?;
     Ok(names
         .iter()
         .zip(&results)

@@ -286,8 +286,10 @@ pub struct TrackReport {
     pub scans_dir: String,
     /// The odometry file.
     pub odometry: String,
-    /// Scans searched as one.
+    /// Scans per window.
     pub window: usize,
+    /// Odometry distance before the window through which chains still count, metres.
+    pub history_m: f64,
     /// The cost that ranks the candidates.
     pub cost: &'static str,
     /// One row per scan, in file-name order.

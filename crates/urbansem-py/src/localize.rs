@@ -306,7 +306,8 @@ impl PyLocalizer {
     /// Localizes a track: scans (each `(n, 3)` float64) tied by odometry (`(m, 3)` poses
     /// `x, y, yaw` in any odometry frame, one per scan); one dict per scan as the rows of
     /// `urbansem localize track --json`.
-    #[pyo3(signature = (scans, odometry, *, window = 5, top = 5, names = None))]
+    #[pyo3(signature = (scans, odometry, *, window = 5, top = 5, names = None, history_m = localize::track::TRACK_HISTORY_M))]
+    #[allow(clippy::too_many_arguments)]
     fn track<'py>(
         &self,
         py: Python<'py>,
@@ -315,11 +316,17 @@ impl PyLocalizer {
         window: usize,
         top: usize,
         names: Option<Vec<String>>,
+        history_m: f64,
     ) -> PyResult<Bound<'py, PyAny>> {
         if window == 0 {
             return Err(PyValueError::new_err(
                 "window = 0: expected at least 1 scan per window",
             ));
+        }
+        if history_m.is_nan() || history_m < 0.0 {
+            return Err(PyValueError::new_err(format!(
+                "history_m = {history_m}: expected 0 or more metres"
+            )));
         }
         if scans.is_empty() {
             return Err(PyValueError::new_err(
@@ -372,7 +379,12 @@ impl PyLocalizer {
                             .context_with(|| format!("extracting walls from {name}"))
                     })
                     .collect::<localize::Result<Vec<_>>>()?;
-                track_rows(localizer, &names, &extracted, &odo, window, top)
+                let track = localize::track::TrackOptions {
+                    window,
+                    history_m,
+                    ..Default::default()
+                };
+                track_rows(localizer, &names, &extracted, &odo, &track, top)
             })
             .map_err(raise!(LocalizeError))?;
         Ok(pythonize::pythonize(py, &rows)?)

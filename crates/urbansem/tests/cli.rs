@@ -487,6 +487,45 @@ fn track_mode_recovers_a_simulated_hdl64_drive() {
     assert!(t["top10_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
 }
 
+/// Issue 15: in Helsinki's long straight street (scans 17–40 of the seed-1 drive), a parallel
+/// street driven the other way fits any window of 5 scans as well as the truth; counting a
+/// chain's consistency over 300 m of odometry before the window keeps the truth.
+#[test]
+fn track_mode_history_follows_a_long_straight_street() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("helsinki");
+    let map = "../../../shared/data/osm/helsinki_centre.osm.pbf";
+    sim_dataset(
+        "localization",
+        &[
+            "--sensor",
+            "hdl64",
+            "--map",
+            map,
+            "--scans",
+            "80",
+            "--seed",
+            "1",
+            "--map-error",
+        ],
+        &data,
+    );
+    let stdout = stdout_of(
+        urbansem()
+            .args([
+                "localize", "eval", "--track", "5", "--limit", "42", "--json",
+            ])
+            .args(["--map", map, "--dataset"])
+            .arg(&data),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
+    let t = &v["track"];
+    assert_eq!(t["scans_after_first_window"], 38, "{t}");
+    assert_eq!(t["history_m"], 300.0, "{t}");
+    // Measured 38/38 (the window alone: 26/38, wrong from scan 22 to 40); two misses allowed.
+    assert!(t["top1_within_2m_3deg"].as_u64().unwrap() >= 36, "{t}");
+}
+
 #[test]
 fn streets_estimate_refuses_an_unknown_cloud_frame_as_a_usage_error() {
     let out = urbansem()

@@ -219,8 +219,10 @@ impl DistractorsReport {
 /// How a track was run (`--track K`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackSetup {
-    /// Window of scans searched as one.
+    /// Scans per window.
     pub window: usize,
+    /// Odometry distance before the window through which chains still count, metres.
+    pub history_m: f64,
     /// Relative odometry drift (0.02: 2 % of the distance).
     pub odometry_drift: f64,
     /// Heading drift, degrees per 50 m.
@@ -230,8 +232,10 @@ pub struct TrackSetup {
 /// Track-mode counts: the scans after the first window, judged in the localizer's order.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct TrackCounts {
-    /// Window of scans searched as one.
+    /// Scans per window.
     pub window: usize,
+    /// Odometry distance before the window through which chains still count, metres.
+    pub history_m: f64,
     /// Relative odometry drift.
     pub odometry_drift: f64,
     /// Heading drift, degrees per 50 m.
@@ -551,6 +555,7 @@ impl EvalReport {
             };
             TrackCounts {
                 window: t.window,
+                history_m: t.history_m,
                 odometry_drift: t.odometry_drift,
                 odometry_yaw_drift_deg_per_50m: t.odometry_yaw_drift_deg,
                 scans_after_first_window: after.len(),

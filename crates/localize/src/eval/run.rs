@@ -200,6 +200,7 @@ fn track_results(
     );
     let options = TrackOptions {
         window: setup.window,
+        history_m: setup.history_m,
         ..Default::default()
     };
     localizer.localize_track(&extracted, &odometry, &options)

@@ -5,7 +5,7 @@
 //!   (DIR: a simulated `localization` dataset, or an MCD sequence folder with `--map`).
 //! - `urbansem localize extract-eval --dataset DIR [--stride N] [--json]` (DIR: a labelled
 //!   KITTI-360 or MCD sequence): wall-extraction precision, recall, segments per scan.
-//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--json] [--geojson FILE] [--poses-tum FILE] [--poses-kitti FILE]`:
+//! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--history-m M] [--json] [--geojson FILE] [--poses-tum FILE] [--poses-kitti FILE]`:
 //!   every scan of a folder with the window of K scans ending at it, tied by odometry.
 //!
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
@@ -116,6 +116,10 @@ pub struct TrackArgs {
     /// Scans per window (the scan and the K−1 before it).
     #[arg(long, default_value_t = 5)]
     pub window: usize,
+    /// Odometry distance before the window, metres, through which a chain's consistency
+    /// still counts (an older consistent chain beats a younger one; 0: the window only).
+    #[arg(long, default_value_t = localize::track::TRACK_HISTORY_M)]
+    pub history_m: f64,
     /// Candidates printed per scan.
     #[arg(long, default_value_t = 5)]
     pub top: usize,
@@ -431,6 +435,10 @@ pub struct EvalArgs {
     /// odometry made from the true poses with drift (scans in file-name order).
     #[arg(long)]
     pub track: Option<usize>,
+    /// Track mode: odometry distance before the window, metres, through which a chain's
+    /// consistency still counts (0: the window only).
+    #[arg(long, default_value_t = localize::track::TRACK_HISTORY_M)]
+    pub history_m: f64,
     /// Track mode: odometry scale error (0.02: 2 % of the distance travelled).
     #[arg(long, default_value_t = localize::track::ODOMETRY_SCALE_DRIFT)]
     pub odometry_drift: f64,
@@ -595,6 +603,9 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
     if args.window == 0 {
         super::usage!("--window 0: expected at least 1 scan per window");
     }
+    if args.history_m.is_nan() || args.history_m < 0.0 {
+        super::usage!("--history-m {}: expected 0 or more metres", args.history_m);
+    }
     let writes_poses =
         args.geojson.is_some() || args.poses_tum.is_some() || args.poses_kitti.is_some();
     if args.top == 0 && writes_poses {
@@ -623,6 +634,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
                 every: args.every,
                 max_gap_s: args.max_gap,
                 window: args.window,
+                history_m: args.history_m,
                 options,
                 top: args.top,
             };
@@ -640,6 +652,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
             scans: scans.clone(),
             odometry: odometry.clone(),
             window: args.window,
+            history_m: args.history_m,
             options,
             top: args.top,
         })?,
@@ -734,6 +747,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if args.track == Some(0) {
         super::usage!("--track 0: expected a window of at least 1 scan");
     }
+    if args.history_m.is_nan() || args.history_m < 0.0 {
+        super::usage!("--history-m {}: expected 0 or more metres", args.history_m);
+    }
     let job = EvalJob {
         dataset: args.dataset.clone(),
         map: args.map.clone(),
@@ -755,6 +771,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         limit: args.limit,
         track: args.track.map(|window| TrackSetup {
             window,
+            history_m: args.history_m,
             odometry_drift: args.odometry_drift,
             odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
         }),
