@@ -195,8 +195,10 @@ impl Localizer<'_> {
                 expected: "one odometry pose per scan",
             });
         }
+        // The scans' own searches are independent: run side by side (one search alone leaves
+        // a core idle a third of the time).
         let singles: Vec<Localization> = scans
-            .iter()
+            .par_iter()
             .map(|scan| self.localize_segments(&scan.segments))
             .collect();
         self.track_from_singles(scans, singles, odometry, options)
