@@ -201,25 +201,18 @@ impl Localizer<'_> {
             .par_iter()
             .map(|scan| self.localize_segments(&scan.segments))
             .collect();
-        self.track_from_singles(scans, singles, odometry, options)
+        Ok(self.track_pass(scans, singles, odometry, options))
     }
 
     /// The track pass of [`Localizer::localize_track`] on every scan's own search result
-    /// (`singles[i]` = [`Localizer::localize_segments`] of `scans[i]`).
-    pub fn track_from_singles(
+    /// (`singles[i]` of `scans[i]`; one odometry pose per scan).
+    fn track_pass(
         &self,
         scans: &[ScanSegments],
         singles: Vec<Localization>,
         odometry: &[Pose2],
         options: &TrackOptions,
-    ) -> Result<Vec<Localization>> {
-        if scans.len() != odometry.len() || singles.len() != scans.len() {
-            return Err(LocalizeError::InvalidOption {
-                name: "odometry",
-                value: odometry.len() as f64,
-                expected: "one odometry pose and one search result per scan",
-            });
-        }
+    ) -> Vec<Localization> {
         let o = &self.options;
         let mut out: Vec<Localization> = Vec::with_capacity(scans.len());
         let mut states: Vec<Vec<Candidate>> = Vec::with_capacity(scans.len());
@@ -241,8 +234,9 @@ impl Localizer<'_> {
                 .take(options.own_states)
                 .copied()
                 .collect();
-            if i > 0 && !segs.is_empty() {
-                let step = odometry[i - 1].inverse().compose(&odometry[i]);
+            // The odometry step from the previous scan (none for the first).
+            let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
+            if let Some(step) = step.filter(|_| !segs.is_empty()) {
                 // The previous scan's states in its chain order: a long-followed place is
                 // carried even when its own cost on that scan was poor.
                 let carried: Vec<Candidate> = out[i - 1]
@@ -273,7 +267,6 @@ impl Localizer<'_> {
             }
             self.sort(&mut mine);
             states.push(mine);
-            let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
             let cap = chain_cap(&travelled, i, options);
             chains = extend_chains(
                 &states,
@@ -315,7 +308,7 @@ impl Localizer<'_> {
             result.record_extraction(scan);
             out.push(result);
         }
-        Ok(out)
+        out
     }
 }
 
@@ -324,12 +317,15 @@ impl Localizer<'_> {
 fn chain_cap(travelled: &[f64], i: usize, options: &TrackOptions) -> usize {
     let window = options.window.max(1);
     let start = (i + 1).saturating_sub(window);
-    let before = travelled[..start]
-        .iter()
-        .rev()
-        .take_while(|&&d| travelled[start] - d <= options.history_m)
-        .count();
-    window + before
+    // `travelled` grows with the scan index: the scans before the window within the
+    // history are a suffix of `travelled[..start]` (a NaN history holds none).
+    let first = travelled[..start].partition_point(|&d| {
+        !matches!(
+            (travelled[start] - d).partial_cmp(&options.history_m),
+            Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+        )
+    });
+    window + start - first
 }
 
 /// The best chain ending in each state of scan i, extending the chains of scan i − 1
