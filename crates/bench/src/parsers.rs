@@ -158,35 +158,19 @@ fn grid_end_to_end(args: &ParsersBenchArgs) -> anyhow::Result<Value> {
         ours = serde_json::from_slice(&out.stdout).context("parsing pbo solve --json")?;
     }
     let energy = ours["energy"].as_f64().unwrap_or(f64::NAN);
-    let mut peer: Option<(f64, f64)> = None;
-    if !args.no_peers {
-        let raw = inst
-            .write_raw(&args.dir)
-            .context("writing the raw grid for the peer")?;
-        let json_out = args.dir.join("grid-peer.json");
-        let script = crate::pbo::script_path();
-        let status = Command::new(&args.python)
-            .arg(&script)
-            .arg(&raw)
-            .args(["--repeat", "3", "--json-out"])
-            .arg(&json_out)
-            .stdout(Stdio::from(std::io::stderr()))
-            .status()
-            .with_context(|| format!("running {} {}", args.python, script.display()))?;
-        anyhow::ensure!(
-            status.success(),
-            "the peer script failed (needs python3 with pip)"
-        );
-        let v: Value = serde_json::from_str(&std::fs::read_to_string(&json_out)?)?;
-        let entry = v
-            .get(raw.display().to_string())
-            .and_then(|e| e.get("qpbo"))
-            .cloned()
-            .unwrap_or(Value::Null);
-        if let (Some(t), Some(e)) = (entry["total_s"].as_f64(), entry["energy"].as_f64()) {
-            peer = Some((t, e));
+    // A failed peer is reported beside our numbers, not instead of them (the readers above
+    // took minutes to measure).
+    let (peer, peer_error) = if args.no_peers {
+        (None, None)
+    } else {
+        match grid_peer(args, &inst) {
+            Ok(p) => (p, None),
+            Err(e) => {
+                eprintln!("bench parsers: thinqpbo not run: {e:#}");
+                (None, Some(format!("{e:#}")))
+            }
         }
-    }
+    };
     let text = format!(
         "OPB {side}² grid end to end ({:.1} MB, one objective line): urbansem pbo solve {best:.2} s \
          (process start, parse, solve, JSON out; target ≤ 2 s), energy {energy}{}",
@@ -196,7 +180,10 @@ fn grid_end_to_end(args: &ParsersBenchArgs) -> anyhow::Result<Value> {
                 "; thinqpbo build+solve {t:.3} s, energy {e} ({})",
                 if e == energy { "equal" } else { "DIFFERENT" }
             ),
-            None => String::new(),
+            None => match &peer_error {
+                Some(e) => format!("; thinqpbo not run: {e}"),
+                None => String::new(),
+            },
         }
     );
     Ok(json!({
@@ -207,6 +194,44 @@ fn grid_end_to_end(args: &ParsersBenchArgs) -> anyhow::Result<Value> {
         "urbansem_seconds_parse_solve": ours["seconds"],
         "thinqpbo_seconds": peer.map(|p| p.0),
         "thinqpbo_energy": peer.map(|p| p.1),
+        "thinqpbo_error": peer_error,
         "text": text,
     }))
+}
+
+/// Kolmogorov's QPBO (thinqpbo, through scripts/bench_pbo_peers.py) on the grid: (build and
+/// solve seconds, energy), or `None` when the script reports none.
+fn grid_peer(
+    args: &ParsersBenchArgs,
+    inst: &pbo::instances::QuadraticInstance,
+) -> anyhow::Result<Option<(f64, f64)>> {
+    let raw = inst
+        .write_raw(&args.dir)
+        .context("writing the raw grid for the peer")?;
+    let json_out = args.dir.join("grid-peer.json");
+    let script = crate::pbo::script_path();
+    let status = Command::new(&args.python)
+        .arg(&script)
+        .arg(&raw)
+        .args(["--repeat", "3", "--json-out"])
+        .arg(&json_out)
+        .stdout(Stdio::from(std::io::stderr()))
+        .status()
+        .with_context(|| format!("running {} {}", args.python, script.display()))?;
+    anyhow::ensure!(
+        status.success(),
+        "the peer script failed (it needs numpy and thinqpbo: `pip install numpy thinqpbo`, or pass --python)"
+    );
+    let v: Value = serde_json::from_str(&std::fs::read_to_string(&json_out)?)?;
+    let entry = v
+        .get(raw.display().to_string())
+        .and_then(|e| e.get("qpbo"))
+        .cloned()
+        .unwrap_or(Value::Null);
+    Ok(
+        match (entry["total_s"].as_f64(), entry["energy"].as_f64()) {
+            (Some(t), Some(e)) => Some((t, e)),
+            _ => None,
+        },
+    )
 }

@@ -130,8 +130,10 @@ pub fn formats() -> Vec<ScaleFormat> {
 /// The reads are interleaved: every round reads every size, smallest first, so a change of
 /// the machine's speed during the run (a shared 2-core VM drifts by tens of per cent over
 /// minutes) affects all sizes alike instead of one size's growth ratio. Within a round a
-/// smaller input is read more often ([`reads_per_round`]): a 60 ms read is far noisier than
-/// a 6 s one, and its minimum over three reads alone moved a growth ratio by ±0.3.
+/// smaller input is read more often ([`reads_per_round`]) and its time is the mean of those
+/// reads, one sample per size and round: a 60 ms read is far noisier than a 6 s one (its
+/// minimum over three reads alone moved a growth ratio by ±0.3), and the minimum of many
+/// short reads is a more extreme draw than that of few long ones.
 pub fn measure(
     format: &ScaleFormat,
     sizes: &[u64],
@@ -166,11 +168,12 @@ pub fn measure(
                 repeat.max(1)
             ));
             for (k, (path, bytes)) in files.iter().enumerate() {
-                for _ in 0..reads_per_round(*bytes, largest) {
-                    let t = Instant::now();
+                let reads = reads_per_round(*bytes, largest);
+                let t = Instant::now();
+                for _ in 0..reads {
                     items[k] = (format.read)(path)?;
-                    best[k] = best[k].min(t.elapsed().as_secs_f64());
                 }
+                best[k] = best[k].min(t.elapsed().as_secs_f64() / reads as f64);
             }
         }
         Ok::<(), String>(())
@@ -196,10 +199,14 @@ pub fn measure(
     Ok(out)
 }
 
-/// Reads of an input of `bytes` per round: √(largest / bytes), at least 1 — a size 8× and
-/// 64× below the largest is read 3× and 8× per round, for a quarter more time in all.
+/// Reads of an input of `bytes` per round: largest / bytes (1 to 4 096), so that every size
+/// reads about as many bytes, and takes about as long, per round — a size 8× and 64× below
+/// the largest is read 8× and 64× per round. Equal durations give every size's timing the
+/// same exposure to the machine's swings: with √(largest / bytes) reads (session 11), the
+/// shorter batches of the small inputs more often fell wholly into a fast spell, and their
+/// minimum over the rounds came out up to 1.4× faster per byte than the largest input's.
 pub fn reads_per_round(bytes: u64, largest: u64) -> usize {
-    ((largest as f64 / bytes.max(1) as f64).sqrt().round() as usize).max(1)
+    ((largest as f64 / bytes.max(1) as f64).round() as usize).clamp(1, 4096)
 }
 
 fn write_text(path: &Path, text: &str) -> Result<(), String> {
@@ -365,8 +372,9 @@ mod tests {
     #[test]
     fn smaller_inputs_are_read_more_often() {
         assert_eq!(reads_per_round(128, 128), 1);
-        assert_eq!(reads_per_round(16, 128), 3);
-        assert_eq!(reads_per_round(2, 128), 8);
+        assert_eq!(reads_per_round(16, 128), 8);
+        assert_eq!(reads_per_round(2, 128), 64);
+        assert_eq!(reads_per_round(1, u64::MAX), 4096);
         assert_eq!(reads_per_round(0, 0), 1);
         assert_eq!(reads_per_round(200, 100), 1);
     }
