@@ -44,6 +44,25 @@ pub fn eval_dataset(
     Ok(report)
 }
 
+/// [`load_sequence`] with the sequence and the map named in its error.
+fn load_real(
+    dataset: &Path,
+    map: &Path,
+    corridor: &crate::corridor::CorridorOptions,
+    truth: &TruthOptions,
+    progress: &dyn Fn(usize, usize),
+) -> Result<crate::real::RealDataset> {
+    Ok(
+        load_sequence(dataset, map, corridor, truth, progress).context(|| {
+            format!(
+                "reading the sequence {} with the map {}",
+                dataset.display(),
+                map.display()
+            )
+        })?,
+    )
+}
+
 /// `streets eval-real`: a labelled real sequence registered by its poses on `map`, the truth
 /// derived from its labels, and the Table 4.1 evaluation; the per-segment rows (truth, and
 /// estimate once evaluated) written to `segments_out` when given — before the evaluation too,
@@ -57,20 +76,13 @@ pub fn eval_real(
 ) -> Result<RealEvalReport> {
     let truth_options = TruthOptions::default();
     let t = Instant::now();
-    let real = load_sequence(
+    let real = load_real(
         dataset,
         map,
         &options.geometry.corridor,
         &truth_options,
         progress,
-    )
-    .context(|| {
-        format!(
-            "reading the sequence {} with the map {}",
-            dataset.display(),
-            map.display()
-        )
-    })?;
+    )?;
     let load_s = t.elapsed().as_secs_f64();
     let write_segments = |geometries: Option<&Vec<SegmentGeometry>>| match segments_out {
         Some(p) => write_json(p, &real.segment_rows(geometries.map(Vec::as_slice))),
@@ -100,4 +112,136 @@ pub fn kitti_eval(
     let features_s = t.elapsed().as_secs_f64();
     let sim = sim_dataset.map(load_dataset).transpose()?;
     evaluate_bins(&train, &test, sim.as_ref(), classifier, features_s)
+}
+
+/// One passed segment of [`ModelRealReport`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ModelRealRow {
+    /// Segment index in the map.
+    pub segment: usize,
+    /// Centre-line length, metres.
+    pub length_m: f64,
+    /// Derived true (offset, width), metres; `None`: too poorly observed.
+    pub truth_m: Option<(f64, f64)>,
+    /// The model's (offset, width), metres; `None`: no usable bins.
+    pub estimate_m: Option<(f64, f64)>,
+}
+
+/// `streets eval-real --model`: a trained model scored on a labelled real sequence without
+/// training on it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ModelRealReport {
+    /// What the model calls street.
+    pub target: crate::model::Target,
+    /// Drivable segments the drive passes.
+    pub passed: usize,
+    /// Passed segments with a derived truth.
+    pub with_truth: usize,
+    /// Passed segments with a truth and an estimate.
+    pub covered: usize,
+    /// The bin classifier on the labelled usable bins of the passed segments' corridors (the
+    /// "raw" row of Table 4.1).
+    pub raw: crate::kitti::Prf,
+    /// Labelled usable bins scored in `raw`.
+    pub raw_bins: usize,
+    /// Length-weighted RMSE of the width over the covered segments, metres.
+    pub rmse_w: Option<f64>,
+    /// Length-weighted RMSE of the offset over the covered segments, metres.
+    pub rmse_d: Option<f64>,
+    /// Every passed segment.
+    pub segments: Vec<ModelRealRow>,
+    /// Wall time of reading and registering the sequence and of the estimate, seconds.
+    pub seconds: std::collections::BTreeMap<String, f64>,
+}
+
+/// `streets eval-real --model`: the sequence registered on `map` with its truth derived as
+/// for `eval-real`, then `model` estimates every segment from the registered cloud (as
+/// `streets estimate` does) and is compared with the truth of the passed segments.
+pub fn eval_real_model(
+    dataset: &Path,
+    map: &Path,
+    model: &crate::model::StreetModel,
+    progress: &dyn Fn(usize, usize),
+) -> Result<ModelRealReport> {
+    let truth_options = TruthOptions::default();
+    let t = Instant::now();
+    let real = load_real(
+        dataset,
+        map,
+        &model.geometry.corridor,
+        &truth_options,
+        progress,
+    )?;
+    let mut seconds = std::collections::BTreeMap::new();
+    seconds.insert("load_and_truth".to_string(), t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let est = model.estimate(
+        &real.dataset.map,
+        &real.dataset.cloud,
+        &map.display().to_string(),
+        &dataset.display().to_string(),
+    )?;
+    seconds.insert("estimate".to_string(), t.elapsed().as_secs_f64());
+    let (mut predicted, mut truth) = (Vec::new(), Vec::new());
+    let bins = crate::model::segment_bins(
+        &real.dataset.map,
+        &real.dataset.cloud,
+        &real.passed,
+        &model.geometry,
+    );
+    for b in bins.iter().flatten() {
+        let usable: Vec<usize> = b.usable().collect();
+        let labels = model.classifier.predict(&b.usable_rows())?;
+        for (&k, &p) in usable.iter().zip(&labels) {
+            if let Some(c) = b.features.truth[k] {
+                predicted.push(p);
+                truth.push(model.target.positive(c));
+            }
+        }
+    }
+    let segs = &real.dataset.map.streets.segments;
+    let mut rows = Vec::new();
+    let (mut w2, mut d2, mut len) = (0.0, 0.0, 0.0);
+    for &s in &real.passed {
+        let obs = real.observations.iter().find(|o| o.segment == s);
+        let truth = obs
+            .and_then(|o| match model.target {
+                crate::model::Target::DrivingArea => o.driving_area,
+                crate::model::Target::WithSidewalk => o.with_sidewalk,
+            })
+            .map(|g| (g.offset_m, g.width_m));
+        let estimate = est
+            .segments
+            .iter()
+            .find(|e| e.segment == s)
+            .map(|e| (e.offset_m, e.width_m));
+        if let (Some(tr), Some(es)) = (truth, estimate) {
+            let l = segs[s].length_m;
+            w2 += l * (es.1 - tr.1).powi(2);
+            d2 += l * (es.0 - tr.0).powi(2);
+            len += l;
+        }
+        rows.push(ModelRealRow {
+            segment: s,
+            length_m: segs[s].length_m,
+            truth_m: truth,
+            estimate_m: estimate,
+        });
+    }
+    let covered = rows
+        .iter()
+        .filter(|r| r.truth_m.is_some() && r.estimate_m.is_some())
+        .count();
+    Ok(ModelRealReport {
+        target: model.target,
+        passed: real.passed.len(),
+        with_truth: rows.iter().filter(|r| r.truth_m.is_some()).count(),
+        covered,
+        raw: crate::kitti::prf(&predicted, &truth),
+        raw_bins: truth.len(),
+        rmse_w: (len > 0.0).then(|| (w2 / len).sqrt()),
+        rmse_d: (len > 0.0).then(|| (d2 / len).sqrt()),
+        segments: rows,
+        seconds,
+    })
 }

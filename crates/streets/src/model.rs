@@ -457,6 +457,54 @@ impl StreetModel {
         })
     }
 
+    /// Trains one model on the labelled bins of several datasets together (simulated
+    /// `streets` datasets and registered real sequences), with the given geometry options
+    /// (e.g. [`FeatureOptions::normalise`] on, colour off, for clouds of other sensors).
+    ///
+    /// Each source contributes at most an equal share of the classifier's training and
+    /// calibration bins (a seeded subset), so a large simulated cloud does not drown a real
+    /// sequence; the geometry prior is fitted on every source's segments.
+    pub fn train_sources(
+        sources: &[&crate::dataset::StreetsDataset],
+        target: Target,
+        geometry: GeometryOptions,
+        classifier: &ClassifierOptions,
+    ) -> Result<StreetModel> {
+        if sources.is_empty() {
+            return Err(StreetsError::InvalidOption {
+                name: "training sources",
+                value: 0.0,
+                expected: "at least one dataset or sequence",
+            });
+        }
+        let per_source = (classifier.max_train_bins + classifier.calibration_bins)
+            .div_ceil(sources.len())
+            .max(1);
+        let mut all = TrainingBins::default();
+        for (i, ds) in sources.iter().enumerate() {
+            let bins = dataset_bins(ds, &geometry, target);
+            let n = bins.labels.len();
+            let mut order: Vec<usize> = (0..n).collect();
+            order.shuffle(&mut ChaCha8Rng::seed_from_u64(
+                classifier.seed ^ (i as u64).wrapping_mul(0x9E37_79B9),
+            ));
+            order.truncate(per_source);
+            for &k in &order {
+                all.features
+                    .extend_from_slice(&bins.features[k * FEATURE_DIMS..(k + 1) * FEATURE_DIMS]);
+                all.labels.push(bins.labels[k]);
+            }
+            all.geometries.extend_from_slice(&bins.geometries);
+        }
+        let classifier = BinClassifier::train(&all.features, &all.labels, classifier)?;
+        Ok(StreetModel {
+            target,
+            geometry,
+            classifier,
+            prior: GeometryPrior::fit(&all.geometries),
+        })
+    }
+
     /// Reads a model written by `urbansem streets train` (JSON) and checks every value
     /// [`StreetModel::estimate`] relies on: feature dimensions, finite numbers, positive
     /// scales, and a corridor of at most [`MAX_CORRIDOR_COLS`] bins of at least

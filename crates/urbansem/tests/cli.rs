@@ -1172,3 +1172,33 @@ fn streets_transfer_from_simulated_hdl64_scans_to_kitti360() {
         assert!(err.contains(says), "{err}");
     }
 }
+
+/// `streets train` without a source, or with a `--sequence` that is not DIR=MAP, is a usage
+/// error (exit 2) that says what it expects.
+#[test]
+fn streets_train_needs_a_source_and_sequences_as_dir_equals_map() {
+    let out = urbansem()
+        .args(["streets", "train", "--out", "never.json"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--sequence DIR=MAP"));
+    let out = urbansem()
+        .args([
+            "streets",
+            "train",
+            "--sequence",
+            "some/dir",
+            "--out",
+            "never.json",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("expected DIR=MAP"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!std::path::Path::new("never.json").exists());
+}

@@ -136,12 +136,29 @@ pub enum StreetsCommand {
         /// Evaluation options.
         #[command(flatten)]
         eval: EvalArgs,
-    },
-    /// Train a model (classifier, confusion matrix, prior) on a whole `streets` dataset.
-    Train {
-        /// Dataset folder.
+        /// Score this trained model (`streets train`) instead of training on the sequence:
+        /// its estimate from the registered cloud against the derived truth.
         #[arg(long)]
-        dataset: PathBuf,
+        model: Option<PathBuf>,
+    },
+    /// Train a model (classifier, confusion matrix, prior) on whole `streets` datasets and
+    /// labelled real sequences together.
+    Train {
+        /// Simulated `streets` dataset folders (comma-separated or repeated).
+        #[arg(long, value_delimiter = ',')]
+        dataset: Vec<PathBuf>,
+        /// A labelled real sequence (KITTI-360 or MCD layout) and the OSM map of its streets,
+        /// as DIR=MAP (repeatable): registered by its poses, truth derived from its labels as
+        /// `streets eval-real` derives it.
+        #[arg(long)]
+        sequence: Vec<String>,
+        /// Standardise the features per corridor (median / IQR), so the model transfers to
+        /// other sensors' intensity scales and densities.
+        #[arg(long)]
+        normalise: bool,
+        /// Leave out the colour histograms (for clouds without RGB).
+        #[arg(long)]
+        no_colour: bool,
         /// Street area to model.
         #[arg(long, value_enum, default_value = "driving-area")]
         target: TargetArg,
@@ -281,7 +298,50 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             map,
             json,
             segments_out,
+            eval: _,
+            model: Some(model),
+        } => {
+            if segments_out.is_some() {
+                super::usage!("--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON");
+            }
+            let bytes = std::fs::read(&model)
+                .with_context(|| format!("reading the model {}", model.display()))?;
+            let model_value = StreetModel::from_json(&bytes, &model)?;
+            let r =
+                streets::jobs::eval_real_model(&dataset, &map, &model_value, &|done, total| {
+                    if done == total || done % 10 == 0 {
+                        eprintln!("streets eval-real: {done}/{total} scans registered");
+                    }
+                })?;
+            if json {
+                super::print_json(&r)?;
+            } else {
+                let m = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.2} m"));
+                println!(
+                    "{} on {} with {} (the model as trained, not retrained on the sequence): {} passed segments, {} with a truth, {} covered; raw bins P/R/F1 {:.3}/{:.3}/{:.3} ({} bins); RMSE_w {}, RMSE_d {}",
+                    model.display(),
+                    dataset.display(),
+                    map.display(),
+                    r.passed,
+                    r.with_truth,
+                    r.covered,
+                    r.raw.precision,
+                    r.raw.recall,
+                    r.raw.f1,
+                    r.raw_bins,
+                    m(r.rmse_w),
+                    m(r.rmse_d)
+                );
+            }
+            Ok(())
+        }
+        StreetsCommand::EvalReal {
+            dataset,
+            map,
+            json,
+            segments_out,
             eval,
+            model: None,
         } => {
             let r = streets::jobs::eval_real(
                 &dataset,
@@ -304,12 +364,48 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         }
         StreetsCommand::Train {
             dataset,
+            sequence,
+            normalise,
+            no_colour,
             target,
             out,
             training,
         } => {
-            let ds = streets::jobs::load_dataset(&dataset)?;
-            let model = StreetModel::train(&ds, target.into(), &training.classifier())?;
+            if dataset.is_empty() && sequence.is_empty() {
+                super::usage!("streets train needs at least one --dataset or --sequence DIR=MAP");
+            }
+            let mut geometry = streets::model::GeometryOptions::default();
+            geometry.features.normalise = normalise;
+            geometry.features.colour = !no_colour;
+            let mut sources = Vec::new();
+            for d in &dataset {
+                sources.push(streets::jobs::load_dataset(d)?);
+            }
+            for pair in &sequence {
+                let Some((dir, map)) = pair.rsplit_once('=') else {
+                    super::usage!("--sequence {pair:?}: expected DIR=MAP");
+                };
+                let real = streets::real::load_sequence(
+                    std::path::Path::new(dir),
+                    std::path::Path::new(map),
+                    &geometry.corridor,
+                    &streets::real::TruthOptions::default(),
+                    &|done, total| {
+                        if done == total || done % 10 == 0 {
+                            eprintln!("streets train: {dir}: {done}/{total} scans registered");
+                        }
+                    },
+                )
+                .with_context(|| format!("reading the sequence {dir} with the map {map}"))?;
+                sources.push(real.dataset);
+            }
+            let refs: Vec<&streets::dataset::StreetsDataset> = sources.iter().collect();
+            let model = if dataset.len() == 1 && sequence.is_empty() && !normalise && !no_colour {
+                // One simulated dataset with the defaults: the model of issue 5, unchanged.
+                StreetModel::train(&sources[0], target.into(), &training.classifier())?
+            } else {
+                StreetModel::train_sources(&refs, target.into(), geometry, &training.classifier())?
+            };
             geodata::fsio::write_atomic(&out, serde_json::to_vec(&model)?)
                 .with_context(|| format!("writing {}", out.display()))?;
             println!(
