@@ -157,10 +157,14 @@ pub struct ModelRealReport {
 /// `streets eval-real --model`: the sequence registered on `map` with its truth derived as
 /// for `eval-real`, then `model` estimates every segment from the registered cloud (as
 /// `streets estimate` does) and is compared with the truth of the passed segments.
+///
+/// `self_calibrate` > 0: [`crate::model::StreetModel::estimate_self_calibrated`] with at most
+/// that many rounds instead of the plain estimate.
 pub fn eval_real_model(
     dataset: &Path,
     map: &Path,
     model: &crate::model::StreetModel,
+    self_calibrate: usize,
     progress: &dyn Fn(usize, usize),
 ) -> Result<ModelRealReport> {
     let truth_options = TruthOptions::default();
@@ -175,12 +179,13 @@ pub fn eval_real_model(
     let mut seconds = std::collections::BTreeMap::new();
     seconds.insert("load_and_truth".to_string(), t.elapsed().as_secs_f64());
     let t = Instant::now();
-    let est = model.estimate(
-        &real.dataset.map,
-        &real.dataset.cloud,
-        &map.display().to_string(),
-        &dataset.display().to_string(),
-    )?;
+    let (map_name, cloud_name) = (map.display().to_string(), dataset.display().to_string());
+    let (osm, cloud) = (&real.dataset.map, &real.dataset.cloud);
+    let est = if self_calibrate > 0 {
+        model.estimate_self_calibrated(osm, cloud, &cloud_name, &map_name, self_calibrate)?
+    } else {
+        model.estimate(osm, cloud, &map_name, &cloud_name)?
+    };
     seconds.insert("estimate".to_string(), t.elapsed().as_secs_f64());
     let (mut predicted, mut truth) = (Vec::new(), Vec::new());
     let bins = crate::model::segment_bins(

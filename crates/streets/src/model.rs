@@ -16,6 +16,7 @@ use geodata::osm::OsmMap;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -394,6 +395,10 @@ pub fn dataset_bins(
     out
 }
 
+/// Weight of the calibration confusion matrix in [`StreetModel::estimate_self_calibrated`],
+/// as bins per true class (the cloud's own corridors count hundreds of thousands).
+pub const SELF_CALIBRATION_PSEUDO_BINS: f64 = 200.0;
+
 /// A trained model for `urbansem streets estimate`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StreetModel {
@@ -701,6 +706,32 @@ impl<'a> PotentialStep<'a> {
         }
     }
 
+    /// The column counts of the classifier's labels in each segment's corridor and its usable
+    /// bins, in the order of `which` (parallel over segments); `None`: too short (no
+    /// corridor), `Some(None)`: no usable bin.
+    #[allow(clippy::type_complexity)]
+    pub fn column_counts(
+        &self,
+        which: &[usize],
+    ) -> Result<Vec<Option<Option<(ColumnCounts, usize)>>>> {
+        let geometry = &self.model.geometry;
+        let results = self
+            .source
+            .map(which, |corridor| -> Result<Option<(ColumnCounts, usize)>> {
+                if corridor.grid.point_ids.is_empty() {
+                    return Ok(None);
+                }
+                let b = SegmentBins::of(corridor, self.cloud, &geometry.features);
+                let rows = b.usable_rows();
+                if rows.is_empty() {
+                    return Ok(None);
+                }
+                let labels = self.model.classifier.predict(&rows)?;
+                Ok(Some((b.counts(&labels), labels.len())))
+            });
+        results.into_iter().map(|r| r.transpose()).collect()
+    }
+
     /// The outcome of each segment of `which`, in order (parallel over segments).
     pub fn outcomes(&self, which: &[usize]) -> Result<Vec<SegmentOutcome>> {
         let flat = GeometryPrior::flat();
@@ -791,6 +822,102 @@ impl StreetModel {
             return Err(no_overlap(map, cloud, cloud_name));
         }
         let (segments, exact) = self.infer(map, observed);
+        Ok(Estimates {
+            segments,
+            too_short,
+            unobserved,
+            exact,
+        })
+    }
+
+    /// [`StreetModel::estimate`] with the classifier's confusion matrix re-estimated on the
+    /// cloud itself instead of taken from the training data's calibration bins (hard EM, at
+    /// most `iterations` rounds, until no estimate changes): each round estimates every
+    /// segment with the current matrix, then counts the labels inside and outside the
+    /// estimated strips as the new matrix, with the calibration matrix as a prior of
+    /// [`SELF_CALIBRATION_PSEUDO_BINS`] per true class. For a cloud of another sensor or city,
+    /// whose bins the classifier labels with other error rates than its calibration bins.
+    /// The whole cloud shares one matrix, so this is not tile-local ([`crate::tiles`]
+    /// reproduces [`StreetModel::estimate`] only).
+    pub fn estimate_self_calibrated(
+        &self,
+        map: &OsmMap,
+        cloud: &PointCloud,
+        cloud_name: &str,
+        map_name: &str,
+        iterations: usize,
+    ) -> Result<Estimates> {
+        let which = drivable_segments(map, map_name)?;
+        let step = PotentialStep::new(self, map, cloud);
+        let counted = step.column_counts(&which)?;
+        let too_short = counted.iter().filter(|c| c.is_none()).count();
+        let unobserved = counted.iter().filter(|c| matches!(c, Some(None))).count();
+        if too_short == which.len() {
+            return Err(StreetsError::SegmentsTooShort {
+                segments: which.len(),
+                bin_m: self.geometry.corridor.bin_m,
+            });
+        }
+        let observed: Vec<(usize, ColumnCounts, usize)> = which
+            .iter()
+            .zip(counted)
+            .filter_map(|(&s, c)| c.flatten().map(|(c, n)| (s, c, n)))
+            .collect();
+        if observed.is_empty() {
+            return Err(no_overlap(map, cloud, cloud_name));
+        }
+        let grid = self.geometry.theta_grid();
+        let prior = crate::potentials::prior_table(&self.prior, &grid);
+        let flat = GeometryPrior::flat();
+        let pseudo: [[f64; 2]; 2] = self.classifier.confusion.counts.map(|row| {
+            let total = (row[0] + row[1]).max(1) as f64;
+            row.map(|c| SELF_CALIBRATION_PSEUDO_BINS * c as f64 / total)
+        });
+        let mut counts = [[0.0f64; 2]; 2];
+        let mut last: Option<Vec<SegmentEstimate>> = None;
+        let mut exact = true;
+        for round in 0..=iterations {
+            let clog: [[f64; 2]; 2] = if round == 0 {
+                self.classifier.confusion.log_likelihood()
+            } else {
+                let mut out = [[0.0; 2]; 2];
+                for t in 0..2 {
+                    let n: [f64; 2] = [counts[t][0] + pseudo[t][0], counts[t][1] + pseudo[t][1]];
+                    let total = n[0] + n[1] + 2.0;
+                    for p in 0..2 {
+                        out[t][p] = ((n[p] + 1.0) / total).ln();
+                    }
+                }
+                out
+            };
+            let potentials: Vec<(usize, SegmentPotential, usize)> = observed
+                .par_iter()
+                .map(|(s, c, n)| {
+                    let p = tempered_with_prior(
+                        &segment_potential(c, &clog, &flat, &grid),
+                        &self.geometry.tempering,
+                        &prior,
+                    );
+                    (*s, p, *n)
+                })
+                .collect();
+            let (segments, ex) = self.infer(map, potentials);
+            exact = ex;
+            if last.as_ref() == Some(&segments) {
+                break;
+            }
+            counts = [[0.0; 2]; 2];
+            for ((_, c, _), e) in observed.iter().zip(&segments) {
+                let (a, b) = grid.columns_of(e.offset_m, e.width_m);
+                for j in 0..grid.cols {
+                    let inside = usize::from(a <= j && j <= b);
+                    counts[inside][1] += f64::from(c.ones.get(j).copied().unwrap_or(0));
+                    counts[inside][0] += f64::from(c.zeros.get(j).copied().unwrap_or(0));
+                }
+            }
+            last = Some(segments);
+        }
+        let segments = last.unwrap_or_default();
         Ok(Estimates {
             segments,
             too_short,

@@ -247,7 +247,7 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
     assert!(!model.classifier.scaler.mean.is_empty());
     let kitti = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/lidar/kitti360_2013_05_28_drive_0009");
-    let r = streets::jobs::eval_real_model(&kitti, &roads_map(), &model, &|_, _| {}).unwrap();
+    let r = streets::jobs::eval_real_model(&kitti, &roads_map(), &model, 0, &|_, _| {}).unwrap();
     assert!(r.passed >= 12, "{r:?}");
     assert!(r.covered >= 10, "{r:?}");
     let (mut w2, mut len) = (0.0, 0.0);
@@ -257,6 +257,23 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
             len += row.length_m;
         }
     }
+    // Self-calibration with no round is the plain estimate, exactly; with rounds it still
+    // covers the same segments.
+    let real = load(&kitti, &roads_map()).unwrap();
+    let (osm, cloud) = (&real.dataset.map, &real.dataset.cloud);
+    let plain = model.estimate(osm, cloud, "map", "cloud").unwrap();
+    let zero = model
+        .estimate_self_calibrated(osm, cloud, "cloud", "map", 0)
+        .unwrap();
+    assert_eq!(plain.segments, zero.segments);
+    assert_eq!(
+        (plain.too_short, plain.unobserved),
+        (zero.too_short, zero.unobserved)
+    );
+    let calibrated =
+        streets::jobs::eval_real_model(&kitti, &roads_map(), &model, 20, &|_, _| {}).unwrap();
+    assert_eq!(calibrated.covered, r.covered);
+    assert!(calibrated.rmse_w.unwrap().is_finite());
     let rmse_w = r.rmse_w.unwrap();
     assert!((rmse_w - (w2 / len).sqrt()).abs() < 1e-9, "{rmse_w}");
     assert!(rmse_w.is_finite() && rmse_w < 10.0, "{rmse_w}");

@@ -1173,8 +1173,9 @@ fn streets_transfer_from_simulated_hdl64_scans_to_kitti360() {
     }
 }
 
-/// `streets train` without a source, or with a `--sequence` that is not DIR=MAP, is a usage
-/// error (exit 2) that says what it expects.
+/// `streets train` without a source, or with a `--sequence` that is not DIR=MAP, and
+/// `streets eval-real --self-calibrate` without `--model`, are usage errors (exit 2) that say
+/// what they expect.
 #[test]
 fn streets_train_needs_a_source_and_sequences_as_dir_equals_map() {
     let out = urbansem()
@@ -1201,4 +1202,11 @@ fn streets_train_needs_a_source_and_sequences_as_dir_equals_map() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(!std::path::Path::new("never.json").exists());
+    let out = urbansem()
+        .args(["streets", "eval-real", "--dataset", "d", "--map", "m.osm"])
+        .args(["--self-calibrate", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--self-calibrate needs --model"));
 }

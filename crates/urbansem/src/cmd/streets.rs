@@ -140,6 +140,10 @@ pub enum StreetsCommand {
         /// its estimate from the registered cloud against the derived truth.
         #[arg(long)]
         model: Option<PathBuf>,
+        /// With --model: re-estimate the classifier's confusion matrix on the sequence's own
+        /// cloud, at most this many rounds (0: the model's calibration matrix as it is).
+        #[arg(long, default_value_t = 0)]
+        self_calibrate: usize,
     },
     /// Train a model (classifier, confusion matrix, prior) on whole `streets` datasets and
     /// labelled real sequences together.
@@ -300,6 +304,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             segments_out,
             eval: _,
             model: Some(model),
+            self_calibrate,
         } => {
             if segments_out.is_some() {
                 super::usage!("--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON");
@@ -307,12 +312,18 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             let bytes = std::fs::read(&model)
                 .with_context(|| format!("reading the model {}", model.display()))?;
             let model_value = StreetModel::from_json(&bytes, &model)?;
-            let r =
-                streets::jobs::eval_real_model(&dataset, &map, &model_value, &|done, total| {
-                    if done == total || done % 10 == 0 {
-                        eprintln!("streets eval-real: {done}/{total} scans registered");
-                    }
-                })?;
+            let progress = |done: usize, total: usize| {
+                if done == total || done % 10 == 0 {
+                    eprintln!("streets eval-real: {done}/{total} scans registered");
+                }
+            };
+            let r = streets::jobs::eval_real_model(
+                &dataset,
+                &map,
+                &model_value,
+                self_calibrate,
+                &progress,
+            )?;
             if json {
                 super::print_json(&r)?;
             } else {
@@ -342,7 +353,11 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             segments_out,
             eval,
             model: None,
+            self_calibrate,
         } => {
+            if self_calibrate > 0 {
+                super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
+            }
             let r = streets::jobs::eval_real(
                 &dataset,
                 &map,
