@@ -178,22 +178,93 @@ pub fn eval_real_model(
     )?;
     let mut seconds = std::collections::BTreeMap::new();
     seconds.insert("load_and_truth".to_string(), t.elapsed().as_secs_f64());
+    let truths: Vec<Option<(f64, f64)>> = real
+        .passed
+        .iter()
+        .map(|&s| {
+            real.observations
+                .iter()
+                .find(|o| o.segment == s)
+                .and_then(|o| match model.target {
+                    crate::model::Target::DrivingArea => o.driving_area,
+                    crate::model::Target::WithSidewalk => o.with_sidewalk,
+                })
+                .map(|g| (g.offset_m, g.width_m))
+        })
+        .collect();
+    score_model(
+        &real.dataset,
+        &real.passed,
+        &truths,
+        model,
+        self_calibrate,
+        (&map.display().to_string(), &dataset.display().to_string()),
+        seconds,
+    )
+}
+
+/// `streets eval --model`: a trained model on a simulated `streets` dataset without training
+/// on it; the segments scored are the observed drivable ones, with the simulator's truth.
+pub fn eval_dataset_model(
+    dir: &Path,
+    model: &crate::model::StreetModel,
+    self_calibrate: usize,
+) -> Result<ModelRealReport> {
     let t = Instant::now();
-    let (map_name, cloud_name) = (map.display().to_string(), dataset.display().to_string());
-    let (osm, cloud) = (&real.dataset.map, &real.dataset.cloud);
+    let ds = load_dataset(dir)?;
+    let mut seconds = std::collections::BTreeMap::new();
+    seconds.insert("load".to_string(), t.elapsed().as_secs_f64());
+    let which: Vec<usize> = (0..ds.segments.len())
+        .filter(|&s| ds.segments[s].drivable && ds.segments[s].observed)
+        .collect();
+    let truths: Vec<Option<(f64, f64)>> = which
+        .iter()
+        .map(|&s| {
+            let t = &ds.segments[s];
+            Some(match model.target {
+                crate::model::Target::DrivingArea => (t.offset_m, t.width_m),
+                crate::model::Target::WithSidewalk => (
+                    t.outer_offset_m.unwrap_or(t.offset_m),
+                    t.width_m + 2.0 * t.sidewalk_m,
+                ),
+            })
+        })
+        .collect();
+    let name = dir.display().to_string();
+    score_model(
+        &ds,
+        &which,
+        &truths,
+        model,
+        self_calibrate,
+        (&ds.map_path.display().to_string(), &name),
+        seconds,
+    )
+}
+
+/// Estimates `ds` with `model` (self-calibrated when `self_calibrate` > 0) and scores the
+/// segments `which` against `truths` (one per segment; `None`: no truth). `names`: (map,
+/// cloud) for messages.
+fn score_model(
+    ds: &StreetsDataset,
+    which: &[usize],
+    truths: &[Option<(f64, f64)>],
+    model: &crate::model::StreetModel,
+    self_calibrate: usize,
+    names: (&str, &str),
+    mut seconds: std::collections::BTreeMap<String, f64>,
+) -> Result<ModelRealReport> {
+    let t = Instant::now();
+    let (map_name, cloud_name) = names;
+    let (osm, cloud) = (&ds.map, &ds.cloud);
     let est = if self_calibrate > 0 {
-        model.estimate_self_calibrated(osm, cloud, &cloud_name, &map_name, self_calibrate)?
+        model.estimate_self_calibrated(osm, cloud, cloud_name, map_name, self_calibrate)?
     } else {
-        model.estimate(osm, cloud, &map_name, &cloud_name)?
+        model.estimate(osm, cloud, map_name, cloud_name)?
     };
     seconds.insert("estimate".to_string(), t.elapsed().as_secs_f64());
     let (mut predicted, mut truth) = (Vec::new(), Vec::new());
-    let bins = crate::model::segment_bins(
-        &real.dataset.map,
-        &real.dataset.cloud,
-        &real.passed,
-        &model.geometry,
-    );
+    let bins = crate::model::segment_bins(osm, cloud, which, &model.geometry);
     for b in bins.iter().flatten() {
         let usable: Vec<usize> = b.usable().collect();
         let labels = model.classifier.predict(&b.usable_rows())?;
@@ -204,17 +275,10 @@ pub fn eval_real_model(
             }
         }
     }
-    let segs = &real.dataset.map.streets.segments;
+    let segs = &osm.streets.segments;
     let mut rows = Vec::new();
     let (mut w2, mut d2, mut len) = (0.0, 0.0, 0.0);
-    for &s in &real.passed {
-        let obs = real.observations.iter().find(|o| o.segment == s);
-        let truth = obs
-            .and_then(|o| match model.target {
-                crate::model::Target::DrivingArea => o.driving_area,
-                crate::model::Target::WithSidewalk => o.with_sidewalk,
-            })
-            .map(|g| (g.offset_m, g.width_m));
+    for (&s, &truth) in which.iter().zip(truths) {
         let estimate = est
             .segments
             .iter()
@@ -239,7 +303,7 @@ pub fn eval_real_model(
         .count();
     Ok(ModelRealReport {
         target: model.target,
-        passed: real.passed.len(),
+        passed: which.len(),
         with_truth: rows.iter().filter(|r| r.truth_m.is_some()).count(),
         covered,
         raw: crate::kitti::prf(&predicted, &truth),

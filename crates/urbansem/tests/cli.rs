@@ -1209,4 +1209,9 @@ fn streets_train_needs_a_source_and_sequences_as_dir_equals_map() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--self-calibrate needs --model"));
+    let out = urbansem()
+        .args(["streets", "eval", "--dataset", "d", "--self-calibrate", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
 }

@@ -115,6 +115,14 @@ pub enum StreetsCommand {
         /// Evaluation options.
         #[command(flatten)]
         eval: EvalArgs,
+        /// Score this trained model (`streets train`) instead of the 5-fold evaluation: its
+        /// estimate of every observed drivable segment against the simulator's truth.
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// With --model: re-estimate the classifier's confusion matrix on the dataset's own
+        /// cloud, at most this many rounds (0: the model's calibration matrix as it is).
+        #[arg(long, default_value_t = 0)]
+        self_calibrate: usize,
     },
     /// Table 4.1 analogue on a real labelled sequence (KITTI-360 or MCD layout) and an OSM
     /// map of its streets: scans registered by their poses, each segment's true offset and
@@ -281,10 +289,28 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         StreetsCommand::Eval {
             dataset,
             json,
+            thesis_mask: _,
+            segments_out,
+            eval: _,
+            model: Some(model),
+            self_calibrate,
+        } => {
+            let model_value = model_for_eval(&model, segments_out.as_deref())?;
+            let r = streets::jobs::eval_dataset_model(&dataset, &model_value, self_calibrate)?;
+            print_model_report(&r, json, &model, &dataset.display().to_string())
+        }
+        StreetsCommand::Eval {
+            dataset,
+            json,
             thesis_mask,
             segments_out,
             eval,
+            model: None,
+            self_calibrate,
         } => {
+            if self_calibrate > 0 {
+                super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
+            }
             let mut options = eval.options();
             options.geometry.corridor.mask_nearer_segments = !thesis_mask;
             let report = streets::jobs::eval_dataset(&dataset, &options, segments_out.as_deref())?;
@@ -306,12 +332,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             model: Some(model),
             self_calibrate,
         } => {
-            if segments_out.is_some() {
-                super::usage!("--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON");
-            }
-            let bytes = std::fs::read(&model)
-                .with_context(|| format!("reading the model {}", model.display()))?;
-            let model_value = StreetModel::from_json(&bytes, &model)?;
+            let model_value = model_for_eval(&model, segments_out.as_deref())?;
             let progress = |done: usize, total: usize| {
                 if done == total || done % 10 == 0 {
                     eprintln!("streets eval-real: {done}/{total} scans registered");
@@ -324,27 +345,8 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
                 self_calibrate,
                 &progress,
             )?;
-            if json {
-                super::print_json(&r)?;
-            } else {
-                let m = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.2} m"));
-                println!(
-                    "{} on {} with {} (the model as trained, not retrained on the sequence): {} passed segments, {} with a truth, {} covered; raw bins P/R/F1 {:.3}/{:.3}/{:.3} ({} bins); RMSE_w {}, RMSE_d {}",
-                    model.display(),
-                    dataset.display(),
-                    map.display(),
-                    r.passed,
-                    r.with_truth,
-                    r.covered,
-                    r.raw.precision,
-                    r.raw.recall,
-                    r.raw.f1,
-                    r.raw_bins,
-                    m(r.rmse_w),
-                    m(r.rmse_d)
-                );
-            }
-            Ok(())
+            let what = format!("{} with {}", dataset.display(), map.display());
+            print_model_report(&r, json, &model, &what)
         }
         StreetsCommand::EvalReal {
             dataset,
@@ -544,4 +546,47 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             json,
         ),
     }
+}
+
+/// The model of `streets eval --model` / `eval-real --model`, read and checked; a usage error
+/// with `--segments-out`, which belongs to the 5-fold evaluation.
+fn model_for_eval(
+    path: &std::path::Path,
+    segments_out: Option<&std::path::Path>,
+) -> anyhow::Result<StreetModel> {
+    if segments_out.is_some() {
+        super::usage!(
+            "--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON"
+        );
+    }
+    let bytes =
+        std::fs::read(path).with_context(|| format!("reading the model {}", path.display()))?;
+    Ok(StreetModel::from_json(&bytes, path)?)
+}
+
+/// Prints the report of `streets eval --model` / `eval-real --model` (`what`: the data).
+fn print_model_report(
+    r: &streets::jobs::ModelRealReport,
+    json: bool,
+    model: &std::path::Path,
+    what: &str,
+) -> anyhow::Result<()> {
+    if json {
+        return super::print_json(r);
+    }
+    let m = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.2} m"));
+    println!(
+        "{} on {what} (the model as trained, not retrained on the data): {} segments, {} with a truth, {} covered; raw bins P/R/F1 {:.3}/{:.3}/{:.3} ({} bins); RMSE_w {}, RMSE_d {}",
+        model.display(),
+        r.passed,
+        r.with_truth,
+        r.covered,
+        r.raw.precision,
+        r.raw.recall,
+        r.raw.f1,
+        r.raw_bins,
+        m(r.rmse_w),
+        m(r.rmse_d)
+    );
+    Ok(())
 }
