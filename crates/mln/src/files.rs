@@ -598,7 +598,7 @@ impl InferReport {
                 .problem
                 .inactive_predicates
                 .iter()
-                .map(|&p| loaded.program.predicates[p].name.clone())
+                .map(|&p| loaded.program.predicates[p].name.to_string())
                 .collect(),
             seconds: InferSeconds {
                 parse: loaded.parse_seconds,

@@ -146,7 +146,11 @@ pub fn training_problem(
             .filter(|l| queried_in_full.contains(&l.predicate))
             .map(|l| Atom {
                 predicate: l.predicate,
-                args: l.args.iter().cloned().map(Term::Const).collect(),
+                args: l
+                    .args
+                    .iter()
+                    .map(|c| Term::Const(c.as_str().into()))
+                    .collect(),
             }),
     );
     let unit = unit_weight_program(program);
@@ -166,7 +170,7 @@ pub fn training_problem(
     if let Some((&p, &atoms)) = hidden.iter().min_by_key(|(&p, _)| p) {
         return Err(LearnError::HiddenPredicate {
             path: program.path.clone(),
-            predicate: program.predicates[p].name.clone(),
+            predicate: program.predicates[p].name.to_string(),
             atoms,
         });
     }

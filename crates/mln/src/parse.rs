@@ -66,13 +66,20 @@ pub enum Weight {
     Hard,
 }
 
+/// A predicate, type, variable or constant name: kept inline up to 24 bytes.
+///
+/// A program of millions of formulas holds tens of millions of names, nearly all short
+/// (`x`, `person`, `Smokes`); a `String` each was a heap object each, and those objects were
+/// half the memory a large program took to read (and most of its page faults).
+pub type Name = compact_str::CompactString;
+
 /// A declared predicate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Predicate {
     /// Its name.
-    pub name: String,
+    pub name: Name,
     /// The type of each argument.
-    pub arg_types: Vec<String>,
+    pub arg_types: Vec<Name>,
     /// Tuffy's `*`: evidence-only, closed world.
     pub closed_world: bool,
     /// Alchemy's `!` after an argument type: the positions whose values are mutually
@@ -97,9 +104,9 @@ pub struct TypeDecl {
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub enum Term {
     /// A variable (lower-case initial).
-    Var(String),
+    Var(Name),
     /// A constant (upper-case initial, digit, or quoted).
-    Const(String),
+    Const(Name),
 }
 
 /// An atom `P(t1, …, tk)`; `predicate` indexes [`Program::predicates`].
@@ -301,7 +308,7 @@ pub struct EvidenceAtom {
     /// Index into the program's predicates.
     pub predicate: usize,
     /// Constant arguments.
-    pub args: Vec<String>,
+    pub args: Vec<Name>,
     /// True for `P(A)`, false for `!P(A)`.
     pub value: bool,
     /// 1-based line in the evidence file.
@@ -1000,11 +1007,16 @@ impl Builder {
         star: bool,
         source: usize,
     ) -> Result<(), ParseError> {
-        let mut arg_types = Vec::new();
+        // Sized to the line's type names (a large program holds millions of these lists).
+        let types_written = cur.toks[cur.pos..]
+            .iter()
+            .filter(|(t, _)| matches!(t, Tok::Ident(_)))
+            .count();
+        let mut arg_types = Vec::with_capacity(types_written);
         let mut block_args = Vec::new();
         loop {
             match cur.bump() {
-                Some(Tok::Ident(t)) => arg_types.push((*t).to_owned()),
+                Some(Tok::Ident(t)) => arg_types.push(Name::from(*t)),
                 _ => {
                     cur.pos -= 1;
                     return Err(cur.error(format!(
@@ -1032,7 +1044,7 @@ impl Builder {
             .insert(name, predicate, arg_types.len(), &self.program.predicates)
             .map_err(|why| cur.error(format!("the declaration of {name}: {why}")))?;
         self.program.predicates.push(Predicate {
-            name: name.to_owned(),
+            name: Name::from(name),
             arg_types,
             closed_world: star,
             block_args,
@@ -1065,9 +1077,9 @@ fn block_constraints(p: &Predicate, predicate: usize) -> Vec<Formula> {
             args: (0..p.arg_types.len())
                 .map(|i| {
                     Term::Var(if p.block_args.contains(&i) {
-                        format!("{block_var}{i}")
+                        compact_str::format_compact!("{block_var}{i}")
                     } else {
-                        format!("u{i}")
+                        compact_str::format_compact!("u{i}")
                     })
                 })
                 .collect(),
@@ -1083,7 +1095,7 @@ fn block_constraints(p: &Predicate, predicate: usize) -> Vec<Formula> {
     let mut same: Vec<Formula> = vars("v")
         .into_iter()
         .zip(vars("w"))
-        .map(|(v, w)| Formula::Equal(Term::Var(v), Term::Var(w)))
+        .map(|(v, w)| Formula::Equal(Term::Var(v.into()), Term::Var(w.into())))
         .collect();
     let same = if same.len() == 1 {
         same.swap_remove(0)
@@ -1179,7 +1191,7 @@ fn parse_domain(cur: &mut Cursor<'_, '_>) -> Result<Vec<String>, ParseError> {
 
 /// Predicate names → (index, arity), for the readers' one lookup per atom.
 ///
-/// Hand-written open addressing (linear probing, at most half full) instead of a
+/// Hand-written open addressing (linear probing, at most three quarters full) instead of a
 /// `HashMap<Box<str>, usize>`: a slot holds the name's hash, length, first 12 bytes and the
 /// predicate's arity, so looking up a name of up to 12 bytes reads one 32-byte slot and
 /// nothing else, where the map read its bucket, the boxed key and then the predicate for its
@@ -1285,7 +1297,7 @@ impl PredIndex {
         else {
             return Err("more than 4 294 967 294 predicates, arguments or name bytes");
         };
-        if 2 * (self.len + 1) > self.slots.len() {
+        if 4 * (self.len + 1) > 3 * self.slots.len() {
             self.grow();
         }
         let hash = Self::hash(name);
@@ -1338,7 +1350,11 @@ fn parse_implies(
 ) -> Result<Formula, ParseError> {
     // `a => b => c` is `a => (b => c)`: read the chain in a loop (a long chain must not
     // recurse once per arrow), then fold from the right.
-    let mut operands = vec![parse_or(cur, p, idx)?];
+    let first = parse_or(cur, p, idx)?;
+    if cur.peek() != Some(&Tok::Implies) {
+        return Ok(first);
+    }
+    let mut operands = vec![first];
     while cur.peek() == Some(&Tok::Implies) {
         if operands.len() > MAX_NESTING {
             return Err(cur.error(format!(
@@ -1362,16 +1378,16 @@ fn is_or(t: Option<&Tok<'_>>) -> bool {
 }
 
 fn parse_or(cur: &mut Cursor<'_, '_>, p: &Program, idx: &PredIndex) -> Result<Formula, ParseError> {
-    let mut parts = vec![parse_and(cur, p, idx)?];
+    let first = parse_and(cur, p, idx)?;
+    if !is_or(cur.peek()) {
+        return Ok(first);
+    }
+    let mut parts = vec![first];
     while is_or(cur.peek()) {
         cur.pos += 1;
         parts.push(parse_and(cur, p, idx)?);
     }
-    Ok(if parts.len() == 1 {
-        parts.swap_remove(0)
-    } else {
-        Formula::Or(parts)
-    })
+    Ok(Formula::Or(parts))
 }
 
 fn parse_and(
@@ -1379,16 +1395,16 @@ fn parse_and(
     p: &Program,
     idx: &PredIndex,
 ) -> Result<Formula, ParseError> {
-    let mut parts = vec![parse_unary(cur, p, idx)?];
+    let first = parse_unary(cur, p, idx)?;
+    if cur.peek() != Some(&Tok::And) {
+        return Ok(first);
+    }
+    let mut parts = vec![first];
     while cur.peek() == Some(&Tok::And) {
         cur.pos += 1;
         parts.push(parse_unary(cur, p, idx)?);
     }
-    Ok(if parts.len() == 1 {
-        parts.swap_remove(0)
-    } else {
-        Formula::And(parts)
-    })
+    Ok(Formula::And(parts))
 }
 
 fn parse_unary(
@@ -1465,7 +1481,7 @@ fn parse_term(cur: &mut Cursor<'_, '_>) -> Result<Term, ParseError> {
         return match cur.bump() {
             Some(Tok::Ident(s)) if is_variable(s) => {
                 cur.plus_vars.push((*s).to_owned());
-                Ok(Term::Var((*s).to_owned()))
+                Ok(Term::Var(Name::from(*s)))
             }
             _ => {
                 cur.pos -= 1;
@@ -1482,9 +1498,9 @@ fn parse_term(cur: &mut Cursor<'_, '_>) -> Result<Term, ParseError> {
         )));
     }
     match cur.bump() {
-        Some(Tok::Ident(s)) if is_variable(s) => Ok(Term::Var((*s).to_owned())),
+        Some(Tok::Ident(s)) if is_variable(s) => Ok(Term::Var(Name::from(*s))),
         Some(Tok::Ident(s)) | Some(Tok::Number(s)) | Some(Tok::Quoted(s)) => {
-            Ok(Term::Const((*s).to_owned()))
+            Ok(Term::Const(Name::from(*s)))
         }
         _ => {
             cur.pos -= 1;
@@ -1542,7 +1558,7 @@ fn parse_primary(
                 }));
             };
             cur.pos += 2;
-            let mut args = Vec::new();
+            let mut args = Vec::with_capacity(arity);
             if cur.peek() != Some(&Tok::RParen) {
                 loop {
                     args.push(parse_term(cur)?);
@@ -1697,7 +1713,7 @@ fn fast_evidence_line(
         if !c.as_bytes()[0].is_ascii_uppercase() {
             return None;
         }
-        args.push(c.to_owned());
+        args.push(Name::from(c));
         match b.get(i) {
             Some(b',') => i += 1,
             Some(b')') if i + 1 == b.len() => break,
@@ -1806,7 +1822,9 @@ pub fn parse_query_predicates(list: &str, program: &Program) -> Result<Vec<Atom>
         let arity = program.predicates[pred].arg_types.len();
         out.push(Atom {
             predicate: pred,
-            args: (0..arity).map(|i| Term::Var(format!("q{i}"))).collect(),
+            args: (0..arity)
+                .map(|i| Term::Var(compact_str::format_compact!("q{i}")))
+                .collect(),
         });
     }
     Ok(out)
@@ -1829,7 +1847,7 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(i, n)| Predicate {
-                name: n.clone(),
+                name: n.as_str().into(),
                 arg_types: vec!["t".into(); i % 5],
                 closed_world: false,
                 block_args: Vec::new(),

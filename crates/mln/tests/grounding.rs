@@ -42,8 +42,8 @@ impl Naive<'_> {
 
     fn eval(&self, f: &Formula, b: &FxHashMap<String, String>, x: &[bool]) -> bool {
         let term = |t: &Term| match t {
-            Term::Var(v) => b[v].clone(),
-            Term::Const(c) => c.clone(),
+            Term::Var(v) => b[v.as_str()].clone(),
+            Term::Const(c) => c.to_string(),
         };
         match f {
             Formula::Atom(a) => {
@@ -80,7 +80,7 @@ impl Naive<'_> {
                 .zip(&self.program.predicates[a.predicate].arg_types)
             {
                 if matches!(t, Term::Var(v) if v == var) && found.is_none() {
-                    found = Some(ty.clone());
+                    found = Some(ty.to_string());
                 }
             }
         });
@@ -145,8 +145,8 @@ fn visit_atoms(f: &Formula, visit: &mut dyn FnMut(&Atom)) {
 fn free_vars(f: &Formula, bound: &mut Vec<String>, out: &mut Vec<String>) {
     let note = |t: &Term, bound: &[String], out: &mut Vec<String>| {
         if let Term::Var(v) = t {
-            if !bound.contains(v) && !out.contains(v) {
-                out.push(v.clone());
+            if !bound.iter().any(|b| b == v) && !out.iter().any(|o| o == v) {
+                out.push(v.to_string());
             }
         }
     };
@@ -230,7 +230,7 @@ proptest! {
         let mut naive = Naive {
             program: &program,
             problem: &problem,
-            evidence: evidence.iter().map(|e| ((e.predicate, e.args.clone()), e.value)).collect(),
+            evidence: evidence.iter().map(|e| ((e.predicate, e.args.iter().map(|a| a.to_string()).collect()), e.value)).collect(),
             open: vec![false, true, true],
             canopy: vec![None, None, None],
             atom_index: FxHashMap::default(),

@@ -85,9 +85,9 @@ struct Scope<'a> {
 fn to_nnf(f: &Formula, positive: bool, s: &mut Scope<'_>, consts: &FxHashMap<String, u32>) -> Nnf {
     let term = |t: &Term, s: &Scope<'_>| -> Arg {
         match t {
-            Term::Var(v) => match s.bound.get(v) {
+            Term::Var(v) => match s.bound.get(v.as_str()) {
                 Some(&c) => Arg::Const(c),
-                None => Arg::Var(s.var_index[v]),
+                None => Arg::Var(s.var_index[v.as_str()]),
             },
             Term::Const(c) => Arg::Const(consts[c.as_str()]),
         }
@@ -180,7 +180,7 @@ fn quantified_type(f: &Formula, var: &str, program: &Program) -> Option<String> 
             .zip(&program.predicates[a.predicate].arg_types)
         {
             if matches!(t, Term::Var(v) if v == var) && found.is_none() {
-                found = Some(ty.clone());
+                found = Some(ty.to_string());
             }
         }
     });
@@ -230,7 +230,7 @@ pub(super) fn free_variables(
         err: &mut Option<(String, String, String)>,
     ) {
         let mut note = |v: &str,
-                        ty: Option<&String>,
+                        ty: Option<&str>,
                         names: &mut Vec<String>,
                         types: &mut Vec<Option<String>>| {
             if bound.iter().any(|b| b == v) {
@@ -246,9 +246,9 @@ pub(super) fn free_variables(
             };
             if let Some(ty) = ty {
                 match &types[i] {
-                    None => types[i] = Some(ty.clone()),
+                    None => types[i] = Some(ty.to_owned()),
                     Some(t) if t != ty && err.is_none() => {
-                        *err = Some((v.to_owned(), t.clone(), ty.clone()));
+                        *err = Some((v.to_owned(), t.clone(), ty.to_owned()));
                     }
                     _ => {}
                 }
@@ -262,7 +262,7 @@ pub(super) fn free_variables(
                     .zip(&program.predicates[a.predicate].arg_types)
                 {
                     if let Term::Var(v) = t {
-                        note(v, Some(ty), names, types);
+                        note(v, Some(ty.as_str()), names, types);
                     }
                 }
             }

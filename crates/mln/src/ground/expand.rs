@@ -142,7 +142,7 @@ fn type_constants<'p>(
 fn substitute(f: &mut Formula, var: &str, c: &str) {
     let term = |t: &mut Term| {
         if matches!(t, Term::Var(v) if v == var) {
-            *t = Term::Const(c.to_owned());
+            *t = Term::Const(c.into());
         }
     };
     match f {

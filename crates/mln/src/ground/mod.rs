@@ -375,13 +375,15 @@ pub fn ground(
         for (c, t) in ev.args.iter().zip(&pred.arg_types) {
             let id = consts.id(c);
             if declared.contains(t.as_str())
-                && !domain_sets.get(t).is_some_and(|d| d.1.contains(&id))
+                && !domain_sets
+                    .get(t.as_str())
+                    .is_some_and(|d| d.1.contains(&id))
             {
                 return Err(GroundError::UnknownConstant {
                     path: evidence_path.to_owned(),
                     line: ev.line,
-                    constant: c.clone(),
-                    type_name: t.clone(),
+                    constant: c.to_string(),
+                    type_name: t.to_string(),
                 });
             }
             add_const(t, id, &mut domain_sets);
