@@ -124,7 +124,7 @@ pub enum Formula {
     /// An atom.
     Atom(Atom),
     /// `t1 = t2`.
-    Equal(Term, Term),
+    Equal(Box<(Term, Term)>),
     /// Negation.
     Not(Box<Formula>),
     /// Conjunction.
@@ -257,7 +257,8 @@ impl Program {
                 }
                 out.push(')');
             }
-            Formula::Equal(a, b) => {
+            Formula::Equal(pair) => {
+                let (a, b) = &**pair;
                 write_term(a, out);
                 out.push_str(" = ");
                 write_term(b, out);
@@ -1095,7 +1096,7 @@ fn block_constraints(p: &Predicate, predicate: usize) -> Vec<Formula> {
     let mut same: Vec<Formula> = vars("v")
         .into_iter()
         .zip(vars("w"))
-        .map(|(v, w)| Formula::Equal(Term::Var(v.into()), Term::Var(w.into())))
+        .map(|(v, w)| Formula::Equal(Box::new((Term::Var(v.into()), Term::Var(w.into())))))
         .collect();
     let same = if same.len() == 1 {
         same.swap_remove(0)
@@ -1591,7 +1592,7 @@ fn parse_primary(
             let a = parse_term(cur)?;
             let neq = cur.bump() == Some(&Tok::Neq);
             let b = parse_term(cur)?;
-            let eq = Formula::Equal(a, b);
+            let eq = Formula::Equal(Box::new((a, b)));
             Ok(if neq { Formula::Not(Box::new(eq)) } else { eq })
         }
         (Some(Tok::Ident(name)), _) => match idx.get(name, &p.predicates) {
@@ -1833,6 +1834,52 @@ pub fn parse_query_predicates(list: &str, program: &Program) -> Result<Vec<Atom>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A large program is millions of these: short names stay inline, lists are sized to
+    /// what they hold, and a formula node stays small (the MLN program reader's memory).
+    #[test]
+    fn a_program_holds_short_names_inline_and_lists_exactly_sized() {
+        let p = parse_program(
+            "Smokes(person)\nFriends(person, person)\n\
+             1.5 Friends(x, y) ^ Smokes(x) => Smokes(y)\nx = y v !Smokes(Anna).\n",
+            "inline.mln",
+        )
+        .unwrap();
+        for pred in &p.predicates {
+            assert!(!pred.name.is_heap_allocated(), "{}", pred.name);
+            assert_eq!(
+                pred.arg_types.capacity(),
+                pred.arg_types.len(),
+                "{}",
+                pred.name
+            );
+        }
+        let mut atoms = 0;
+        fn visit(f: &Formula, seen: &mut usize) {
+            match f {
+                Formula::Atom(a) => {
+                    *seen += 1;
+                    assert_eq!(a.args.capacity(), a.args.len());
+                    for t in &a.args {
+                        let (Term::Var(n) | Term::Const(n)) = t;
+                        assert!(!n.is_heap_allocated(), "{n}");
+                    }
+                }
+                Formula::Equal(_) => {}
+                Formula::Not(g) | Formula::Exists(_, g) | Formula::Forall(_, g) => visit(g, seen),
+                Formula::And(v) | Formula::Or(v) => v.iter().for_each(|g| visit(g, seen)),
+                Formula::Implies(a, b) | Formula::Iff(a, b) => {
+                    visit(a, seen);
+                    visit(b, seen);
+                }
+            }
+        }
+        for f in &p.formulas {
+            visit(&f.formula, &mut atoms);
+        }
+        assert_eq!(atoms, 4);
+        assert!(std::mem::size_of::<Formula>() <= 40);
+    }
 
     #[test]
     fn predicate_index_finds_what_a_hash_map_finds() {

@@ -50,7 +50,7 @@ impl Naive<'_> {
                 let args: Vec<String> = a.args.iter().map(term).collect();
                 self.truth(a.predicate, &args, x)
             }
-            Formula::Equal(a, c) => term(a) == term(c),
+            Formula::Equal(pair) => term(&pair.0) == term(&pair.1),
             Formula::Not(g) => !self.eval(g, b, x),
             Formula::And(v) => v.iter().all(|g| self.eval(g, b, x)),
             Formula::Or(v) => v.iter().any(|g| self.eval(g, b, x)),
@@ -152,9 +152,9 @@ fn free_vars(f: &Formula, bound: &mut Vec<String>, out: &mut Vec<String>) {
     };
     match f {
         Formula::Atom(a) => a.args.iter().for_each(|t| note(t, bound, out)),
-        Formula::Equal(a, b) => {
-            note(a, bound, out);
-            note(b, bound, out);
+        Formula::Equal(pair) => {
+            note(&pair.0, bound, out);
+            note(&pair.1, bound, out);
         }
         Formula::Not(g) => free_vars(g, bound, out),
         Formula::Exists(vs, g) | Formula::Forall(vs, g) => {

@@ -98,9 +98,9 @@ fn to_nnf(f: &Formula, positive: bool, s: &mut Scope<'_>, consts: &FxHashMap<Str
             args: a.args.iter().map(|t| term(t, s)).collect(),
             positive,
         }),
-        Formula::Equal(a, b) => Nnf::Lit(ClauseLit::Equal {
-            a: term(a, s),
-            b: term(b, s),
+        Formula::Equal(pair) => Nnf::Lit(ClauseLit::Equal {
+            a: term(&pair.0, s),
+            b: term(&pair.1, s),
             positive,
         }),
         Formula::Not(g) => to_nnf(g, !positive, s, consts),
@@ -266,8 +266,8 @@ pub(super) fn free_variables(
                     }
                 }
             }
-            Formula::Equal(a, b) => {
-                for t in [a, b] {
+            Formula::Equal(pair) => {
+                for t in [&pair.0, &pair.1] {
                     if let Term::Var(v) = t {
                         note(v, None, names, types);
                     }

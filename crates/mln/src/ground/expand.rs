@@ -147,9 +147,9 @@ fn substitute(f: &mut Formula, var: &str, c: &str) {
     };
     match f {
         Formula::Atom(a) => a.args.iter_mut().for_each(term),
-        Formula::Equal(a, b) => {
-            term(a);
-            term(b);
+        Formula::Equal(pair) => {
+            term(&mut pair.0);
+            term(&mut pair.1);
         }
         Formula::Not(g) => substitute(g, var, c),
         Formula::And(v) | Formula::Or(v) => v.iter_mut().for_each(|g| substitute(g, var, c)),
