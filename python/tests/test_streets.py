@@ -83,10 +83,16 @@ def test_geojson_passes_rfc_7946_checks(small):
     json.dumps(fc, allow_nan=False)
 
 
+def test_without_a_model_the_shipped_default_model_is_used(small):
+    d, _ = small
+    shipped = Path(__file__).resolve().parents[2] / "crates" / "streets" / "models" / "default.json"
+    fc = streets.estimate(d / "city.osm", d / "cloud.ply")
+    assert fc["type"] == "FeatureCollection" and fc["features"]
+    assert fc == streets.estimate(d / "city.osm", d / "cloud.ply", shipped)
+
+
 def test_bad_input_is_a_clear_error(small, tmp_path):
     d, _ = small
-    with pytest.raises(ValueError, match="model is needed"):
-        streets.estimate(d / "city.osm", d / "cloud.ply")
     with pytest.raises(urbansem.CloudError, match="no-such-cloud.ply"):
         streets.estimate(d / "city.osm", tmp_path / "no-such-cloud.ply", d / "model.json")
     with pytest.raises(urbansem.OsmError, match="no-such-map.osm"):

@@ -55,20 +55,19 @@ def estimate(
 ) -> Dict[str, Any]:
     """Estimates offset and width per drivable street segment of ``map`` from ``cloud`` (a
     path, or a dict of arrays as :func:`urbansem.read_cloud` returns) with ``model`` (the JSON
-    of ``urbansem streets train``: a path, its parsed dict or its bytes).
+    of ``urbansem streets train``: a path, its parsed dict or its bytes; ``None``: the shipped
+    default model, trained on simulated scans, as ``urbansem streets estimate`` without
+    ``--model``).
 
     ``cloud_frame`` is the cloud's frame as ``--cloud-frame`` takes it (``local``,
     ``utm:32N``, ``enu:LAT,LON``). Returns the RFC 7946 FeatureCollection (a dict) that
     ``urbansem streets estimate`` writes: one Polygon per segment with ``segment``,
     ``osm_way``, ``highway``, ``width``, ``offset`` and ``bins``.
     """
-    if model is None:
-        raise ValueError(
-            "a street model is needed (there is no built-in one): train one with "
-            "`urbansem streets train --dataset DIR --out model.json` and pass its path"
-        )
     if not isinstance(map, OsmMap):
         map = os.fspath(map)
+    if model is None:
+        return _estimate(map, _cloud(cloud), cloud_frame=cloud_frame)
     if isinstance(model, Mapping):
         return _estimate(map, _cloud(cloud), model_json=json.dumps(model).encode(), cloud_frame=cloud_frame)
     if isinstance(model, (bytes, bytearray)):

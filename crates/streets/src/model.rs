@@ -399,6 +399,12 @@ pub fn dataset_bins(
 /// as bins per true class (the cloud's own corridors count hundreds of thousands).
 pub const SELF_CALIBRATION_PSEUDO_BINS: f64 = 200.0;
 
+/// The shipped default model's JSON ([`StreetModel::shipped_default`]).
+pub const DEFAULT_MODEL_JSON: &[u8] = include_bytes!("../models/default.json");
+
+/// How errors and reports name the shipped default model.
+pub const DEFAULT_MODEL_NAME: &str = "<urbansem default street model>";
+
 /// A trained model for `urbansem streets estimate`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StreetModel {
@@ -525,6 +531,17 @@ impl StreetModel {
             message,
         })?;
         Ok(model)
+    }
+
+    /// The model shipped with urbansem, for a user without labels of their own.
+    ///
+    /// Built by `urbansem streets train --dataset target/streets-emb-s1,target/streets-hel-s1
+    /// --normalise --no-colour --out crates/streets/models/default.json` from `urbansem sim
+    /// dataset --kind streets --seed 1` of the embedded procedural city and of OSM Helsinki
+    /// centre (© OpenStreetMap contributors, ODbL 1.0); a test rebuilds it byte for byte.
+    /// Its measured accuracy on real scans is in the crate README ("The shipped default model").
+    pub fn shipped_default() -> Result<StreetModel> {
+        StreetModel::from_json(DEFAULT_MODEL_JSON, Path::new(DEFAULT_MODEL_NAME))
     }
 
     /// The first value out of range, described with its field and the accepted range.

@@ -53,7 +53,7 @@ fn cloud_of_dict(d: &Bound<'_, PyDict>) -> PyResult<PointCloud> {
 
 /// Estimates offset and width per drivable OSM segment from a cloud (a path, or a dict of
 /// arrays as `read_cloud` returns) and a model (`urbansem streets train`'s JSON, as a path or
-/// as bytes): the RFC 7946 FeatureCollection `urbansem streets estimate` writes, as a dict.
+/// as bytes; neither: the shipped default model): the RFC 7946 FeatureCollection `urbansem streets estimate` writes, as a dict.
 #[pyfunction]
 #[pyo3(name = "streets_estimate", signature = (map, cloud, *, model_path = None,
     model_json = None, cloud_frame = "local"))]
@@ -68,21 +68,22 @@ fn streets_estimate<'py>(
     let frame: CloudFrame = cloud_frame
         .parse()
         .map_err(|e| PyValueError::new_err(chain(&e)))?;
-    let (bytes, model_name) = match (model_path, model_json) {
+    let model = match (model_path, model_json) {
         (Some(p), None) => {
             let bytes = std::fs::read(&p).map_err(|e| {
                 StreetsError::new_err(format!("reading the model {}: {e}", p.display()))
             })?;
-            (bytes, p)
+            StreetModel::from_json(&bytes, &p)
         }
-        (None, Some(b)) => (b, PathBuf::from("<model>")),
-        _ => {
+        (None, Some(b)) => StreetModel::from_json(&b, std::path::Path::new("<model>")),
+        (None, None) => StreetModel::shipped_default(),
+        (Some(_), Some(_)) => {
             return Err(PyValueError::new_err(
-                "give the model as model_path or model_json (exactly one)",
+                "give the model as model_path or model_json, not both",
             ))
         }
-    };
-    let model = StreetModel::from_json(&bytes, &model_name).map_err(raise!(StreetsError))?;
+    }
+    .map_err(raise!(StreetsError))?;
     let (osm, map_name): (Arc<OsmMap>, String) = match map.cast::<PyOsmMap>() {
         Ok(m) => {
             let m = m.get();

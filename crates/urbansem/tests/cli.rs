@@ -1215,3 +1215,65 @@ fn streets_train_needs_a_source_and_sequences_as_dir_equals_map() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// Issue 17: the shipped default street model is what its documented command builds (so it
+/// can be rebuilt and audited), and `streets estimate` without `--model` uses it.
+#[test]
+fn the_shipped_default_street_model_is_what_its_documented_command_builds() {
+    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+    let shipped = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../streets/models/default.json"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let emb = dir.path().join("streets-emb-s1");
+    let hel = dir.path().join("streets-hel-s1");
+    let helsinki = format!("{shared}/osm/helsinki_centre.osm.pbf");
+    for (out, map) in [(&emb, None), (&hel, Some(helsinki.as_str()))] {
+        let mut cmd = urbansem();
+        cmd.args([
+            "sim", "dataset", "--kind", "streets", "--seed", "1", "--out",
+        ])
+        .arg(out);
+        if let Some(map) = map {
+            cmd.args(["--map", map]);
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let model = dir.path().join("default.json");
+    let o = urbansem()
+        .args(["streets", "train", "--dataset"])
+        .arg(format!("{},{}", emb.display(), hel.display()))
+        .args(["--normalise", "--no-colour", "--out"])
+        .arg(&model)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(&model).unwrap() == std::fs::read(shipped).unwrap(),
+        "crates/streets/models/default.json is not what its command builds: rebuild it (crates/streets/README.md)"
+    );
+    let mut outputs = Vec::new();
+    for with_model in [false, true] {
+        let out = dir.path().join(format!("streets-{with_model}.geojson"));
+        let mut cmd = urbansem();
+        cmd.args(["streets", "estimate", "--map"])
+            .arg(emb.join("city.osm"))
+            .arg("--cloud")
+            .arg(emb.join("cloud.ply"))
+            .arg("--out")
+            .arg(&out);
+        if with_model {
+            cmd.arg("--model").arg(shipped);
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        if !with_model {
+            assert!(String::from_utf8_lossy(&o.stderr).contains("shipped default model"));
+        }
+        outputs.push(std::fs::read(&out).unwrap());
+    }
+    assert_eq!(outputs[0], outputs[1]);
+    assert!(String::from_utf8_lossy(&outputs[0]).contains("\"width\""));
+}

@@ -196,9 +196,10 @@ pub enum StreetsCommand {
         /// or enu:LAT,LON (east/north/up metres about a WGS84 anchor); converted exactly.
         #[arg(long, default_value = "local")]
         cloud_frame: geodata::georef::CloudFrame,
-        /// Model from `urbansem streets train`.
+        /// Model from `urbansem streets train` (default: the shipped model, trained on
+        /// simulated scans of the embedded city and of OSM Helsinki; see the streets README).
         #[arg(long)]
-        model: PathBuf,
+        model: Option<PathBuf>,
         /// Output GeoJSON.
         #[arg(long)]
         out: PathBuf,
@@ -441,10 +442,20 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             model,
             out,
         } => {
-            let bytes = std::fs::read(&model)
-                .with_context(|| format!("reading the model {}", model.display()))?;
-            // Checked as it is read: dimensions, finite values, bin sizes (issue 16).
-            let model = StreetModel::from_json(&bytes, &model)?;
+            let model = match model {
+                Some(path) => {
+                    let bytes = std::fs::read(&path)
+                        .with_context(|| format!("reading the model {}", path.display()))?;
+                    // Checked as it is read: dimensions, finite values, bin sizes (issue 16).
+                    StreetModel::from_json(&bytes, &path)?
+                }
+                None => {
+                    eprintln!(
+                        "streets estimate: no --model, using the shipped default model (trained on simulated scans; its accuracy on real scans is in crates/streets/README.md)"
+                    );
+                    StreetModel::shipped_default()?
+                }
+            };
             let osm = OsmMap::load(&map).with_context(|| format!("loading {}", map.display()))?;
             let (mut pc, _, _) = bag.read(&cloud)?;
             cloud_frame
