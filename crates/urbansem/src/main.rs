@@ -91,6 +91,23 @@ fn install_panic_hook() {
     }));
 }
 
+/// The error and its causes joined by ": ", each cause once: an error whose message already
+/// ends with its cause's text (a `thiserror` message with `{source}`) does not repeat it.
+fn error_message(err: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if out.ends_with(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
 fn main() -> ExitCode {
     install_panic_hook();
     let cli = Cli::parse();
@@ -111,7 +128,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", error_message(&err));
             if err.downcast_ref::<cmd::UsageError>().is_some() {
                 eprintln!("(see `urbansem help` or `urbansem <command> --help`)");
                 ExitCode::from(EXIT_USAGE)
@@ -119,5 +136,31 @@ fn main() -> ExitCode {
                 ExitCode::from(EXIT_RUNTIME)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::error_message;
+    use anyhow::Context;
+
+    #[test]
+    fn a_cause_already_in_its_error_message_is_printed_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let osm = geodata::osm::OsmError::Io {
+            path: "m.osm".into(),
+            source: io,
+        };
+        let err = Err::<(), _>(osm).context("loading the map").unwrap_err();
+        assert_eq!(
+            error_message(&err),
+            "loading the map: m.osm: cannot read OSM file: no such file"
+        );
+        // A cause that is not in the message above it is still printed.
+        let err = Err::<(), _>(std::io::Error::other("disk full"))
+            .context("writing out.json")
+            .unwrap_err();
+        assert_eq!(error_message(&err), "writing out.json: disk full");
     }
 }
