@@ -1277,3 +1277,35 @@ fn the_shipped_default_street_model_is_what_its_documented_command_builds() {
     assert_eq!(outputs[0], outputs[1]);
     assert!(String::from_utf8_lossy(&outputs[0]).contains("\"width\""));
 }
+
+/// Issue 17 with issue 19: a streets plan without `--model` uses the shipped default model,
+/// written into the results folder so that the plan checks it like any other file.
+#[test]
+fn shard_streets_plan_without_a_model_uses_the_shipped_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("sim");
+    sim_dataset("streets", &["--scans", "4"], &data);
+    let plan = dir.path().join("plan.json");
+    let results = dir.path().join("results");
+    let v: serde_json::Value = serde_json::from_slice(&stdout_of(
+        urbansem()
+            .args(["shard", "plan", "--job", "streets", "--json", "--map"])
+            .arg(data.join("city.osm"))
+            .arg("--inputs")
+            .arg(data.join("cloud.ply"))
+            .arg("--results")
+            .arg(&results)
+            .arg("--out")
+            .arg(&plan),
+    ))
+    .unwrap();
+    assert!(v["shards"].as_u64().unwrap() >= 1, "{v}");
+    let written = results.join("default-street-model.json");
+    let shipped = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../streets/models/default.json"
+    );
+    assert!(std::fs::read(&written).unwrap() == std::fs::read(shipped).unwrap());
+    let text = std::fs::read_to_string(&plan).unwrap();
+    assert!(text.contains("default-street-model.json"), "{text}");
+}

@@ -1,10 +1,11 @@
 //! `urbansem shard …`: a fleet job as engine-neutral shards (plan, run one, merge).
 
+use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use fleet::merge::Merged;
 use fleet::plan::{plan_localize, JobOptions};
 use fleet::streets::plan_streets;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Jobs a plan can hold.
 #[derive(Clone, Copy, ValueEnum)]
@@ -38,7 +39,8 @@ pub enum ShardCommand {
         /// of labelled clouds (or one) in the map's local frame.
         #[arg(long)]
         inputs: PathBuf,
-        /// The street model from `urbansem streets train` (streets only).
+        /// The street model from `urbansem streets train` (streets only; default: the shipped
+        /// model, written into the results folder so that the plan can check it like any file).
         #[arg(long)]
         model: Option<PathBuf>,
         /// Side of the tiles, metres (streets: default 500; maps: default 100, a whole number
@@ -146,17 +148,16 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                     }
                     plan_localize(&map, &inputs, &results, batch, options)?
                 }
-                (JobArg::Streets, Some(model)) => {
+                (JobArg::Streets, model) => {
                     let tile_m = tile_m.unwrap_or(500.0);
                     if !(tile_m.is_finite() && tile_m > 0.0) {
                         super::usage!("--tile-m {tile_m}: expected a tile side > 0 metres");
                     }
+                    let model = match model {
+                        Some(model) => model,
+                        None => shipped_street_model_file(&results)?,
+                    };
                     plan_streets(&map, &inputs, &model, &results, tile_m)?
-                }
-                (JobArg::Streets, None) => {
-                    super::usage!(
-                        "--job streets needs --model MODEL.json (from `urbansem streets train`)"
-                    )
                 }
                 (JobArg::Map, _) => {
                     let tile_m = tile_m.unwrap_or(100.0);
@@ -268,4 +269,18 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// Writes the shipped default street model into `results` (for a streets plan without
+/// `--model`) and returns its path.
+fn shipped_street_model_file(results: &Path) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(results).with_context(|| format!("creating {}", results.display()))?;
+    let path = results.join("default-street-model.json");
+    geodata::fsio::write_atomic(&path, streets::model::DEFAULT_MODEL_JSON)
+        .with_context(|| format!("writing {}", path.display()))?;
+    eprintln!(
+        "shard plan: no --model, the streets job uses the shipped default model ({})",
+        path.display()
+    );
+    Ok(path)
 }
