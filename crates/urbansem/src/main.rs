@@ -91,8 +91,10 @@ fn install_panic_hook() {
     }));
 }
 
-/// The error and its causes joined by ": ", each cause once: an error whose message already
-/// ends with its cause's text (a `thiserror` message with `{source}`) does not repeat it.
+/// The error and its causes joined by ": ", each thing said once: an error whose message
+/// already ends with its cause's text (a `thiserror` message with `{source}`) does not repeat
+/// it, and a cause that starts by naming what the context above it ends with ("loading M" then
+/// "M: cannot read …") does not name it again.
 fn error_message(err: &anyhow::Error) -> String {
     let mut out = String::new();
     for cause in err.chain() {
@@ -100,10 +102,20 @@ fn error_message(err: &anyhow::Error) -> String {
         if out.ends_with(&text) {
             continue;
         }
+        let mut rest = text.as_str();
+        if let Some((head, tail)) = text.split_once(": ") {
+            let before = out.len().saturating_sub(head.len());
+            if !head.is_empty()
+                && out.ends_with(head)
+                && (before == 0 || out[..before].ends_with(' '))
+            {
+                rest = tail;
+            }
+        }
         if !out.is_empty() {
             out.push_str(": ");
         }
-        out.push_str(&text);
+        out.push_str(rest);
     }
     out
 }
@@ -157,6 +169,24 @@ mod tests {
             error_message(&err),
             "loading the map: m.osm: cannot read OSM file: no such file"
         );
+        // A context that ends with the path the cause starts with names it once.
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let osm = geodata::osm::OsmError::Io {
+            path: "m.osm".into(),
+            source: io,
+        };
+        let err = Err::<(), _>(osm)
+            .context("loading the map m.osm")
+            .unwrap_err();
+        assert_eq!(
+            error_message(&err),
+            "loading the map m.osm: cannot read OSM file: no such file"
+        );
+        // Not when the context merely ends with the same letters.
+        let err = Err::<(), _>(std::io::Error::other("x.osm: bad"))
+            .context("loading max.osm")
+            .unwrap_err();
+        assert_eq!(error_message(&err), "loading max.osm: x.osm: bad");
         // A cause that is not in the message above it is still printed.
         let err = Err::<(), _>(std::io::Error::other("disk full"))
             .context("writing out.json")
