@@ -83,6 +83,7 @@ SLACK_SHARE = 0.10
 HANG_FACTOR = 10
 HANG_MIN_S = 2.0
 MEMORY_FACTOR = 4
+MEMORY_RULE = f"{MEMORY_FACTOR} x file size + baseline RSS + {SLACK_MB} MB + {SLACK_SHARE:.0%} of baseline RSS slack"
 BIG_FILE_BYTES = 5 * 1024 * 1024
 SLOW_BASELINE_S = 5.0
 BASELINE_TIMEOUT_S = 300.0
@@ -730,7 +731,7 @@ def main() -> int:
     keep = Path(args.keep)
     print(f"binary {binary_src} (built {mtime}, sha256 {sha[:16]}), data {data}")
     print(f"seed {args.seed}; hang limit max({HANG_FACTOR} x baseline, {HANG_MIN_S:g} s); memory limit "
-          f"{MEMORY_FACTOR} x file size + baseline RSS + {SLACK_MB} MB + {SLACK_SHARE:.0%} of it slack; address-space cap "
+          f"{MEMORY_RULE}; address-space cap "
           f"{args.as_limit_gb:g} GiB; nice {os.nice(0)}", flush=True)
 
     ie_evidence = None
@@ -885,7 +886,7 @@ def main() -> int:
     print(f"{'total':{width}s}" + "".join(f"{total[c]:>12d}" for c in cols))
     print("(exit-2: variants that passed with exit code 2, a usage error, though only a file's "
           "content changed; runtime errors must exit 1)")
-    print(f"memory limit = {MEMORY_FACTOR} x file size + baseline RSS + {SLACK_MB} MB + {SLACK_SHARE:.0%} of it slack; "
+    print(f"memory limit = {MEMORY_RULE}; "
           f"hang limit = max({HANG_FACTOR} x baseline, {HANG_MIN_S:g} s)")
     print("\nskipped files:")
     for why, fs in sorted(skipped.items(), key=lambda kv: -len(kv[1])):
@@ -929,7 +930,7 @@ def main() -> int:
         "binary": str(binary_src), "binary_sha256": sha, "binary_mtime": mtime, "data": str(data),
         "seed": args.seed, "only": args.only, "max_variants": args.max_variants,
         "rules": {"hang": f"max({HANG_FACTOR} x baseline, {HANG_MIN_S} s)",
-                  "memory": f"{MEMORY_FACTOR} x file size + baseline RSS + {SLACK_MB} MB + {SLACK_SHARE:.0%} of baseline RSS slack",
+                  "memory": MEMORY_RULE,
                   "slack_mb": SLACK_MB, "slack_share": SLACK_SHARE, "address_space_cap_gib": args.as_limit_gb,
                   "slow_baseline_s": SLOW_BASELINE_S},
         "seconds": round(elapsed, 1),

@@ -53,7 +53,8 @@ fn cloud_of_dict(d: &Bound<'_, PyDict>) -> PyResult<PointCloud> {
 
 /// Estimates offset and width per drivable OSM segment from a cloud (a path, or a dict of
 /// arrays as `read_cloud` returns) and a model (`urbansem streets train`'s JSON, as a path or
-/// as bytes; neither: the shipped default model): the RFC 7946 FeatureCollection `urbansem streets estimate` writes, as a dict.
+/// as bytes; neither: the shipped default model): the RFC 7946 FeatureCollection `urbansem
+/// streets estimate` writes, as a dict.
 #[pyfunction]
 #[pyo3(name = "streets_estimate", signature = (map, cloud, *, model_path = None,
     model_json = None, cloud_frame = "local"))]

@@ -443,12 +443,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             out,
         } => {
             let model = match model {
-                Some(path) => {
-                    let bytes = std::fs::read(&path)
-                        .with_context(|| format!("reading the model {}", path.display()))?;
-                    // Checked as it is read: dimensions, finite values, bin sizes (issue 16).
-                    StreetModel::from_json(&bytes, &path)?
-                }
+                Some(path) => read_model(&path)?,
                 None => {
                     eprintln!(
                         "streets estimate: no --model, using the shipped default model (trained on simulated scans; its accuracy on real scans is in crates/streets/README.md)"
@@ -570,6 +565,12 @@ fn model_for_eval(
             "--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON"
         );
     }
+    read_model(path)
+}
+
+/// A model file from `urbansem streets train`, checked as it is read: dimensions, finite
+/// values, bin sizes (issue 16).
+fn read_model(path: &std::path::Path) -> anyhow::Result<StreetModel> {
     let bytes =
         std::fs::read(path).with_context(|| format!("reading the model {}", path.display()))?;
     Ok(StreetModel::from_json(&bytes, path)?)
