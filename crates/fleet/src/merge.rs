@@ -138,13 +138,7 @@ pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
         let segments = e.segments();
         let mut result = finish_tiled(&manifest, searches, &segments, &options, &place_of);
         let ex = e.scan_segments();
-        result.record_extraction(&ex);
-        if segments.is_empty() {
-            result.message = Some(format!(
-                "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
-                e.points, e.vertical_cells, e.min_length_m
-            ));
-        }
+        result.record_scan(&ex, e.points);
         scans.push(TrackRow::new(
             frame_map,
             &e.name,

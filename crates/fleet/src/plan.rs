@@ -45,7 +45,7 @@ pub struct JobOptions {
 }
 
 fn default_caps() -> Vec<f64> {
-    vec![0.4, 0.55, 0.8]
+    localize::tiles::MINIMUM_CAPS_M.to_vec()
 }
 
 impl Default for JobOptions {

@@ -11,10 +11,10 @@
 
 use crate::plan::{Job, Plan};
 use crate::{invalid, io_err, FleetError, Result};
-use localize::candidates::{limit_of, sample_segment_points, Cap};
+use localize::candidates::{limit_of, Cap};
 use localize::pipeline::{scan_segments, LocalizeOptions, ScanSegments};
 use localize::sensor::{SensorGeometry, SensorReport};
-use localize::tiles::{search_tile, LoadedTile, Manifest, TileSearch};
+use localize::tiles::{round_cap, search_tile, LoadedTile, Manifest, TileSearch};
 use localize::Segment;
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;
@@ -302,10 +302,7 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                             return None;
                         }
                         let cost = match plan.options.minimum_caps_m.get(round) {
-                            Some(&d) => {
-                                let n = sample_segment_points(&e.segments(), manifest.grid_m).len();
-                                (d * manifest.units_per_m * n as f64).floor() as u64
-                            }
+                            Some(&d) => round_cap(&manifest, &e.segments(), d),
                             None => u64::MAX,
                         };
                         Some(Cap {

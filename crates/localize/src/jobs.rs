@@ -247,16 +247,8 @@ fn localize_scan_tiled(
         only.as_deref(),
     )?;
     let mut result = tiled.result;
-    result.record_extraction(&extracted);
+    result.record_scan(&extracted, cloud.len());
     result.seconds.total = t0.elapsed().as_secs_f64() - tiled.load_seconds;
-    if extracted.segments.is_empty() {
-        result.message = Some(format!(
-            "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
-            cloud.len(),
-            extracted.vertical_cells,
-            extracted.min_length_m
-        ));
-    }
     let mut report = LocalizeReport::of_map(
         &tiled.frame_map,
         &crate::index::MapSeconds::default(),

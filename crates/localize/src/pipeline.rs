@@ -233,6 +233,18 @@ impl Localization {
         self.seconds.segments = extracted.segments_s;
         self.seconds.total += extracted.surfaces_s + extracted.segments_s;
     }
+
+    /// [`Localization::record_extraction`] of a scan of `points` points, and why nothing was
+    /// matched when it yielded no segment.
+    pub fn record_scan(&mut self, extracted: &ScanSegments, points: usize) {
+        self.record_extraction(extracted);
+        if extracted.segments.is_empty() {
+            self.message = Some(format!(
+                "no vertical structure found in the scan ({points} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
+                extracted.vertical_cells, extracted.min_length_m
+            ));
+        }
+    }
 }
 
 impl<'m> Localizer<'m> {
@@ -302,16 +314,8 @@ impl<'m> Localizer<'m> {
         let t0 = Instant::now();
         let extracted = self.scan_segments(points)?;
         let mut out = self.localize_segments(&extracted.segments);
-        out.record_extraction(&extracted);
+        out.record_scan(&extracted, points.len());
         out.seconds.total = t0.elapsed().as_secs_f64();
-        if extracted.segments.is_empty() {
-            out.message = Some(format!(
-                "no vertical structure found in the scan ({} points, {} vertical-surface cells, no segment ≥ {} m); nothing to match",
-                points.len(),
-                extracted.vertical_cells,
-                extracted.min_length_m
-            ));
-        }
         Ok(out)
     }
 

@@ -27,7 +27,9 @@
 //!
 //! The crop files' format is in [`crate::crop`].
 
-use crate::candidates::{limit_of, search_capped, Cap, RawPose, SearchStats};
+use crate::candidates::{
+    limit_of, sample_segment_points, search_capped, Cap, RawPose, SearchStats,
+};
 use crate::chamfer::{bounding_box, map_edges, DtTensor};
 use crate::codec::index_err;
 pub use crate::crop::{read_crop, read_crop_from, write_crop};
@@ -40,6 +42,7 @@ use geodata::osm::index::MapIndex;
 use geodata::osm::model::{Building, StreetSegment};
 use geodata::osm::OsmMap;
 use geodata::projection::LocalFrame;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use std::path::{Path, PathBuf};
@@ -768,60 +771,194 @@ pub fn is_exact(manifest: &Manifest, reach_m: f64, options: &LocalizeOptions) ->
         && options.visibility.range_m + slack <= manifest.overlap_m
 }
 
-/// Localizes scan segments on the tiled map of `manifest_path`: every tile (or those of
-/// `only`), one at a time, in two passes — the least minimum over the tiles (each tile's
-/// search capped at the best so far), then each tile's poses within the factor of it — and
-/// the finishing stages once.
-pub fn localize_tiled(
+/// The caps of the capped `minimum` rounds by default, as d_DCM in metres.
+pub const MINIMUM_CAPS_M: [f64; 3] = [0.4, 0.55, 0.8];
+
+/// The cost cap of a `minimum` round of `d_m` metres (d_DCM) for scan `segments` on the
+/// lattice of `manifest`.
+pub fn round_cap(manifest: &Manifest, segments: &[Segment], d_m: f64) -> u64 {
+    let n = sample_segment_points(segments, manifest.grid_m).len();
+    (d_m * manifest.units_per_m * n as f64).floor() as u64
+}
+
+/// Where a batch on a tiled map is: after each tile of each round.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatchStep<'a> {
+    /// The round: `minimum-{cap}m`, `minimum` or `poses`.
+    pub round: &'a str,
+    /// Tiles of the round done.
+    pub tiles_done: usize,
+    /// Tiles of the round.
+    pub tiles: usize,
+    /// Scans the round searches.
+    pub scans: usize,
+}
+
+/// Scans localized together on a tiled map ([`localize_tiled_batch`]).
+pub struct TiledBatch {
+    /// One result per scan, as on the whole map.
+    pub results: Vec<Localization>,
+    /// Per scan: whether tiled equals untiled for it (see [`is_exact`]).
+    pub exact: Vec<bool>,
+    /// Tiles searched per round.
+    pub tiles_searched: usize,
+    /// Tile loads over all rounds.
+    pub tile_loads: usize,
+    /// The largest memory a tile held (tensor, pyramid, mask), bytes.
+    pub max_tile_memory_bytes: u64,
+    /// Seconds loading tiles and crops.
+    pub load_seconds: f64,
+    /// The crop of the first tile owning a candidate (its frame is the map's).
+    pub frame_map: OsmMap,
+}
+
+/// Localizes several scans (their segments) on the tiled map of `manifest_path`, every tile
+/// (or those of `only`) read once per round: `minimum` rounds under the caps `caps_m`
+/// (d_DCM, increasing) and a last one uncapped, each only for the scans no earlier round
+/// found a pose for and each tile's search capped by the least cost found so far; then every
+/// tile's poses within the factor of each scan's least cost; the finishing stages once per
+/// scan. The answer does not depend on the caps (they change the time only), and is the
+/// whole map's, scan by scan.
+pub fn localize_tiled_batch(
     manifest_path: &Path,
-    segments: &[Segment],
+    scans: &[Vec<Segment>],
     options: &LocalizeOptions,
+    caps_m: &[f64],
     only: Option<&[usize]>,
-) -> Result<TiledLocalization> {
+    progress: &mut dyn FnMut(BatchStep<'_>),
+) -> Result<TiledBatch> {
+    let bad = caps_m
+        .iter()
+        .enumerate()
+        .find(|&(i, &d)| !(d.is_finite() && d > 0.0) || (i > 0 && caps_m[i - 1] >= d));
+    if let Some((_, &value)) = bad {
+        return Err(LocalizeError::InvalidOption {
+            name: "minimum caps",
+            value,
+            expected: "increasing positive d_DCM values in metres",
+        });
+    }
     let manifest = Manifest::read(manifest_path)?;
     let all: Vec<usize> = (0..manifest.tiles.len()).collect();
     let which = only.unwrap_or(&all);
-    let mut searches = Vec::new();
+    let n = scans.len();
+    let mut best: Vec<Option<u64>> = vec![None; n];
+    let mut search_s = vec![0.0; n];
+    let mut stats = vec![SearchStats::default(); n];
     let mut load_s = 0.0;
     let mut max_mem = 0u64;
-    let mut first_pass = 0.0;
-    if !segments.is_empty() {
-        let mut best = u64::MAX;
-        for &k in which {
-            let t = Instant::now();
-            let tile = LoadedTile::read(manifest_path, &manifest, k)?;
-            load_s += t.elapsed().as_secs_f64();
-            max_mem = max_mem.max(tile.prepared.memory_bytes() as u64);
-            let cap = Cap {
-                cost: best,
-                minimum_only: true,
-            };
-            let s = search_tile(&tile, k, segments, options, cap)?;
-            first_pass += s.seconds;
-            best = best.min(s.minimum.unwrap_or(u64::MAX));
+    let mut loads = 0usize;
+    let mut load = |k: usize| -> Result<LoadedTile> {
+        let t = Instant::now();
+        let tile = LoadedTile::read(manifest_path, &manifest, k)?;
+        load_s += t.elapsed().as_secs_f64();
+        max_mem = max_mem.max(tile.prepared.memory_bytes() as u64);
+        loads += 1;
+        Ok(tile)
+    };
+    for round in 0..=caps_m.len() {
+        let open: Vec<usize> = (0..n)
+            .filter(|&s| best[s].is_none() && !scans[s].is_empty())
+            .collect();
+        if open.is_empty() {
+            break;
         }
-        if best < u64::MAX {
-            let cap = Cap {
-                cost: limit_of(best, options.search.keep_factor),
-                minimum_only: false,
-            };
-            for &k in which {
-                let t = Instant::now();
-                let tile = LoadedTile::read(manifest_path, &manifest, k)?;
-                load_s += t.elapsed().as_secs_f64();
-                let s = search_tile(&tile, k, segments, options, cap)?;
-                if !s.raw.is_empty() {
-                    searches.push(s);
+        let name = caps_m
+            .get(round)
+            .map_or_else(|| "minimum".to_owned(), |d| format!("minimum-{d}m"));
+        let round_caps: Vec<u64> = open
+            .iter()
+            .map(|&s| {
+                caps_m
+                    .get(round)
+                    .map_or(u64::MAX, |&d| round_cap(&manifest, &scans[s], d))
+            })
+            .collect();
+        let mut found: Vec<Option<u64>> = vec![None; open.len()];
+        for (done, &k) in which.iter().enumerate() {
+            let tile = load(k)?;
+            // The scans in parallel (each search also splits its own work).
+            let searched: Vec<TileSearch> = open
+                .par_iter()
+                .zip(&round_caps)
+                .zip(&found)
+                .map(|((&s, &c), f)| {
+                    let cap = Cap {
+                        cost: f.map_or(c, |f| f.min(c)),
+                        minimum_only: true,
+                    };
+                    search_tile(&tile, k, &scans[s], options, cap)
+                })
+                .collect::<Result<_>>()?;
+            for (x, r) in searched.iter().enumerate() {
+                let s = open[x];
+                if let Some(m) = r.minimum {
+                    found[x] = Some(found[x].map_or(m, |f| f.min(m)));
                 }
+                search_s[s] += r.seconds;
+                stats[s].boxes += r.boxes;
+                stats[s].leaves += r.leaves;
             }
+            progress(BatchStep {
+                round: &name,
+                tiles_done: done + 1,
+                tiles: which.len(),
+                scans: open.len(),
+            });
+        }
+        for (x, &s) in open.iter().enumerate() {
+            best[s] = found[x];
         }
     }
+    let wanted: Vec<(usize, Cap)> = best
+        .iter()
+        .enumerate()
+        .filter_map(|(s, b)| {
+            b.map(|b| {
+                let cap = Cap {
+                    cost: limit_of(b, options.search.keep_factor),
+                    minimum_only: false,
+                };
+                (s, cap)
+            })
+        })
+        .collect();
+    let mut searches: Vec<Vec<TileSearch>> = vec![Vec::new(); n];
+    if !wanted.is_empty() {
+        for (done, &k) in which.iter().enumerate() {
+            let tile = load(k)?;
+            let searched: Vec<TileSearch> = wanted
+                .par_iter()
+                .map(|&(s, cap)| search_tile(&tile, k, &scans[s], options, cap))
+                .collect::<Result<_>>()?;
+            for (r, &(s, _)) in searched.into_iter().zip(&wanted) {
+                search_s[s] += r.seconds;
+                if !r.raw.is_empty() {
+                    searches[s].push(r);
+                }
+            }
+            progress(BatchStep {
+                round: "poses",
+                tiles_done: done + 1,
+                tiles: which.len(),
+                scans: wanted.len(),
+            });
+        }
+    }
+    // The crops of every tile owning a candidate of some scan, read once.
     let t = Instant::now();
-    let needed = owners(&manifest, &searches, options);
+    let mut needed: Vec<usize> = searches
+        .iter()
+        .flat_map(|s| owners(&manifest, s, options))
+        .collect();
+    needed.sort_unstable();
+    needed.dedup();
     let mut crops: Vec<(usize, OsmMap)> = Vec::new();
     for &k in &needed {
-        let entry = &manifest.tiles[k];
-        crops.push((k, read_crop(&resolve(manifest_path, &entry.crop))?));
+        crops.push((
+            k,
+            read_crop(&resolve(manifest_path, &manifest.tiles[k].crop))?,
+        ));
     }
     let frame_map = match crops.first() {
         Some((_, c)) => c.clone(),
@@ -845,15 +982,63 @@ pub fn localize_tiled(
             None => &fallback,
         }
     };
-    let mut result = finish_tiled(&manifest, &searches, segments, options, &place_of);
-    result.seconds.search += first_pass;
-    let exact = is_exact(&manifest, scan_reach_m(segments), options);
-    Ok(TiledLocalization {
-        result,
+    let mut results = Vec::with_capacity(n);
+    for s in 0..n {
+        let mut r = finish_tiled(&manifest, &searches[s], &scans[s], options, &place_of);
+        // The poses round's statistics are in `r.search`; add the minimum rounds'.
+        r.search.boxes += stats[s].boxes;
+        r.search.leaves += stats[s].leaves;
+        r.seconds.search = search_s[s];
+        results.push(r);
+    }
+    Ok(TiledBatch {
+        exact: scans
+            .iter()
+            .map(|s| is_exact(&manifest, scan_reach_m(s), options))
+            .collect(),
+        results,
         tiles_searched: which.len(),
-        exact,
+        tile_loads: loads,
         max_tile_memory_bytes: max_mem,
         load_seconds: load_s,
-        frame_map: frame_map.clone(),
+        frame_map,
+    })
+}
+
+/// Localizes scan segments on the tiled map of `manifest_path`: every tile (or those of
+/// `only`), [`localize_tiled_batch`] for one scan with the default caps.
+pub fn localize_tiled(
+    manifest_path: &Path,
+    segments: &[Segment],
+    options: &LocalizeOptions,
+    only: Option<&[usize]>,
+) -> Result<TiledLocalization> {
+    let batch = localize_tiled_batch(
+        manifest_path,
+        &[segments.to_vec()],
+        options,
+        &MINIMUM_CAPS_M,
+        only,
+        &mut |_| {},
+    )?;
+    let TiledBatch {
+        results,
+        exact,
+        tiles_searched,
+        max_tile_memory_bytes,
+        load_seconds,
+        frame_map,
+        ..
+    } = batch;
+    Ok(TiledLocalization {
+        result: results
+            .into_iter()
+            .next()
+            .unwrap_or_else(|| Localization::empty(options.rank_by)),
+        tiles_searched,
+        exact: exact.first().copied().unwrap_or(true),
+        max_tile_memory_bytes,
+        load_seconds,
+        frame_map,
     })
 }

@@ -6,7 +6,10 @@
 use geodata::osm::OsmMap;
 use localize::eval::mcd_scans;
 use localize::pipeline::{LocalizeOptions, Localizer};
-use localize::tiles::{build_tiles, localize_tiled, read_crop, Manifest, TileOptions};
+use localize::tiles::{
+    build_tiles, localize_tiled, localize_tiled_batch, read_crop, Manifest, TileOptions,
+    MINIMUM_CAPS_M,
+};
 use localize::LocalizeError;
 use std::path::PathBuf;
 
@@ -47,12 +50,51 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
 
     let scans = mcd_scans(&data_file("lidar/mcd_kth_day_06"), &map, 5).unwrap();
     assert!(scans.len() >= 3);
+    // All scans together (each tile read once per round) under the default caps, under caps
+    // so tight that most scans need every round, and with no capped round at all.
+    let segments: Vec<_> = scans
+        .iter()
+        .map(|s| whole.scan_segments(&s.points).unwrap().segments)
+        .collect();
+    let mut steps = 0;
+    let batch = localize_tiled_batch(
+        &manifest_path,
+        &segments,
+        &options,
+        &MINIMUM_CAPS_M,
+        None,
+        &mut |_| steps += 1,
+    )
+    .unwrap();
+    assert_eq!(batch.results.len(), scans.len());
+    assert!(steps >= 2 * manifest.tiles.len(), "{steps} progress steps");
+    for caps in [&[0.01, 0.02][..], &[]] {
+        let other =
+            localize_tiled_batch(&manifest_path, &segments, &options, caps, None, &mut |_| {})
+                .unwrap();
+        for (a, b) in batch.results.iter().zip(&other.results) {
+            assert_eq!(a.candidates, b.candidates, "caps {caps:?}");
+            assert_eq!(a.raw_poses, b.raw_poses, "caps {caps:?}");
+        }
+    }
+    // Caps must increase and be positive.
+    for caps in [&[0.5, 0.4][..], &[0.0], &[f64::NAN]] {
+        let e = localize_tiled_batch(&manifest_path, &segments, &options, caps, None, &mut |_| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("minimum caps"), "{e}");
+    }
     let mut compared = 0;
-    for s in &scans {
+    for (n, s) in scans.iter().enumerate() {
         let extracted = whole.scan_segments(&s.points).unwrap();
         let a = whole.localize_segments(&extracted.segments);
         let tiled = localize_tiled(&manifest_path, &extracted.segments, &options, None).unwrap();
         let b = &tiled.result;
+        // One scan alone is the batch's row for it.
+        assert_eq!(b.candidates, batch.results[n].candidates, "{}", s.name);
+        assert_eq!(b.confidence, batch.results[n].confidence, "{}", s.name);
+        assert_eq!(tiled.exact, batch.exact[n], "{}", s.name);
         assert!(!a.candidates.is_empty(), "{}", s.name);
         if !tiled.exact {
             continue;

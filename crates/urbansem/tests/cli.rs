@@ -802,6 +802,71 @@ fn tiled_map_localizes_as_the_whole_map() {
         "{some}"
     );
     assert_eq!(some["candidates"][0], whole["candidates"][0]);
+
+    // `localize eval` on the manifest scores the same candidates as on the map itself; the
+    // options a tiled map cannot run are usage errors; a dataset simulated on another map is
+    // refused (its truth is in that map's frame).
+    let eval = |m: &std::path::Path| -> serde_json::Value {
+        let stdout = stdout_of(
+            urbansem()
+                .args([
+                    "localize",
+                    "eval",
+                    "--json",
+                    "--method",
+                    "reverse",
+                    "--dataset",
+                ])
+                .arg(&data)
+                .arg("--map")
+                .arg(m),
+        );
+        serde_json::from_slice(&stdout).unwrap()
+    };
+    let (a, b) = (eval(std::path::Path::new(&map)), eval(&manifest));
+    assert_eq!(a["scans"], 2);
+    assert_eq!(a["n_accurate"], b["n_accurate"], "{b}");
+    assert_eq!(a["top1_within_2m_3deg"], b["top1_within_2m_3deg"]);
+    for k in 0..2 {
+        for key in ["top1", "top_costs", "raw_poses", "candidates", "confidence"] {
+            assert_eq!(a["per_scan"][k][key], b["per_scan"][k][key], "{key}");
+        }
+    }
+    for extra in [
+        &["--method", "hashing"][..],
+        &["--track", "2"],
+        &["--figures", "figs"],
+    ] {
+        let out = urbansem()
+            .args(["localize", "eval", "--dataset"])
+            .arg(&data)
+            .arg("--map")
+            .arg(&manifest)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("tiled map"),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let other = dir.path().join("other");
+    sim_dataset("localization", &["--scans", "1", "--seed", "3"], &other);
+    let out = urbansem()
+        .args(["localize", "eval", "--method", "reverse", "--dataset"])
+        .arg(&other)
+        .arg("--map")
+        .arg(&manifest)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("manifest.json") && err.contains("frame"),
+        "{err}"
+    );
 }
 
 /// Issue 19: `shard plan --job map` → `shard run` for every shard → `shard merge` builds the

@@ -7,9 +7,11 @@
 use super::{accurate_within, Accuracy};
 use crate::candidates::SearchStats;
 use crate::distractors::{DistractorOptions, DistractorSummary};
+use crate::index::MapSeconds;
 use crate::pipeline::{Localization, Localizer, StageSeconds};
 use crate::rank::{rank_order, CostKind, Costs};
 use crate::sensor::SensorReport;
+use crate::tiles::Manifest;
 use crate::Pose2;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -454,17 +456,74 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// The searched map as the report describes it: one prepared map or a tiled map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapFacts {
+    /// Tensor cell, metres.
+    pub grid_m: f64,
+    /// Position cells of the search domain.
+    pub domain_cells: u64,
+    /// Position cells the feasible-pose mask keeps.
+    pub feasible_cells: u64,
+    /// Seconds preparing the map (zero for a tiled map: prepared by `localize index`).
+    pub seconds: MapSeconds,
+    /// Tensor width, height and channels (a tiled map: its lattice over the whole domain).
+    pub tensor_dims: [usize; 3],
+    /// Bytes of the tensor (a tiled map: the sum of its tiles' memory).
+    pub tensor_bytes: usize,
+}
+
+impl MapFacts {
+    /// The facts of a localizer's prepared map.
+    pub fn of_localizer(localizer: &Localizer<'_>) -> MapFacts {
+        let domain_cells = localizer.domain.cells();
+        MapFacts {
+            grid_m: localizer.dt.grid_m,
+            domain_cells,
+            feasible_cells: localizer
+                .feasible
+                .as_ref()
+                .map_or(domain_cells, |m| m.feasible_cells),
+            seconds: localizer.seconds,
+            tensor_dims: [
+                localizer.dt.width,
+                localizer.dt.height,
+                localizer.dt.channels,
+            ],
+            tensor_bytes: localizer.dt.bytes(),
+        }
+    }
+
+    /// The facts of a tiled map: its tiles' cores make its domain.
+    pub fn of_manifest(manifest: &Manifest) -> MapFacts {
+        let [i0, j0, i1, j1] = manifest.domain;
+        let cells = |c: &[i64; 4]| ((c[2] - c[0]).max(0) * (c[3] - c[1]).max(0)) as u64;
+        MapFacts {
+            grid_m: manifest.grid_m,
+            domain_cells: manifest.tiles.iter().map(|t| cells(&t.core)).sum(),
+            feasible_cells: manifest.tiles.iter().map(|t| t.feasible_cells).sum(),
+            seconds: MapSeconds::default(),
+            tensor_dims: [
+                (i1 - i0).max(0) as usize,
+                (j1 - j0).max(0) as usize,
+                manifest.channels,
+            ],
+            tensor_bytes: manifest.tiles.iter().map(|t| t.memory_bytes as usize).sum(),
+        }
+    }
+}
+
 /// What [`EvalReport::new`] needs besides the outcomes.
 #[derive(Clone)]
-pub struct EvalSetup<'a> {
+pub struct EvalSetup {
     /// The dataset folder.
     pub dataset: String,
     /// The map (or index) file.
     pub map: String,
     /// Methods to tabulate.
     pub methods: Vec<RankMethod>,
-    /// The localizer (map preparation timings, tensor, domain).
-    pub localizer: &'a Localizer<'a>,
+    /// What was searched (map preparation timings, tensor, domain).
+    pub facts: MapFacts,
     /// Seconds loading the map.
     pub load_map_seconds: f64,
     /// Seconds building the hashing index.
@@ -477,8 +536,8 @@ pub struct EvalSetup<'a> {
 
 impl EvalReport {
     /// Tabulates the outcomes of every scan.
-    pub fn new(setup: EvalSetup<'_>, records: &[ScanOutcome]) -> Self {
-        let localizer = setup.localizer;
+    pub fn new(setup: EvalSetup, records: &[ScanOutcome]) -> Self {
+        let facts = setup.facts;
         let n_accurate: AccuracyTable = setup
             .methods
             .iter()
@@ -610,8 +669,8 @@ impl EvalReport {
                 ((*name).to_owned(), stats)
             })
             .collect();
-        let grid_m = localizer.dt.grid_m;
-        let domain_cells = localizer.domain.cells();
+        let grid_m = facts.grid_m;
+        let domain_cells = facts.domain_cells;
         EvalReport {
             dataset: setup.dataset,
             map: setup.map,
@@ -636,18 +695,18 @@ impl EvalReport {
             median_error_accurate_top1_reverse_m: median(accurate_top1_err),
             map_seconds: MapPrepSeconds {
                 load_map: setup.load_map_seconds,
-                map_edges: localizer.seconds.edges,
-                distance_transform: localizer.seconds.distance_transform,
-                pyramid: localizer.seconds.pyramid,
-                feasible_mask: localizer.seconds.feasible,
+                map_edges: facts.seconds.edges,
+                distance_transform: facts.seconds.distance_transform,
+                pyramid: facts.seconds.pyramid,
+                feasible_mask: facts.seconds.feasible,
                 hashing_index: setup.hashing_index_seconds,
             },
             tensor: TensorInfo {
-                width: localizer.dt.width,
-                height: localizer.dt.height,
-                channels: localizer.dt.channels,
+                width: facts.tensor_dims[0],
+                height: facts.tensor_dims[1],
+                channels: facts.tensor_dims[2],
                 grid_m,
-                bytes: localizer.dt.bytes(),
+                bytes: facts.tensor_bytes,
             },
             stage_seconds,
             threads: rayon::current_num_threads(),
@@ -657,10 +716,7 @@ impl EvalReport {
             yaws_per_cell: records
                 .first()
                 .map_or(0, |r| r.result.search.space / domain_cells.max(1)),
-            feasible_cells: localizer
-                .feasible
-                .as_ref()
-                .map_or(domain_cells, |m| m.feasible_cells),
+            feasible_cells: facts.feasible_cells,
         }
     }
 

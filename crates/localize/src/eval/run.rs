@@ -3,7 +3,7 @@
 //! ranked by each requested method, with figures, summed up in an [`EvalReport`].
 
 use super::report::{
-    DistractorsReport, EvalReport, EvalSetup, RankMethod, ScanOutcome, TrackSetup,
+    DistractorsReport, EvalReport, EvalSetup, MapFacts, RankMethod, ScanOutcome, TrackSetup,
 };
 use super::{is_mcd, mcd_scans, EvalScan, SimDataset};
 use crate::distractors::{embed_among_distractors, DistractorOptions};
@@ -76,8 +76,13 @@ fn composed_map(
     Ok((composed, Some(report)))
 }
 
-/// Runs the evaluation; `on_scan` sees each scan's outcome as soon as it is known.
-pub fn run_eval(job: &EvalJob, on_scan: &mut dyn FnMut(&ScanOutcome)) -> Result<EvalReport> {
+/// Runs the evaluation; `on_scan` sees each scan's outcome as soon as it is known, and on a
+/// tiled map `progress` each tile of each round ([`run_eval_tiled`]).
+pub fn run_eval(
+    job: &EvalJob,
+    on_scan: &mut dyn FnMut(&ScanOutcome),
+    progress: &mut dyn FnMut(crate::tiles::BatchStep<'_>),
+) -> Result<EvalReport> {
     let sim = if is_mcd(&job.dataset) {
         None
     } else {
@@ -87,6 +92,9 @@ pub fn run_eval(job: &EvalJob, on_scan: &mut dyn FnMut(&ScanOutcome)) -> Result<
         )
     };
     let map_path = job_map(job, sim.as_ref())?;
+    if crate::tiles::is_manifest(&map_path) {
+        return run_eval_tiled(job, sim.as_ref(), &map_path, on_scan, progress);
+    }
     let t = Instant::now();
     let (map, prepared) = load_map_or_index(&map_path)?;
     if prepared.is_some() && job.distractors.is_some() {
@@ -161,7 +169,7 @@ pub fn run_eval(job: &EvalJob, on_scan: &mut dyn FnMut(&ScanOutcome)) -> Result<
             dataset: job.dataset.display().to_string(),
             map: map_path.display().to_string(),
             methods: job.methods.clone(),
-            localizer: &localizer,
+            facts: MapFacts::of_localizer(&localizer),
             load_map_seconds: load_map_s,
             hashing_index_seconds: hashing_index_s,
             distractors,
@@ -204,4 +212,130 @@ fn track_results(
         ..Default::default()
     };
     localizer.localize_track(&extracted, &odometry, &options)
+}
+
+/// Why a tiled map cannot run a job's option, if one is asked for.
+pub fn tiled_refusal(job: &EvalJob) -> Option<&'static str> {
+    if job.distractors.is_some() {
+        Some("distractors are added to one OSM map, not to a tiled map")
+    } else if job.track.is_some() {
+        Some("track mode runs on one map or .uloc index, not on a tiled map")
+    } else if job.methods.contains(&RankMethod::Hashing) {
+        Some("the hashing baseline indexes one whole map, not a tiled map")
+    } else if job.figures.is_some() {
+        Some("figures are drawn on one map, not on a tiled map")
+    } else {
+        None
+    }
+}
+
+/// The evaluation on a tiled map (`map_path`, a manifest of `localize index --tile-m`): every
+/// scan's walls first, then all scans searched together tile by tile
+/// ([`crate::tiles::localize_tiled_batch`]: each tile read once per round, not once per
+/// scan); `progress` sees each tile of each round.
+pub fn run_eval_tiled(
+    job: &EvalJob,
+    sim: Option<&SimDataset>,
+    map_path: &Path,
+    on_scan: &mut dyn FnMut(&ScanOutcome),
+    progress: &mut dyn FnMut(crate::tiles::BatchStep<'_>),
+) -> Result<EvalReport> {
+    use crate::tiles::{localize_tiled_batch, Manifest, MINIMUM_CAPS_M};
+    if let Some(why) = tiled_refusal(job) {
+        return Err(LocalizeError::Dataset {
+            path: map_path.to_path_buf(),
+            message: why.into(),
+        });
+    }
+    let t = Instant::now();
+    let manifest = Manifest::read(map_path)?;
+    if let Some(d) = sim {
+        // The truth is in the frame of the map the dataset was simulated on.
+        let bytes = std::fs::read(&d.map_path).map_err(|source| LocalizeError::Io {
+            action: "reading",
+            path: d.map_path.clone(),
+            source,
+        })?;
+        if crc32fast::hash(&bytes) != manifest.map.crc32 || bytes.len() as u64 != manifest.map.bytes
+        {
+            return Err(LocalizeError::Dataset {
+                path: map_path.to_path_buf(),
+                message: format!(
+                    "tiled from {}, but {} was simulated on {} (another file): its true poses are in that map's frame",
+                    manifest.map.path,
+                    job.dataset.display(),
+                    d.map_path.display()
+                ),
+            });
+        }
+    }
+    let frame = crate::tiles::read_crop(&crate::tiles::resolve(
+        map_path,
+        &manifest
+            .tiles
+            .first()
+            .ok_or_else(|| LocalizeError::Dataset {
+                path: map_path.to_path_buf(),
+                message: "the manifest lists no tile".into(),
+            })?
+            .crop,
+    ))?;
+    let load_map_s = t.elapsed().as_secs_f64();
+    let mcd: Vec<EvalScan> = match sim {
+        Some(_) => Vec::new(),
+        None => mcd_scans(&job.dataset, &frame, 1)
+            .context_with(|| format!("reading the MCD scans in {}", job.dataset.display()))?,
+    };
+    let count = sim.map_or(mcd.len(), |d| d.truth.len());
+    let count = job.limit.map_or(count, |l| l.min(count));
+    let mut scans = Vec::with_capacity(count);
+    let mut extracted = Vec::with_capacity(count);
+    for i in 0..count {
+        let scan = match sim {
+            Some(d) => d
+                .load(i)
+                .context_with(|| format!("loading scan {i} of {}", job.dataset.display()))?,
+            None => mcd.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
+                path: job.dataset.clone(),
+                message: format!("MCD scan {i} missing"),
+            })?,
+        };
+        let e = crate::pipeline::scan_segments(&job.options, &scan.points)
+            .context_with(|| format!("extracting walls from {}", scan.name))?;
+        extracted.push((e, scan.points.len()));
+        scans.push((scan.name, scan.truth));
+    }
+    let segments: Vec<Vec<crate::Segment>> =
+        extracted.iter().map(|(e, _)| e.segments.clone()).collect();
+    let batch = localize_tiled_batch(
+        map_path,
+        &segments,
+        &job.options,
+        &MINIMUM_CAPS_M,
+        None,
+        progress,
+    )?;
+    let mut records = Vec::with_capacity(count);
+    for (((name, truth), (e, points)), mut result) in
+        scans.into_iter().zip(extracted).zip(batch.results)
+    {
+        result.seconds.total = result.seconds.search;
+        result.record_scan(&e, points);
+        let rec = ScanOutcome::new(name, truth, result, Vec::new(), 0.0);
+        on_scan(&rec);
+        records.push(rec);
+    }
+    Ok(EvalReport::new(
+        EvalSetup {
+            dataset: job.dataset.display().to_string(),
+            map: map_path.display().to_string(),
+            methods: job.methods.clone(),
+            facts: MapFacts::of_manifest(&manifest),
+            load_map_seconds: load_map_s,
+            hashing_index_seconds: 0.0,
+            distractors: None,
+            track: None,
+        },
+        &records,
+    ))
 }

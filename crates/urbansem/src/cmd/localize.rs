@@ -398,7 +398,8 @@ pub struct EvalArgs {
     /// A `localization` dataset folder, or an MCD sequence folder (needs --map).
     #[arg(long)]
     pub dataset: PathBuf,
-    /// OSM map, or its index (.uloc); default: the dataset's `map`.
+    /// OSM map, its index (.uloc), or a tiled map's manifest (.json, from `localize index
+    /// --tile-m`: every scan searched together, tile by tile); default: the dataset's `map`.
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// Methods to evaluate (repeatable).
@@ -723,20 +724,20 @@ impl Method {
 }
 
 fn eval(args: EvalArgs) -> anyhow::Result<()> {
-    let methods: Vec<RankMethod> = if args.method.contains(&Method::All) || args.method.is_empty() {
-        RankMethod::ALL.to_vec()
+    let tiled = args
+        .map
+        .as_deref()
+        .is_some_and(localize::tiles::is_manifest);
+    let all = args.method.contains(&Method::All) || args.method.is_empty();
+    let methods: Vec<RankMethod> = if all {
+        RankMethod::ALL
+            .into_iter()
+            // The hashing baseline indexes one whole map: left out on a tiled map unless asked for.
+            .filter(|m| !(tiled && *m == RankMethod::Hashing))
+            .collect()
     } else {
         args.method.iter().filter_map(|m| m.rank_method()).collect()
     };
-    if args
-        .map
-        .as_deref()
-        .is_some_and(localize::tiles::is_manifest)
-    {
-        super::usage!(
-            "localize eval runs on one map or .uloc index, not a tiled map's manifest (`shard plan --job localize` localizes a folder of scans on tiles)"
-        );
-    }
     let mcd = is_mcd(&args.dataset);
     if mcd && args.map.is_none() {
         super::usage!(
@@ -777,12 +778,29 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         }),
         figures: args.figures.clone(),
     };
-    let json = args.json;
-    let report = match run_eval(&job, &mut |scan| {
-        if !json {
-            println!("{}", scan.line_text());
+    if tiled {
+        if let Some(why) = localize::eval::run::tiled_refusal(&job) {
+            super::usage!("{why}: drop that option, or give the map itself (or its .uloc index)");
         }
-    }) {
+    }
+    let json = args.json;
+    let mut progress = |step: localize::tiles::BatchStep<'_>| {
+        if step.tiles_done % 10 == 0 || step.tiles_done == step.tiles {
+            eprintln!(
+                "{}: {} of {} tiles, {} scans",
+                step.round, step.tiles_done, step.tiles, step.scans
+            );
+        }
+    };
+    let report = match run_eval(
+        &job,
+        &mut |scan| {
+            if !json {
+                println!("{}", scan.line_text());
+            }
+        },
+        &mut progress,
+    ) {
         Err(e @ LocalizeError::DistractorsNeedOsmMap { .. }) => super::usage!("{e}"),
         r => r?,
     };
