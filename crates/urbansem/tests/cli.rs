@@ -825,6 +825,8 @@ fn tiled_map_localizes_as_the_whole_map() {
     };
     let (a, b) = (eval(std::path::Path::new(&map)), eval(&manifest));
     assert_eq!(a["scans"], 2);
+    assert!(a.get("tiled_exact_scans").is_none());
+    assert_eq!(b["tiled_exact_scans"], 2, "{b}");
     assert_eq!(a["n_accurate"], b["n_accurate"], "{b}");
     assert_eq!(a["top1_within_2m_3deg"], b["top1_within_2m_3deg"]);
     for k in 0..2 {

@@ -408,6 +408,10 @@ pub struct EvalReport {
     pub top10_within_2m_3deg_reverse: usize,
     /// Track-mode counts.
     pub track: Option<TrackCounts>,
+    /// On a tiled map: scans for which the tiled search equals the whole map's
+    /// ([`crate::tiles::is_exact`]); absent on one map.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tiled_exact_scans: Option<usize>,
     /// Scans per sensor profile, in the order first seen (a JSON object).
     #[serde(serialize_with = "as_map")]
     pub sensors: Vec<(String, usize)>,
@@ -691,6 +695,7 @@ impl EvalReport {
             },
             top10_within_2m_3deg_reverse,
             track,
+            tiled_exact_scans: None,
             sensors,
             median_error_accurate_top1_reverse_m: median(accurate_top1_err),
             map_seconds: MapPrepSeconds {
@@ -922,6 +927,13 @@ impl EvalReport {
         let sensor_counts: Vec<String> =
             r.sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
         let _ = writeln!(out, "sensor profiles: {}", sensor_counts.join(", "));
+        if let Some(n) = r.tiled_exact_scans {
+            let _ = writeln!(
+                out,
+                "tiled map: {n} of {} scans searched exactly as on the whole map",
+                r.scans
+            );
+        }
         if let Some(t) = &r.track {
             let _ = writeln!(
                 out,

@@ -315,6 +315,7 @@ pub fn run_eval_tiled(
         None,
         progress,
     )?;
+    let exact = batch.exact.iter().filter(|&&e| e).count();
     let mut records = Vec::with_capacity(count);
     for (((name, truth), (e, points)), mut result) in
         scans.into_iter().zip(extracted).zip(batch.results)
@@ -325,7 +326,7 @@ pub fn run_eval_tiled(
         on_scan(&rec);
         records.push(rec);
     }
-    Ok(EvalReport::new(
+    let mut report = EvalReport::new(
         EvalSetup {
             dataset: job.dataset.display().to_string(),
             map: map_path.display().to_string(),
@@ -337,5 +338,7 @@ pub fn run_eval_tiled(
             track: None,
         },
         &records,
-    ))
+    );
+    report.tiled_exact_scans = Some(exact);
+    Ok(report)
 }
