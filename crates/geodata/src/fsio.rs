@@ -52,7 +52,8 @@ fn permissions_for(path: &Path) -> Permissions {
 }
 
 impl AtomicFile {
-    /// Starts writing `path`: creates the temporary file beside it.
+    /// Starts writing `path`: creates its folder if missing, then the temporary file beside
+    /// it.
     pub fn create(path: impl AsRef<Path>) -> io::Result<AtomicFile> {
         let path = path.as_ref().to_path_buf();
         let name = path
@@ -69,6 +70,7 @@ impl AtomicFile {
         builder.prefix(&prefix).suffix(".partial");
         #[cfg(unix)]
         builder.permissions(permissions_for(&path));
+        std::fs::create_dir_all(parent_dir(&path))?;
         let file = builder.tempfile_in(parent_dir(&path))?;
         Ok(AtomicFile {
             inner: BufWriter::with_capacity(1 << 16, file),
@@ -131,6 +133,15 @@ mod tests {
     }
 
     #[test]
+    fn a_missing_folder_is_created() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a/b/out.uloc");
+        write_atomic(&path, b"index").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"index");
+        assert!(partial_files(&dir.path().join("a/b")).is_empty());
+    }
+
+    #[test]
     fn old_file_survives_an_abandoned_write() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("map.srt");
@@ -157,7 +168,8 @@ mod tests {
         f.write_all(b"head").unwrap();
         f.commit().unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"headdata");
-        assert!(AtomicFile::create(dir.path().join("missing/x")).is_err());
+        // A folder that cannot be made (a file stands in its place) is an error.
+        assert!(AtomicFile::create(path.join("x")).is_err());
     }
 
     #[cfg(unix)]
