@@ -5,10 +5,11 @@
 
 use geodata::osm::OsmMap;
 use localize::eval::mcd_scans;
+use localize::eval::run::{run_eval, EvalJob};
+use localize::eval::RankMethod;
 use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::tiles::{
-    build_tiles, localize_tiled, localize_tiled_batch, read_crop, Manifest, TileOptions,
-    MINIMUM_CAPS_M,
+    build_tiles, localize_tiled_batch, read_crop, Manifest, TileOptions, MINIMUM_CAPS_M,
 };
 use localize::LocalizeError;
 use std::path::PathBuf;
@@ -50,8 +51,7 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
 
     let scans = mcd_scans(&data_file("lidar/mcd_kth_day_06"), &map, 5).unwrap();
     assert!(scans.len() >= 3);
-    // All scans together (each tile read once per round) under the default caps, under caps
-    // so tight that most scans need every round, and with no capped round at all.
+    // All scans together (each tile read once per round; `localize_tiled` is a batch of one).
     let segments: Vec<_> = scans
         .iter()
         .map(|s| whole.scan_segments(&s.points).unwrap().segments)
@@ -68,14 +68,20 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
     .unwrap();
     assert_eq!(batch.results.len(), scans.len());
     assert!(steps >= 2 * manifest.tiles.len(), "{steps} progress steps");
-    for caps in [&[0.01, 0.02][..], &[]] {
-        let other =
-            localize_tiled_batch(&manifest_path, &segments, &options, caps, None, &mut |_| {})
-                .unwrap();
-        for (a, b) in batch.results.iter().zip(&other.results) {
-            assert_eq!(a.candidates, b.candidates, "caps {caps:?}");
-            assert_eq!(a.raw_poses, b.raw_poses, "caps {caps:?}");
-        }
+    // Two scans under caps so tight that they need every round: the same answers.
+    let caps = [0.01, 0.02];
+    let other = localize_tiled_batch(
+        &manifest_path,
+        &segments[..2],
+        &options,
+        &caps,
+        None,
+        &mut |_| {},
+    )
+    .unwrap();
+    for (a, b) in batch.results.iter().zip(&other.results) {
+        assert_eq!(a.candidates, b.candidates, "caps {caps:?}");
+        assert_eq!(a.raw_poses, b.raw_poses, "caps {caps:?}");
     }
     // Caps must increase and be positive.
     for caps in [&[0.5, 0.4][..], &[0.0], &[f64::NAN]] {
@@ -89,14 +95,9 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
     for (n, s) in scans.iter().enumerate() {
         let extracted = whole.scan_segments(&s.points).unwrap();
         let a = whole.localize_segments(&extracted.segments);
-        let tiled = localize_tiled(&manifest_path, &extracted.segments, &options, None).unwrap();
-        let b = &tiled.result;
-        // One scan alone is the batch's row for it.
-        assert_eq!(b.candidates, batch.results[n].candidates, "{}", s.name);
-        assert_eq!(b.confidence, batch.results[n].confidence, "{}", s.name);
-        assert_eq!(tiled.exact, batch.exact[n], "{}", s.name);
+        let b = &batch.results[n];
         assert!(!a.candidates.is_empty(), "{}", s.name);
-        if !tiled.exact {
+        if !batch.exact[n] {
             continue;
         }
         compared += 1;
@@ -108,6 +109,30 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
         assert_eq!(a.message, b.message, "{}", s.name);
     }
     assert!(compared >= 3, "only {compared} scans within the overlap");
+
+    // `localize eval` of the real MCD sequence on the manifest: the scans' truth in the map
+    // frame (taken from a tile's crop), and the same top-1 errors as on the map itself.
+    let job = |map: &std::path::Path| EvalJob {
+        dataset: data_file("lidar/mcd_kth_day_06"),
+        map: Some(map.to_path_buf()),
+        methods: vec![RankMethod::Reverse],
+        options: options.clone(),
+        distractors: None,
+        limit: Some(2),
+        track: None,
+        figures: None,
+    };
+    let on_map = run_eval(&job(&map_path), &mut |_| {}, &mut |_| {}).unwrap();
+    let on_tiles = run_eval(&job(&manifest_path), &mut |_| {}, &mut |_| {}).unwrap();
+    assert_eq!(on_tiles.scans, 2);
+    assert_eq!(on_map.top1_within_2m_3deg, on_tiles.top1_within_2m_3deg);
+    assert!(on_tiles.tiled_exact_scans.is_some() && on_map.tiled_exact_scans.is_none());
+    for (a, b) in on_map.per_scan.iter().zip(&on_tiles.per_scan) {
+        assert_eq!(a.truth, b.truth, "{}", a.scan);
+        if on_tiles.tiled_exact_scans == Some(2) {
+            assert_eq!(a.top1["reverse"], b.top1["reverse"], "{}", a.scan);
+        }
+    }
 
     // A crop round-trips; a flipped byte is an error naming the file.
     let crop_path = out.join(&manifest.tiles[0].crop.path);
