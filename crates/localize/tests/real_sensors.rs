@@ -95,3 +95,30 @@ fn car_profile_beats_the_terrestrial_one_on_car_scans() {
         terrestrial.recall
     );
 }
+
+/// `localize eval`'s truth for a KITTI-360 sequence: every scan's dataset pose, in the frame
+/// of the map of its streets, lies on those streets (within 12 m of a street centre line; a
+/// wrong georeference would put it kilometres away).
+#[test]
+fn kitti360_truth_poses_lie_on_the_streets_of_their_map() {
+    use localize::eval::{real_scans, real_sequence};
+    let dir = shared("lidar/kitti360_2013_05_28_drive_0009");
+    let map =
+        geodata::osm::OsmMap::load(shared("osm/karlsruhe_west_kitti360_0009_roads.osm")).unwrap();
+    let kind = real_sequence(&dir).unwrap();
+    assert_eq!(kind, SequenceKind::Kitti360);
+    let scans = real_scans(&dir, kind, &map, 1).unwrap();
+    assert_eq!(scans.len(), 25);
+    for s in &scans {
+        let d = map
+            .streets
+            .segments
+            .iter()
+            .map(|g| {
+                geodata::osm::geometry::point_segment_distance([s.truth.x, s.truth.y], g.a, g.b)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(d <= 12.0, "{}: {d:.1} m from the nearest street", s.name);
+        assert!(s.points.len() > 50_000, "{}", s.name);
+    }
+}

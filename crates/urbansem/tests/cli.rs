@@ -1376,3 +1376,51 @@ fn shard_streets_plan_without_a_model_uses_the_shipped_default() {
     let text = std::fs::read_to_string(&plan).unwrap();
     assert!(text.contains("default-street-model.json"), "{text}");
 }
+
+/// Issue 15: `localize eval` takes a real KITTI-360 sequence as it takes an MCD one (its
+/// poses as truth); a map without buildings, a map of another place and a missing map are
+/// clear errors.
+#[test]
+fn localize_eval_takes_a_kitti360_sequence() {
+    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+    let kitti = format!("{shared}/lidar/kitti360_2013_05_28_drive_0009");
+    let eval = |map: Option<&str>| {
+        let mut c = urbansem();
+        c.args([
+            "localize",
+            "eval",
+            "--method",
+            "reverse",
+            "--limit",
+            "2",
+            "--dataset",
+        ])
+        .arg(&kitti);
+        if let Some(m) = map {
+            c.arg("--map").arg(m);
+        }
+        let out = c.output().unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let roads = format!("{shared}/osm/karlsruhe_west_kitti360_0009_roads.osm");
+    let (code, err) = eval(Some(&roads));
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("karlsruhe_west_kitti360_0009_roads.osm")
+            && err.contains("no building outlines"),
+        "{err}"
+    );
+    let kth = format!("{shared}/osm/kth_campus_stockholm.osm");
+    let (code, err) = eval(Some(&kth));
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("none of its") && err.contains("kth_campus_stockholm.osm"),
+        "{err}"
+    );
+    let (code, err) = eval(None);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("kitti360"), "{err}");
+}

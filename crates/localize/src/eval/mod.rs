@@ -134,6 +134,91 @@ impl SimDataset {
     }
 }
 
+/// The layout of a real LiDAR sequence folder (MCD, KITTI-360, KITTI raw), or `None` for a
+/// simulated dataset (it has `dataset.json`) or an unknown folder.
+pub fn real_sequence(dir: &Path) -> Option<SequenceKind> {
+    if dir.join("dataset.json").exists() {
+        None
+    } else {
+        SequenceKind::of(dir)
+    }
+}
+
+/// The scans of the real `kind` sequence in `dir` (every `stride`-th frame), levelled, with
+/// their dataset poses in the map's local frame as truth.
+pub fn real_scans(
+    dir: &Path,
+    kind: SequenceKind,
+    map: &OsmMap,
+    stride: usize,
+) -> Result<Vec<EvalScan>> {
+    sequence_scans(kind.open(dir)?.as_ref(), map, stride)
+}
+
+/// An error unless some true pose lies within `margin_m` of the box `[min_x, min_y, max_x,
+/// max_y]` of the map (its buildings and streets): scans of another place.
+pub fn check_overlap(
+    dataset: &Path,
+    map: &Path,
+    scans: &[EvalScan],
+    bounds: Option<[f64; 4]>,
+    margin_m: f64,
+) -> Result<()> {
+    let Some(b) = bounds else {
+        return Err(dataset_err(
+            map,
+            "the map has no buildings or streets to localize on",
+        ));
+    };
+    let near = |p: &Pose2| {
+        p.x >= b[0] - margin_m
+            && p.x <= b[2] + margin_m
+            && p.y >= b[1] - margin_m
+            && p.y <= b[3] + margin_m
+    };
+    match scans.iter().find(|s| near(&s.truth)) {
+        Some(_) => Ok(()),
+        None if scans.is_empty() => Err(dataset_err(dataset, "no scans")),
+        None => {
+            let t = scans[0].truth;
+            Err(dataset_err(
+                dataset,
+                format!(
+                    "none of its {} scan poses lies within {margin_m} m of the map {} (the first is at ({:.0}, {:.0}) m in the map's frame, the map spans x {:.0}…{:.0}, y {:.0}…{:.0} m): is it the map of this sequence?",
+                    scans.len(),
+                    map.display(),
+                    t.x,
+                    t.y,
+                    b[0],
+                    b[2],
+                    b[1],
+                    b[3]
+                ),
+            ))
+        }
+    }
+}
+
+/// The box `[min_x, min_y, max_x, max_y]` of a map's buildings and streets (`None`: neither).
+pub fn map_bounds(map: &OsmMap) -> Option<[f64; 4]> {
+    let points = map
+        .buildings
+        .iter()
+        .flat_map(|b| b.outer.iter().copied())
+        .chain(map.streets.segments.iter().flat_map(|s| [s.a, s.b]));
+    let mut out: Option<[f64; 4]> = None;
+    for p in points {
+        let b = out.get_or_insert([p[0], p[1], p[0], p[1]]);
+        *b = [
+            b[0].min(p[0]),
+            b[1].min(p[1]),
+            b[2].max(p[0]),
+            b[3].max(p[1]),
+        ];
+    }
+    out
+}
+
 /// Whether a folder is an MCD sequence (has `pose_inW.csv`).
 pub fn is_mcd(dir: &Path) -> bool {
     dir.join("pose_inW.csv").exists()

@@ -859,9 +859,10 @@ impl ScanOutcome {
 }
 
 impl EvalReport {
-    /// The evaluation as the command line prints it (`real_mcd`: the scans are real MCD scans).
-    pub fn table_text(&self, real_mcd: bool) -> String {
-        let (r, mcd) = (self, real_mcd);
+    /// The evaluation as the command line prints it (`real`: the layout of the real
+    /// sequence the scans come from, `None`: simulated scans).
+    pub fn table_text(&self, real: Option<&str>) -> String {
+        let r = self;
         let mut out = String::new();
         let n = r.scans;
         let _ = writeln!(out);
@@ -871,7 +872,7 @@ impl EvalReport {
             n,
             r.dataset,
             r.map,
-            if mcd { "real MCD scans" } else { "simulated" }
+            real.map_or_else(|| "simulated".to_owned(), |k| format!("real {k} scans"))
         );
         if let Some(d) = &r.distractors {
             let s = &d.summary;

@@ -5,7 +5,7 @@
 use super::report::{
     DistractorsReport, EvalReport, EvalSetup, MapFacts, RankMethod, ScanOutcome, TrackSetup,
 };
-use super::{is_mcd, mcd_scans, EvalScan, SimDataset};
+use super::{check_overlap, map_bounds, real_scans, real_sequence, EvalScan, SimDataset};
 use crate::distractors::{embed_among_distractors, DistractorOptions};
 use crate::figure::result_svg;
 use crate::hashing::{CornerIndex, HashingOptions};
@@ -21,7 +21,8 @@ use std::time::Instant;
 /// What to evaluate and how.
 #[derive(Debug, Clone)]
 pub struct EvalJob {
-    /// A simulated `localization` dataset folder or an MCD sequence folder.
+    /// A simulated `localization` dataset folder or a real sequence folder (MCD, KITTI-360,
+    /// KITTI raw: the scans with their dataset poses as truth).
     pub dataset: PathBuf,
     /// The map (OSM file or `.uloc` index); a simulated dataset's own map when `None`.
     pub map: Option<PathBuf>,
@@ -46,9 +47,7 @@ fn job_map(job: &EvalJob, sim: Option<&SimDataset>) -> Result<PathBuf> {
         (None, Some(d)) => Ok(d.map_path.clone()),
         (None, None) => Err(LocalizeError::Dataset {
             path: job.dataset.clone(),
-            message:
-                "an MCD sequence; give the map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)"
-                    .into(),
+            message: "a real sequence; give the map of the place it was recorded (an OSM file with buildings, or its .uloc index)".into(),
         }),
     }
 }
@@ -83,7 +82,8 @@ pub fn run_eval(
     on_scan: &mut dyn FnMut(&ScanOutcome),
     progress: &mut dyn FnMut(crate::tiles::BatchStep<'_>),
 ) -> Result<EvalReport> {
-    let sim = if is_mcd(&job.dataset) {
+    let real = real_sequence(&job.dataset);
+    let sim = if real.is_some() {
         None
     } else {
         Some(
@@ -100,16 +100,31 @@ pub fn run_eval(
     if prepared.is_some() && job.distractors.is_some() {
         return Err(LocalizeError::DistractorsNeedOsmMap { path: map_path });
     }
+    if map.buildings.is_empty() {
+        return Err(LocalizeError::Dataset {
+            path: map_path,
+            message: "the map has no building outlines, and localization matches walls against them (a map of streets only?)".into(),
+        });
+    }
     let (map, distractors) = composed_map(job, map, &map_path)?;
     let load_map_s = t.elapsed().as_secs_f64();
     let localizer = Localizer::prepared_or_new(&map, prepared, job.options.clone(), &map_path)?;
     let t = Instant::now();
     let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
     let hashing_index_s = t.elapsed().as_secs_f64();
-    let mcd: Vec<EvalScan> = match &sim {
-        Some(_) => Vec::new(),
-        None => mcd_scans(&job.dataset, &map, 1)
-            .context_with(|| format!("reading the MCD scans in {}", job.dataset.display()))?,
+    let mcd: Vec<EvalScan> = match real {
+        None => Vec::new(),
+        Some(kind) => {
+            let scans = real_scans(&job.dataset, kind, &map, 1).context_with(|| {
+                format!(
+                    "reading the {} scans in {}",
+                    kind.name(),
+                    job.dataset.display()
+                )
+            })?;
+            check_overlap(&job.dataset, &map_path, &scans, map_bounds(&map), 200.0)?;
+            scans
+        }
     };
     let count = sim.as_ref().map_or(mcd.len(), |d| d.truth.len());
     let count = job.limit.map_or(count, |l| l.min(count));
@@ -127,7 +142,7 @@ pub fn run_eval(
                 .context_with(|| format!("loading scan {i} of {}", job.dataset.display())),
             None => mcd.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
                 path: job.dataset.clone(),
-                message: format!("MCD scan {i} missing"),
+                message: format!("real scan {i} missing"),
             }),
         }
     };
@@ -281,10 +296,27 @@ pub fn run_eval_tiled(
             .crop,
     ))?;
     let load_map_s = t.elapsed().as_secs_f64();
-    let mcd: Vec<EvalScan> = match sim {
-        Some(_) => Vec::new(),
-        None => mcd_scans(&job.dataset, &frame, 1)
-            .context_with(|| format!("reading the MCD scans in {}", job.dataset.display()))?,
+    let mcd: Vec<EvalScan> = match (sim, real_sequence(&job.dataset)) {
+        (None, Some(kind)) => {
+            let scans = real_scans(&job.dataset, kind, &frame, 1).context_with(|| {
+                format!(
+                    "reading the {} scans in {}",
+                    kind.name(),
+                    job.dataset.display()
+                )
+            })?;
+            let cores = manifest.tiles.iter().map(|t| t.core_m).reduce(|a, b| {
+                [
+                    a[0].min(b[0]),
+                    a[1].min(b[1]),
+                    a[2].max(b[2]),
+                    a[3].max(b[3]),
+                ]
+            });
+            check_overlap(&job.dataset, map_path, &scans, cores, 200.0)?;
+            scans
+        }
+        _ => Vec::new(),
     };
     let count = sim.map_or(mcd.len(), |d| d.truth.len());
     let count = job.limit.map_or(count, |l| l.min(count));
@@ -297,7 +329,7 @@ pub fn run_eval_tiled(
                 .context_with(|| format!("loading scan {i} of {}", job.dataset.display()))?,
             None => mcd.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
                 path: job.dataset.clone(),
-                message: format!("MCD scan {i} missing"),
+                message: format!("real scan {i} missing"),
             })?,
         };
         let e = crate::pipeline::scan_segments(&job.options, &scan.points)

@@ -14,7 +14,7 @@
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 use localize::distractors::DistractorOptions;
-use localize::eval::is_mcd;
+use localize::eval::real_sequence;
 use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
 use localize::index::is_index;
@@ -395,7 +395,8 @@ pub enum Method {
 /// Arguments of `urbansem localize eval`.
 #[derive(Args)]
 pub struct EvalArgs {
-    /// A `localization` dataset folder, or an MCD sequence folder (needs --map).
+    /// A `localization` dataset folder, or a real sequence folder (MCD, KITTI-360, KITTI
+    /// raw; needs --map): its scans with their dataset poses as truth.
     #[arg(long)]
     pub dataset: PathBuf,
     /// OSM map, its index (.uloc), or a tiled map's manifest (.json, from `localize index
@@ -738,11 +739,12 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     } else {
         args.method.iter().filter_map(|m| m.rank_method()).collect()
     };
-    let mcd = is_mcd(&args.dataset);
-    if mcd && args.map.is_none() {
+    let real = real_sequence(&args.dataset);
+    if let (Some(kind), None) = (real, &args.map) {
         super::usage!(
-            "{} is an MCD sequence; give the map with --map (e.g. ../shared/data/osm/kth_campus_stockholm.osm)",
-            args.dataset.display()
+            "{} is a real {} sequence; give the map of the place it was recorded with --map (an OSM file with buildings or its .uloc index, e.g. ../shared/data/osm/kth_campus_stockholm.osm for MCD kth_day_06)",
+            args.dataset.display(),
+            kind.name()
         );
     }
     if args.track == Some(0) {
@@ -807,7 +809,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if args.json {
         return super::print_json(&report);
     }
-    print!("{}", report.table_text(mcd));
+    print!("{}", report.table_text(real.map(|k| k.name())));
     Ok(())
 }
 
