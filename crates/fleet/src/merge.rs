@@ -6,9 +6,8 @@ use crate::plan::{Job, Plan};
 use crate::run::{plan_manifest, read_results, ExtractRecord, PosesRecord};
 use crate::streets::StreetsMerge;
 use crate::Result;
-use localize::pipeline::Place;
 use localize::report::TrackRow;
-use localize::tiles::{finish_tiled, owners, read_crop, resolve, TilePlace, TileSearch};
+use localize::tiles::{finish_tiled, owner_crops, place_in, TilePlace, TileSearch};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -96,41 +95,16 @@ pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
         v.sort_by_key(|s| s.tile);
     }
     // The crops of every tile owning a candidate of some scan, loaded once.
-    let mut needed: Vec<usize> = by_scan
-        .values()
-        .flat_map(|s| owners(&manifest, s, &options))
-        .collect();
-    if needed.is_empty() && !manifest.tiles.is_empty() {
-        needed.push(0);
-    }
-    needed.sort_unstable();
-    needed.dedup();
-    let crops = needed
-        .iter()
-        .map(|&k| {
-            Ok((
-                k,
-                read_crop(&resolve(&manifest_path, &manifest.tiles[k].crop))?,
-            ))
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let crops = owner_crops(
+        &manifest_path,
+        &manifest,
+        by_scan.values().map(|s| &s[..]),
+        &options,
+    )?;
     let places: Vec<(usize, TilePlace<'_>)> =
         crops.iter().map(|(k, c)| (*k, TilePlace::new(c))).collect();
-    let place_of = |k: usize| -> &dyn Place {
-        match places.iter().find(|(j, _)| *j == k) {
-            Some((_, p)) => p,
-            None => &places[0].1,
-        }
-    };
-    let frame_map = match crops.first() {
-        Some((_, c)) => c,
-        None => {
-            return Err(crate::invalid(
-                &manifest_path,
-                "the tiled map lists no tile".into(),
-            ))
-        }
-    };
+    let place_of = |k: usize| place_in(&places, k);
+    let frame_map = &crops[0].1;
     let empty = Vec::new();
     let mut scans = Vec::with_capacity(extracted.len());
     for e in &extracted {

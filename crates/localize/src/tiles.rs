@@ -738,6 +738,50 @@ pub fn owners(
     out
 }
 
+/// The crops of every tile owning a candidate of some scan's merged searches (`per_scan`),
+/// each read once, by tile; tile 0's when none does (the map's frame), so never empty. A
+/// manifest that lists no tile is an error.
+pub fn owner_crops<'a>(
+    manifest_path: &Path,
+    manifest: &Manifest,
+    per_scan: impl IntoIterator<Item = &'a [TileSearch]>,
+    options: &LocalizeOptions,
+) -> Result<Vec<(usize, OsmMap)>> {
+    let mut needed: Vec<usize> = per_scan
+        .into_iter()
+        .flat_map(|s| owners(manifest, s, options))
+        .collect();
+    if needed.is_empty() {
+        if manifest.tiles.is_empty() {
+            return Err(index_err(
+                manifest_path,
+                "the manifest lists no tile".into(),
+            ));
+        }
+        needed.push(0);
+    }
+    needed.sort_unstable();
+    needed.dedup();
+    needed
+        .into_iter()
+        .map(|k| {
+            Ok((
+                k,
+                read_crop(&resolve(manifest_path, &manifest.tiles[k].crop))?,
+            ))
+        })
+        .collect()
+}
+
+/// The place of tile `k` among the places of [`owner_crops`] (the first one when `k` owns no
+/// candidate).
+pub fn place_in<'p>(places: &'p [(usize, TilePlace<'p>)], k: usize) -> &'p dyn Place {
+    match places.iter().find(|(j, _)| *j == k) {
+        Some((_, p)) => p,
+        None => &places[0].1,
+    }
+}
+
 /// One scan localized on a tiled map.
 pub struct TiledLocalization {
     /// The result, as on the whole map.
@@ -945,43 +989,17 @@ pub fn localize_tiled_batch(
             });
         }
     }
-    // The crops of every tile owning a candidate of some scan, read once.
     let t = Instant::now();
-    let mut needed: Vec<usize> = searches
-        .iter()
-        .flat_map(|s| owners(&manifest, s, options))
-        .collect();
-    needed.sort_unstable();
-    needed.dedup();
-    let mut crops: Vec<(usize, OsmMap)> = Vec::new();
-    for &k in &needed {
-        crops.push((
-            k,
-            read_crop(&resolve(manifest_path, &manifest.tiles[k].crop))?,
-        ));
-    }
-    let frame_map = match crops.first() {
-        Some((_, c)) => c.clone(),
-        None => match manifest.tiles.first() {
-            Some(e) => read_crop(&resolve(manifest_path, &e.crop))?,
-            None => {
-                return Err(index_err(
-                    manifest_path,
-                    "the manifest lists no tile".into(),
-                ));
-            }
-        },
-    };
+    let crops = owner_crops(
+        manifest_path,
+        &manifest,
+        searches.iter().map(|s| &s[..]),
+        options,
+    )?;
     let places: Vec<(usize, TilePlace<'_>)> =
         crops.iter().map(|(k, c)| (*k, TilePlace::new(c))).collect();
     load_s += t.elapsed().as_secs_f64();
-    let fallback = TilePlace::new(&frame_map);
-    let place_of = |k: usize| -> &dyn Place {
-        match places.iter().find(|(j, _)| *j == k) {
-            Some((_, p)) => p,
-            None => &fallback,
-        }
-    };
+    let place_of = |k: usize| place_in(&places, k);
     let mut results = Vec::with_capacity(n);
     for s in 0..n {
         let mut r = finish_tiled(&manifest, &searches[s], &scans[s], options, &place_of);
@@ -1001,7 +1019,7 @@ pub fn localize_tiled_batch(
         tile_loads: loads,
         max_tile_memory_bytes: max_mem,
         load_seconds: load_s,
-        frame_map,
+        frame_map: crops[0].1.clone(),
     })
 }
 

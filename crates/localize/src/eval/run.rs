@@ -14,6 +14,7 @@ use crate::jobs::write_file;
 use crate::pipeline::{Localization, LocalizeOptions, Localizer};
 use crate::track::{drifted_odometry, TrackOptions};
 use crate::{LocalizeError, Pose2, Result, WithContext};
+use geodata::datasets::SequenceKind;
 use geodata::osm::OsmMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -112,20 +113,7 @@ pub fn run_eval(
     let t = Instant::now();
     let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
     let hashing_index_s = t.elapsed().as_secs_f64();
-    let mcd: Vec<EvalScan> = match real {
-        None => Vec::new(),
-        Some(kind) => {
-            let scans = real_scans(&job.dataset, kind, &map, 1).context_with(|| {
-                format!(
-                    "reading the {} scans in {}",
-                    kind.name(),
-                    job.dataset.display()
-                )
-            })?;
-            check_overlap(&job.dataset, &map_path, &scans, map_bounds(&map), 200.0)?;
-            scans
-        }
-    };
+    let mcd = real_eval_scans(job, real, &map, &map_path, map_bounds(&map))?;
     let count = sim.as_ref().map_or(mcd.len(), |d| d.truth.len());
     let count = job.limit.map_or(count, |l| l.min(count));
     if let Some(dir) = &job.figures {
@@ -135,17 +123,7 @@ pub fn run_eval(
             source,
         })?;
     }
-    let load = |i: usize| -> Result<EvalScan> {
-        match &sim {
-            Some(d) => d
-                .load(i)
-                .context_with(|| format!("loading scan {i} of {}", job.dataset.display())),
-            None => mcd.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
-                path: job.dataset.clone(),
-                message: format!("real scan {i} missing"),
-            }),
-        }
-    };
+    let load = |i: usize| load_scan(job, sim.as_ref(), &mcd, i);
     let track_results = match &job.track {
         Some(setup) => Some(track_results(&localizer, setup, count, &load)?),
         None => None,
@@ -229,6 +207,48 @@ fn track_results(
     localizer.localize_track(&extracted, &odometry, &options)
 }
 
+/// The scans of a real sequence of layout `real` (none for a simulated dataset), truth in
+/// `frame_map`'s frame, refused unless one of them lies near `bounds` (the searched map's
+/// box).
+fn real_eval_scans(
+    job: &EvalJob,
+    real: Option<SequenceKind>,
+    frame_map: &OsmMap,
+    map_path: &Path,
+    bounds: Option<[f64; 4]>,
+) -> Result<Vec<EvalScan>> {
+    let Some(kind) = real else {
+        return Ok(Vec::new());
+    };
+    let scans = real_scans(&job.dataset, kind, frame_map, 1).context_with(|| {
+        format!(
+            "reading the {} scans in {}",
+            kind.name(),
+            job.dataset.display()
+        )
+    })?;
+    check_overlap(&job.dataset, map_path, &scans, bounds, 200.0)?;
+    Ok(scans)
+}
+
+/// Scan `i` of the job: from the simulated dataset, or of the real scans read up front.
+fn load_scan(
+    job: &EvalJob,
+    sim: Option<&SimDataset>,
+    real: &[EvalScan],
+    i: usize,
+) -> Result<EvalScan> {
+    match sim {
+        Some(d) => d
+            .load(i)
+            .context_with(|| format!("loading scan {i} of {}", job.dataset.display())),
+        None => real.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
+            path: job.dataset.clone(),
+            message: format!("real scan {i} missing"),
+        }),
+    }
+}
+
 /// Why a tiled map cannot run a job's option, if one is asked for.
 pub fn tiled_refusal(job: &EvalJob) -> Option<&'static str> {
     if job.distractors.is_some() {
@@ -266,13 +286,8 @@ pub fn run_eval_tiled(
     let manifest = Manifest::read(map_path)?;
     if let Some(d) = sim {
         // The truth is in the frame of the map the dataset was simulated on.
-        let bytes = std::fs::read(&d.map_path).map_err(|source| LocalizeError::Io {
-            action: "reading",
-            path: d.map_path.clone(),
-            source,
-        })?;
-        if crc32fast::hash(&bytes) != manifest.map.crc32 || bytes.len() as u64 != manifest.map.bytes
-        {
+        let simulated_on = crate::tiles::FileRef::of(&d.map_path, "")?;
+        if (simulated_on.bytes, simulated_on.crc32) != (manifest.map.bytes, manifest.map.crc32) {
             return Err(LocalizeError::Dataset {
                 path: map_path.to_path_buf(),
                 message: format!(
@@ -296,42 +311,22 @@ pub fn run_eval_tiled(
             .crop,
     ))?;
     let load_map_s = t.elapsed().as_secs_f64();
-    let mcd: Vec<EvalScan> = match (sim, real_sequence(&job.dataset)) {
-        (None, Some(kind)) => {
-            let scans = real_scans(&job.dataset, kind, &frame, 1).context_with(|| {
-                format!(
-                    "reading the {} scans in {}",
-                    kind.name(),
-                    job.dataset.display()
-                )
-            })?;
-            let cores = manifest.tiles.iter().map(|t| t.core_m).reduce(|a, b| {
-                [
-                    a[0].min(b[0]),
-                    a[1].min(b[1]),
-                    a[2].max(b[2]),
-                    a[3].max(b[3]),
-                ]
-            });
-            check_overlap(&job.dataset, map_path, &scans, cores, 200.0)?;
-            scans
-        }
-        _ => Vec::new(),
-    };
+    let cores = manifest.tiles.iter().map(|t| t.core_m).reduce(|a, b| {
+        [
+            a[0].min(b[0]),
+            a[1].min(b[1]),
+            a[2].max(b[2]),
+            a[3].max(b[3]),
+        ]
+    });
+    let real = sim.is_none().then(|| real_sequence(&job.dataset)).flatten();
+    let mcd = real_eval_scans(job, real, &frame, map_path, cores)?;
     let count = sim.map_or(mcd.len(), |d| d.truth.len());
     let count = job.limit.map_or(count, |l| l.min(count));
     let mut scans = Vec::with_capacity(count);
     let mut extracted = Vec::with_capacity(count);
     for i in 0..count {
-        let scan = match sim {
-            Some(d) => d
-                .load(i)
-                .context_with(|| format!("loading scan {i} of {}", job.dataset.display()))?,
-            None => mcd.get(i).cloned().ok_or_else(|| LocalizeError::Dataset {
-                path: job.dataset.clone(),
-                message: format!("real scan {i} missing"),
-            })?,
-        };
+        let scan = load_scan(job, sim, &mcd, i)?;
         let e = crate::pipeline::scan_segments(&job.options, &scan.points)
             .context_with(|| format!("extracting walls from {}", scan.name))?;
         extracted.push((e, scan.points.len()));
