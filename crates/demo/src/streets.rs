@@ -132,6 +132,7 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
                         offset_m: g.estimate.0,
                         width_m: g.estimate.1,
                         bins: 0,
+                        width_sd_m: None,
                     })
                     .collect()
             })

@@ -580,6 +580,21 @@ fn street_model_json() -> Option<Vec<u8>> {
         geometry,
         classifier,
         prior: streets::potentials::GeometryPrior::fit(&geoms),
+        tag_prior: Some(streets::prior::TagPrior::fit(
+            &geoms
+                .iter()
+                .map(|&g| {
+                    let tags = streets::prior::SegmentTags {
+                        class: "residential".into(),
+                        width_m: None,
+                        lanes: Some(2),
+                        no_sidewalk: false,
+                    };
+                    (tags, g)
+                })
+                .collect::<Vec<_>>(),
+            false,
+        )),
     };
     serde_json::to_vec(&model).ok()
 }

@@ -10,8 +10,10 @@ use crate::model::{
     Target,
 };
 use crate::potentials::{
-    segment_potential, tempered_with_prior, Confusion, GeometryPrior, SegmentPotential, Tempering,
+    segment_potential, tempered_with_prior, width_spread_m, Confusion, GeometryPrior,
+    SegmentPotential, Tempering,
 };
+use crate::prior::{PriorTables, SegmentTags, TagPrior};
 use crate::{Result, StreetsError};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -32,6 +34,9 @@ pub struct EvalOptions {
     /// Candidate likelihood temperings; each fold takes the one with the smallest boundary
     /// error on its training segments (one candidate: no selection).
     pub temperings: Vec<Tempering>,
+    /// Width priors per OSM tag group ([`crate::prior`]); off: one prior for every segment
+    /// (thesis §4.4.2).
+    pub tag_prior: bool,
 }
 
 /// The default candidates: τ ∈ {8, 32, 128, 512} × floor ∈ {∞, 8} nats × prior weight ∈
@@ -63,6 +68,7 @@ impl Default for EvalOptions {
             folds: 5,
             mcmc: McmcOptions::default(),
             temperings: default_temperings(),
+            tag_prior: true,
         }
     }
 }
@@ -96,6 +102,30 @@ pub struct TargetScores {
     pub opt_on_truth: Scores,
     /// The true geometry.
     pub true_geometry: Scores,
+    /// The full model on the segments it is confident about.
+    pub confident: Confident,
+}
+
+/// Largest posterior width spread (standard deviation, metres) of a confident estimate.
+pub const CONFIDENT_WIDTH_SD_M: f64 = 1.0;
+
+/// The full model's width and offset errors on the segments whose posterior width spread
+/// ([`crate::potentials::width_spread_m`] of the segment's potential with its prior) is at
+/// most [`CONFIDENT_WIDTH_SD_M`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Confident {
+    /// The threshold, metres.
+    pub width_sd_max_m: f64,
+    /// Confident segments with a truth.
+    pub segments: usize,
+    /// Segments with a truth.
+    pub of_segments: usize,
+    /// Share of the length of the segments with a truth that is confident.
+    pub coverage: f64,
+    /// Length-weighted width RMSE of the confident segments, metres (`None`: none).
+    pub rmse_w: Option<f64>,
+    /// Length-weighted offset RMSE of the confident segments, metres (`None`: none).
+    pub rmse_d: Option<f64>,
 }
 
 /// Diagnostics not in Table 4.1.
@@ -276,6 +306,10 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
     let grid = options.geometry.theta_grid();
     let lambda = (options.geometry.corridor.bin_m / options.geometry.sigma_m).powi(2) / 2.0;
     let edges = network_edges(&ds.map, &eval_ids, options.geometry.max_turn_deg);
+    let tags: Vec<SegmentTags> = eval_ids
+        .iter()
+        .map(|&s| SegmentTags::of(&ds.map, s))
+        .collect();
     let mut per_target = BTreeMap::new();
     let mut details = BTreeMap::new();
     let mut geometries = BTreeMap::new();
@@ -292,13 +326,13 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             let t = Instant::now();
             let mut x = Vec::new();
             let mut y = Vec::new();
-            let mut train_geom = Vec::new();
+            let mut train_geom: Vec<(SegmentTags, (f64, f64))> = Vec::new();
             for k in 0..eval_ids.len() {
                 if fold_of(k) == fold {
                     continue;
                 }
                 if has_truth(ds, eval_ids[k], target) {
-                    train_geom.push(true_geometry(ds, eval_ids[k], target));
+                    train_geom.push((tags[k].clone(), true_geometry(ds, eval_ids[k], target)));
                 }
                 for (j, c) in classes[k].iter().enumerate() {
                     if let Some(c) = c {
@@ -318,8 +352,15 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     ..options.classifier.clone()
                 },
             )?;
-            let prior = GeometryPrior::fit(&train_geom);
-            fold_priors.push(prior);
+            let prior = if options.tag_prior {
+                TagPrior::fit(&train_geom, target == Target::WithSidewalk)
+            } else {
+                TagPrior {
+                    sidewalk_groups: false,
+                    global: GeometryPrior::fit(&train_geom.iter().map(|t| t.1).collect::<Vec<_>>()),
+                    groups: BTreeMap::new(),
+                }
+            };
             sv_sum += clf.svm.support_count();
             for (sum_row, row) in conf_sum.iter_mut().zip(&clf.confusion.counts) {
                 for (s, c) in sum_row.iter_mut().zip(row) {
@@ -345,8 +386,9 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             }
             predict_s += t.elapsed().as_secs_f64();
             for &k in &test {
-                priors[k] = prior;
+                priors[k] = prior.for_tags(&tags[k]);
             }
+            fold_priors.push(prior);
         }
         // Potentials: C of fold f from the out-of-fold predictions of its training segments
         // (segments held out from the classifier that labelled them), the tempering selected on
@@ -378,7 +420,13 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             }
             let clog = Confusion::from_pairs(&truth, &pred).log_likelihood();
             let flat = GeometryPrior::flat();
-            let prior_log = crate::potentials::prior_table(fold_prior, &grid);
+            let prior_log = PriorTables::new(
+                &tags
+                    .iter()
+                    .map(|t| fold_prior.for_tags(t))
+                    .collect::<Vec<_>>(),
+                &grid,
+            );
             let ll: Vec<SegmentPotential> = counts
                 .par_iter()
                 .map(|c| segment_potential(c, &clog, &flat, &grid))
@@ -409,7 +457,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             );
             chosen.push(selected);
             for k in (0..eval_ids.len()).filter(|&k| fold_of(k) == fold) {
-                potentials[k] = Some(tempered_with_prior(&ll[k], &selected, &prior_log));
+                potentials[k] = Some(tempered_with_prior(&ll[k], &selected, prior_log.table(k)));
                 for (c, &p) in classes[k].iter().zip(&predicted[k]) {
                     if let Some(c) = c {
                         conf_test[usize::from(target.positive(*c))][usize::from(p)] += 1;
@@ -418,6 +466,13 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             }
         }
         potentials_s += t.elapsed().as_secs_f64();
+        let spread: Vec<f64> = potentials
+            .iter()
+            .map(|p| {
+                p.as_ref()
+                    .map_or(f64::INFINITY, |p| width_spread_m(p, &grid))
+            })
+            .collect();
         let mut net = Network {
             potentials: potentials
                 .into_iter()
@@ -521,6 +576,31 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             full_model: score(Some(&full_states)),
             opt_on_truth: score(Some(&truth_states)),
             true_geometry: score(Some(&truth_cols)),
+            confident: {
+                let (mut n, mut of, mut len, mut len_all, mut w2, mut d2) =
+                    (0, 0, 0.0, 0.0, 0.0, 0.0);
+                for k in (0..eval_ids.len()).filter(|&k| has_truth(ds, eval_ids[k], target)) {
+                    let l = segs[eval_ids[k]].length_m;
+                    of += 1;
+                    len_all += l;
+                    if spread[k] <= CONFIDENT_WIDTH_SD_M {
+                        let (d, w) = grid.geometry(full_states[k].0, full_states[k].1);
+                        let (d_true, w_true) = true_geometry(ds, eval_ids[k], target);
+                        n += 1;
+                        len += l;
+                        w2 += l * (w - w_true).powi(2);
+                        d2 += l * (d - d_true).powi(2);
+                    }
+                }
+                Confident {
+                    width_sd_max_m: CONFIDENT_WIDTH_SD_M,
+                    segments: n,
+                    of_segments: of,
+                    coverage: len / len_all.max(1e-12),
+                    rmse_w: (n > 0).then(|| (w2 / len).sqrt()),
+                    rmse_d: (n > 0).then(|| (d2 / len).sqrt()),
+                }
+            },
         };
         details.insert(
             target.key(),
@@ -604,8 +684,8 @@ struct Selection<'a> {
     edges: &'a [crate::inference::Edge],
     /// Coupling.
     lambda: f64,
-    /// The fold's prior as a table.
-    prior: &'a [f64],
+    /// The fold's prior tables of all segments.
+    prior: &'a PriorTables,
 }
 
 /// The candidate whose full-model solution on the training subnetwork has the smallest
@@ -635,7 +715,7 @@ fn select_tempering(candidates: &[Tempering], sel: &Selection) -> Tempering {
                 potentials: sel
                     .members
                     .iter()
-                    .map(|&k| tempered_with_prior(&sel.ll[k], t, sel.prior))
+                    .map(|&k| tempered_with_prior(&sel.ll[k], t, sel.prior.table(k)))
                     .collect(),
                 edges: edges.clone(),
                 lambda: sel.lambda,
@@ -698,6 +778,17 @@ impl EvalReport {
             out += &(scores_row("full model", &t.full_model) + "\n");
             out += &(scores_row("opt. on truth", &t.opt_on_truth) + "\n");
             out += &(scores_row("true geometry", &t.true_geometry) + "\n");
+            let c = &t.confident;
+            let m = |v: Option<f64>| v.map_or("n/a".to_string(), |r| format!("{r:.2}"));
+            out += &format!(
+                "  full model where the width spread is at most {:.1} m: {} of {} segments, {:.0} % of their length, RMSE_w {}, RMSE_d {}\n",
+                c.width_sd_max_m,
+                c.segments,
+                c.of_segments,
+                100.0 * c.coverage,
+                m(c.rmse_w),
+                m(c.rmse_d)
+            );
         }
         out += "seconds:";
         for (k, v) in &r.seconds {

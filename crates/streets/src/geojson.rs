@@ -62,14 +62,18 @@ fn strip_feature(
 fn estimate_properties(e: &SegmentEstimate, target: Target) -> Map<String, Value> {
     let mut p = Map::new();
     p.insert("bins".into(), json!(e.bins));
+    if let Some(sd) = e.width_sd_m {
+        p.insert("width_sd".into(), json!(sd));
+    }
     p.insert("target".into(), json!(target.key()));
     p.insert("area".into(), json!(area_name(target)));
     p
 }
 
 /// A FeatureCollection of the estimates of one target (coordinates `[lon, lat]`, properties
-/// `segment`, `osm_way`, `highway`, `width`, `offset`, `bins`, `target` (`driving_area` or
-/// `with_sidewalk`) and `area` (in words)), with the OSM attribution.
+/// `segment`, `osm_way`, `highway`, `width`, `offset`, `bins`, `width_sd` (the width's
+/// posterior spread, metres, when known), `target` (`driving_area` or `with_sidewalk`) and
+/// `area` (in words)), with the OSM attribution.
 pub fn feature_collection(map: &OsmMap, estimates: &[SegmentEstimate], target: Target) -> Value {
     let features = estimates
         .iter()
@@ -156,6 +160,7 @@ mod tests {
             offset_m,
             width_m,
             bins: 7,
+            width_sd_m: Some(0.4),
         };
         let fc = areas_collection(&map, &[e(0.5, 6.0)], &[e(0.0, 10.0)]);
         validate(&fc).unwrap();
@@ -181,6 +186,7 @@ mod tests {
         let one = feature_collection(&map, &[e(0.0, 10.0)], Target::WithSidewalk);
         validate(&one).unwrap();
         assert_eq!(one["features"][0]["properties"]["target"], "with_sidewalk");
+        assert_eq!(one["features"][0]["properties"]["width_sd"], 0.4);
         assert_eq!(one["attribution"], geodata::geojson::OSM_ATTRIBUTION);
     }
 }

@@ -10,6 +10,7 @@
 //! - [`svm`]: an RBF-kernel SVM trained by SMO with a kernel cache (libsvm's algorithm).
 //! - [`potentials`]: segment geometry potentials of eq. 4.2 by the column-count DP of eq. 4.4,
 //!   priors and the intersegment potentials.
+//! - [`prior`]: geometry priors per OSM tag group (`width`, `lanes`, `highway` class).
 //! - [`inference`]: exact max-product on trees, loopy max-product, and parallel MCMC.
 //! - [`model`]: the trained model (bin classifier and prior) and the per-segment estimate.
 //! - [`tiles`]: the estimate tile by tile, each tile reading its segments' coupling components (exact).
@@ -32,6 +33,7 @@ pub mod jobs;
 pub mod kitti;
 pub mod model;
 pub mod potentials;
+pub mod prior;
 pub mod real;
 pub mod svm;
 pub mod synthetic;

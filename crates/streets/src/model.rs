@@ -8,6 +8,7 @@ use crate::potentials::{
     segment_potential, tempered_with_prior, ColumnCounts, Confusion, GeometryPrior,
     SegmentPotential, Tempering, ThetaGrid,
 };
+use crate::prior::{PriorTables, SegmentTags, TagPrior};
 use crate::svm::{Svm, SvmOptions};
 use crate::{Result, StreetsError};
 use geodata::classes::Class;
@@ -364,6 +365,21 @@ pub struct TrainingBins {
     pub labels: Vec<bool>,
     /// (offset, width) of every segment with usable bins, metres.
     pub geometries: Vec<(f64, f64)>,
+    /// The OSM tags of the same segments, in the same order.
+    pub tags: Vec<SegmentTags>,
+}
+
+impl TrainingBins {
+    /// The width priors per tag group fitted on these segments.
+    pub fn tag_prior(&self, target: Target) -> TagPrior {
+        let samples: Vec<(SegmentTags, (f64, f64))> = self
+            .tags
+            .iter()
+            .cloned()
+            .zip(self.geometries.iter().copied())
+            .collect();
+        TagPrior::fit(&samples, target == Target::WithSidewalk)
+    }
 }
 
 /// Features and labels (for `target`) of all usable labelled bins of a dataset's observed
@@ -385,6 +401,7 @@ pub fn dataset_bins(
             Target::DrivingArea => (t.offset_m, t.width_m),
             Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
         });
+        out.tags.push(SegmentTags::of(&ds.map, s));
         for k in b.usable() {
             if let Some(c) = b.features.truth[k] {
                 out.features.extend_from_slice(b.features.row(k));
@@ -416,6 +433,10 @@ pub struct StreetModel {
     pub classifier: BinClassifier,
     /// The geometry prior.
     pub prior: GeometryPrior,
+    /// Width priors per OSM tag group; absent (models written before them): `prior` for
+    /// every segment.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tag_prior: Option<TagPrior>,
 }
 
 /// One segment's estimate.
@@ -429,6 +450,10 @@ pub struct SegmentEstimate {
     pub width_m: f64,
     /// Usable bins in the corridor.
     pub bins: usize,
+    /// Posterior spread of the width (standard deviation under the segment's own potential
+    /// with its prior), metres; `None` where not computed (results written before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width_sd_m: Option<f64>,
 }
 
 /// Estimates of all segments with usable bins; the counts of segments skipped as shorter than a bin.
@@ -465,6 +490,7 @@ impl StreetModel {
             geometry,
             classifier,
             prior: GeometryPrior::fit(&bins.geometries),
+            tag_prior: Some(bins.tag_prior(target)),
         })
     }
 
@@ -506,6 +532,7 @@ impl StreetModel {
                 all.labels.push(bins.labels[k]);
             }
             all.geometries.extend_from_slice(&bins.geometries);
+            all.tags.extend(bins.tags);
         }
         let classifier = BinClassifier::train(&all.features, &all.labels, classifier)?;
         Ok(StreetModel {
@@ -513,6 +540,7 @@ impl StreetModel {
             geometry,
             classifier,
             prior: GeometryPrior::fit(&all.geometries),
+            tag_prior: Some(all.tag_prior(target)),
         })
     }
 
@@ -672,6 +700,14 @@ impl StreetModel {
         positive("prior.sigma_offset_m", p.sigma_offset_m)?;
         finite("prior.mean_log_width", p.mean_log_width)?;
         positive("prior.sigma_log_width", p.sigma_log_width)?;
+        if let Some(t) = &self.tag_prior {
+            let g = &t.global;
+            finite("tag_prior.global.mean_offset_m", g.mean_offset_m)?;
+            positive("tag_prior.global.sigma_offset_m", g.sigma_offset_m)?;
+            finite("tag_prior.global.mean_log_width", g.mean_log_width)?;
+            positive("tag_prior.global.sigma_log_width", g.sigma_log_width)?;
+            t.check()?;
+        }
         Ok(())
     }
 }
@@ -701,7 +737,8 @@ pub struct PotentialStep<'a> {
     source: CorridorSource<'a>,
     grid: ThetaGrid,
     confusion_log: [[f64; 2]; 2],
-    prior: Vec<f64>,
+    /// Prior tables of every segment of the map.
+    prior: PriorTables,
 }
 
 impl<'a> PotentialStep<'a> {
@@ -718,7 +755,7 @@ impl<'a> PotentialStep<'a> {
                 &model.geometry.corridor,
             ),
             confusion_log: model.classifier.confusion.log_likelihood(),
-            prior: crate::potentials::prior_table(&model.prior, &grid),
+            prior: model.prior_tables(map, &grid),
             grid,
         }
     }
@@ -760,6 +797,7 @@ impl<'a> PotentialStep<'a> {
                 if corridor.grid.point_ids.is_empty() {
                     return Ok(SegmentOutcome::Unobserved);
                 }
+                let segment = corridor.segment;
                 let b = SegmentBins::of(corridor, self.cloud, &geometry.features);
                 let rows = b.usable_rows();
                 if rows.is_empty() {
@@ -769,7 +807,7 @@ impl<'a> PotentialStep<'a> {
                 let potential = tempered_with_prior(
                     &segment_potential(&b.counts(&labels), &self.confusion_log, &flat, &self.grid),
                     &geometry.tempering,
-                    &self.prior,
+                    self.prior.table(segment),
                 );
                 Ok(SegmentOutcome::Observed {
                     potential,
@@ -799,6 +837,22 @@ pub fn drivable_segments(map: &OsmMap, map_name: &str) -> Result<Vec<usize>> {
 }
 
 impl StreetModel {
+    /// The prior of segment `s` of `map`: its tag group's when the model has tag priors.
+    pub fn segment_prior(&self, map: &OsmMap, s: usize) -> GeometryPrior {
+        match &self.tag_prior {
+            Some(t) => t.for_tags(&SegmentTags::of(map, s)),
+            None => self.prior,
+        }
+    }
+
+    /// Prior tables of every segment of `map` (indexed by segment).
+    fn prior_tables(&self, map: &OsmMap, grid: &ThetaGrid) -> PriorTables {
+        let priors: Vec<GeometryPrior> = (0..map.streets.segments.len())
+            .map(|s| self.segment_prior(map, s))
+            .collect();
+        PriorTables::new(&priors, grid)
+    }
+
     /// Estimates offset and width of every segment of `map` that `cloud` covers.
     ///
     /// Inference is [`Network::max_product`], which solves each connected component of the
@@ -884,7 +938,7 @@ impl StreetModel {
             return Err(no_overlap(map, cloud, cloud_name));
         }
         let grid = self.geometry.theta_grid();
-        let prior = crate::potentials::prior_table(&self.prior, &grid);
+        let prior = self.prior_tables(map, &grid);
         let flat = GeometryPrior::flat();
         let pseudo: [[f64; 2]; 2] = self.classifier.confusion.counts.map(|row| {
             let total = (row[0] + row[1]).max(1) as f64;
@@ -913,14 +967,20 @@ impl StreetModel {
                     let p = tempered_with_prior(
                         &segment_potential(c, &clog, &flat, &grid),
                         &self.geometry.tempering,
-                        &prior,
+                        prior.table(*s),
                     );
                     (*s, p, *n)
                 })
                 .collect();
             let (segments, ex) = self.infer(map, potentials);
             exact = ex;
-            if last.as_ref() == Some(&segments) {
+            let same_geometry = |a: &[SegmentEstimate], b: &[SegmentEstimate]| {
+                a.len() == b.len()
+                    && a.iter().zip(b).all(|(x, y)| {
+                        (x.segment, x.offset_m, x.width_m) == (y.segment, y.offset_m, y.width_m)
+                    })
+            };
+            if last.as_deref().is_some_and(|l| same_geometry(l, &segments)) {
                 break;
             }
             counts = [[0.0; 2]; 2];
@@ -956,7 +1016,7 @@ impl StreetModel {
         let mut used = Vec::with_capacity(observed.len());
         let mut potentials = Vec::with_capacity(observed.len());
         for (s, p, n) in observed {
-            used.push((s, n));
+            used.push((s, n, crate::potentials::width_spread_m(&p, &grid)));
             potentials.push(p);
         }
         let net = Network {
@@ -969,13 +1029,14 @@ impl StreetModel {
         let segments = used
             .iter()
             .zip(&sol.states)
-            .map(|(&(s, n), &(a, b))| {
+            .map(|(&(s, n, sd), &(a, b))| {
                 let (offset_m, width_m) = grid.geometry(a, b);
                 SegmentEstimate {
                     segment: s,
                     offset_m,
                     width_m,
                     bins: n,
+                    width_sd_m: sd.is_finite().then_some(sd),
                 }
             })
             .collect();
@@ -1045,6 +1106,18 @@ mod tests {
                 },
             },
             prior: GeometryPrior::fit(&[(0.0, 7.0), (0.5, 9.0)]),
+            tag_prior: Some(TagPrior::fit(
+                &[(0.0, 7.0), (0.5, 9.0), (0.2, 4.0)].map(|g| {
+                    let tags = SegmentTags {
+                        class: "residential".into(),
+                        width_m: None,
+                        lanes: None,
+                        no_sidewalk: false,
+                    };
+                    (tags, g)
+                }),
+                false,
+            )),
         }
     }
 
@@ -1067,11 +1140,19 @@ mod tests {
         short_support.classifier.svm.support.pop();
         let mut zero_sigma = model.clone();
         zero_sigma.prior.sigma_log_width = 0.0;
+        let mut zero_group = model.clone();
+        if let Some(t) = zero_group.tag_prior.as_mut() {
+            t.groups
+                .get_mut("highway=residential")
+                .expect("the fitted group")
+                .sigma = 0.0;
+        }
         for (bad, field) in [
             (no_features, "classifier.scaler.mean"),
             (tiny_bin, "geometry.corridor.bin_m"),
             (short_support, "classifier.svm.support"),
             (zero_sigma, "prior.sigma_log_width"),
+            (zero_group, "tag_prior.groups[highway=residential].sigma"),
         ] {
             let bytes = serde_json::to_vec(&bad).unwrap();
             let err = StreetModel::from_json(&bytes, path).unwrap_err();
@@ -1087,5 +1168,10 @@ mod tests {
                 .unwrap_err()
                 .to_string();
         assert!(err.contains("m.json") && err.contains("line 2"), "{err}");
+        // A model written before tag priors reads with one prior for every segment.
+        let mut value = serde_json::to_value(&model).unwrap();
+        value.as_object_mut().unwrap().remove("tag_prior");
+        let old = StreetModel::from_json(&serde_json::to_vec(&value).unwrap(), path).unwrap();
+        assert_eq!(old.tag_prior, None);
     }
 }

@@ -343,6 +343,32 @@ pub fn tempered_with_prior(
     SegmentPotential { cols: ll.cols, log }
 }
 
+/// Standard deviation of the width, metres, under the distribution ∝ exp(`p`) over its valid
+/// geometries: the segment's posterior spread (0 when one geometry holds all the mass).
+pub fn width_spread_m(p: &SegmentPotential, grid: &ThetaGrid) -> f64 {
+    let top = p.log.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !top.is_finite() {
+        return f64::INFINITY;
+    }
+    let n = p.cols;
+    let (mut z, mut m1, mut m2) = (0.0f64, 0.0f64, 0.0f64);
+    for a in 0..n {
+        for b in a..n {
+            let v = p.log[a * n + b];
+            if v == f64::NEG_INFINITY {
+                continue;
+            }
+            let weight = (v - top).exp();
+            let w = grid.geometry(a, b).1;
+            z += weight;
+            m1 += weight * w;
+            m2 += weight * w * w;
+        }
+    }
+    let mean = m1 / z;
+    (m2 / z - mean * mean).max(0.0).sqrt()
+}
+
 /// The same value as [`segment_potential`] for one θ by direct summation over the bins.
 pub fn direct_log_potential(
     labels: &[Option<bool>],
@@ -383,6 +409,35 @@ mod tests {
         assert_eq!(g.columns_of(d, w), (90, 109));
         let (d, w) = g.geometry(10, 60);
         assert_eq!(g.columns_of(d, w), (10, 60));
+    }
+
+    #[test]
+    fn width_spread_is_the_standard_deviation_of_the_normalised_potential() {
+        let g = ThetaGrid {
+            cols: 20,
+            bin_m: 0.5,
+            max_width_cols: 20,
+        };
+        let n = g.cols;
+        // Brute force: two geometries of widths 2 m and 4 m with probabilities 1/4 and 3/4.
+        let mut log = vec![f64::NEG_INFINITY; n * n];
+        log[5 * n + 8] = (0.25f64).ln() + 3.0;
+        log[4 * n + 11] = (0.75f64).ln() + 3.0;
+        let p = SegmentPotential { cols: n, log };
+        let (w1, w2) = (g.geometry(5, 8).1, g.geometry(4, 11).1);
+        assert!((w1 - 2.0).abs() < 1e-12 && (w2 - 4.0).abs() < 1e-12);
+        let mean = 0.25 * w1 + 0.75 * w2;
+        let var = 0.25 * (w1 - mean).powi(2) + 0.75 * (w2 - mean).powi(2);
+        assert!((width_spread_m(&p, &g) - var.sqrt()).abs() < 1e-12);
+        // One geometry: no spread; nothing valid: infinitely unsure.
+        let mut one = vec![f64::NEG_INFINITY; n * n];
+        one[2 * n + 9] = -7.0;
+        assert_eq!(
+            width_spread_m(&SegmentPotential { cols: n, log: one }, &g),
+            0.0
+        );
+        let none = vec![f64::NEG_INFINITY; n * n];
+        assert!(width_spread_m(&SegmentPotential { cols: n, log: none }, &g).is_infinite());
     }
 
     #[test]

@@ -167,6 +167,7 @@ fn model_for(ds: &StreetsDataset) -> StreetModel {
         geometry,
         classifier,
         prior,
+        tag_prior: None,
     }
 }
 

@@ -76,6 +76,10 @@ pub struct EvalArgs {
     /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
     #[arg(long, default_value_t = 45.0)]
     max_turn_deg: f64,
+    /// One width prior for every segment (thesis §4.4.2) instead of one per OSM tag group
+    /// (`width`, `lanes`, `highway` class).
+    #[arg(long)]
+    no_tag_prior: bool,
     /// Training options.
     #[command(flatten)]
     pub training: TrainingArgs,
@@ -88,6 +92,7 @@ impl EvalArgs {
             ..EvalOptions::default()
         };
         options.geometry.max_turn_deg = self.max_turn_deg;
+        options.tag_prior = !self.no_tag_prior;
         options.mcmc.chains = self.chains;
         options.mcmc.iterations = self.iterations;
         options.mcmc.seed = self.training.seed;

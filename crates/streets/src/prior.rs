@@ -1,0 +1,359 @@
+//! Geometry priors conditioned on a segment's OSM tags (issue 17 item 3).
+//!
+//! How wide a street is depends first on what the map says about it: its `width=*` when
+//! mapped, else its `lanes=*`, else its `highway` class (a service road is 3–5 m, a primary
+//! road 11–16 m). Thesis §4.4.2 uses one Gaussian on (offset, log width) for every segment;
+//! a segment whose corridor says little about its width (few usable bins, occluded kerbs)
+//! is then pulled to the city-wide mean. [`TagPrior`] learns from training segments one
+//! Gaussian on log width per tag group instead:
+//!
+//! - a segment with a `width` tag: log width = ln(tag) + a learnt bias (group `width`);
+//! - else with `lanes`: ln(lanes) + a learnt log lane width (group `lanes`);
+//! - else by class: the `highway` value without `_link` (group `highway=CLASS`);
+//! - for the with-sidewalk target, `sidewalk=no|none|separate` is a group of its own
+//!   (suffix `;sidewalk=no`), since such a road has nothing beside it.
+//!
+//! Each group's mean and spread are shrunk toward its parent by [`PSEUDO_SEGMENTS`]
+//! pseudo-observations (class groups toward the global fit, `width`/`lanes` groups toward
+//! the pooled residuals of their kind), so a group of one or two segments stays near the
+//! pooled estimate and a large group speaks for itself. A segment whose group was never seen
+//! in training falls back to its class group, then to the global prior. Offsets keep the
+//! global prior (the map's tags say nothing about which way a centre line is drawn off).
+//! The pseudo-count was set once, before the first run, and not tuned.
+
+use std::collections::BTreeMap;
+
+use geodata::osm::OsmMap;
+use serde::{Deserialize, Serialize};
+
+use crate::potentials::{prior_table, GeometryPrior, ThetaGrid};
+
+/// Pseudo-segments of the parent in each group's mean and variance.
+pub const PSEUDO_SEGMENTS: f64 = 3.0;
+
+/// Smallest spread of log width a group may have (as [`GeometryPrior::fit`]'s floor).
+pub const MIN_SIGMA_LOG_WIDTH: f64 = 0.05;
+
+/// What the map says about a segment's cross-section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentTags {
+    /// `highway` class without `_link`.
+    pub class: String,
+    /// `width=*`, metres, when mapped (and plausible: 0.5–60 m).
+    pub width_m: Option<f64>,
+    /// `lanes=*`, when mapped (1–12).
+    pub lanes: Option<u32>,
+    /// `sidewalk=no|none|separate`.
+    pub no_sidewalk: bool,
+}
+
+impl SegmentTags {
+    /// The tags of segment `s` of `map`'s street network (its way's tags).
+    pub fn of(map: &OsmMap, s: usize) -> SegmentTags {
+        let seg = &map.streets.segments[s];
+        let way = map.highways.get(seg.way_index);
+        SegmentTags {
+            class: seg.highway.trim_end_matches("_link").to_string(),
+            width_m: way
+                .and_then(|w| w.width_m)
+                .filter(|w| w.is_finite() && (0.5..=60.0).contains(w)),
+            lanes: way.and_then(|w| w.lanes).filter(|l| (1..=12).contains(l)),
+            no_sidewalk: way
+                .is_some_and(|w| matches!(w.sidewalk.as_deref(), Some("no" | "none" | "separate"))),
+        }
+    }
+
+    /// The group of the most specific tag (`width`, `lanes` or none) and its basis
+    /// (ln of the tag value), and the class group.
+    fn groups(&self, sidewalk_groups: bool) -> (Option<(String, f64)>, String) {
+        let suffix = if sidewalk_groups && self.no_sidewalk {
+            ";sidewalk=no"
+        } else {
+            ""
+        };
+        let specific = match (self.width_m, self.lanes) {
+            (Some(w), _) => Some((format!("width{suffix}"), w.ln())),
+            (None, Some(l)) => Some((format!("lanes{suffix}"), f64::from(l).ln())),
+            _ => None,
+        };
+        (specific, format!("highway={}{suffix}", self.class))
+    }
+}
+
+/// One group's Gaussian on log width (minus the group's basis).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WidthGroup {
+    /// Mean of log width minus the basis (ln of the tag value; 0 for class groups).
+    pub mean: f64,
+    /// Standard deviation of the same.
+    pub sigma: f64,
+    /// Training segments in the group.
+    pub segments: usize,
+}
+
+/// A geometry prior per OSM tag group, learnt from training segments.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TagPrior {
+    /// Whether `sidewalk=no|none|separate` makes groups of their own (for the with-sidewalk
+    /// target: such a road has nothing beside it).
+    pub sidewalk_groups: bool,
+    /// The global prior: offsets, and log width where no group applies.
+    pub global: GeometryPrior,
+    /// Groups by key (`width`, `lanes`, `highway=CLASS`, each maybe with `;sidewalk=no`).
+    pub groups: BTreeMap<String, WidthGroup>,
+}
+
+/// Mean and spread of `xs` shrunk toward (`mean0`, `sigma0`) by [`PSEUDO_SEGMENTS`].
+fn shrunk(xs: &[f64], mean0: f64, sigma0: f64) -> WidthGroup {
+    let n = xs.len() as f64;
+    let k = PSEUDO_SEGMENTS;
+    let mean = (xs.iter().sum::<f64>() + k * mean0) / (n + k);
+    let var = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() + k * sigma0 * sigma0) / (n + k);
+    WidthGroup {
+        mean,
+        sigma: var.sqrt().max(MIN_SIGMA_LOG_WIDTH),
+        segments: xs.len(),
+    }
+}
+
+impl TagPrior {
+    /// Fits the groups on training segments: their tags and true (offset, width);
+    /// `sidewalk_groups` as [`TagPrior::sidewalk_groups`].
+    pub fn fit(samples: &[(SegmentTags, (f64, f64))], sidewalk_groups: bool) -> TagPrior {
+        let geometries: Vec<(f64, f64)> = samples.iter().map(|s| s.1).collect();
+        let global = GeometryPrior::fit(&geometries);
+        let mut class: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        let mut specific: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        // Residuals of each specific kind over every suffix, for the kind's parent.
+        let mut kinds: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
+        for (tags, (_, w)) in samples {
+            let lw = w.max(0.1).ln();
+            let (spec, cls) = tags.groups(sidewalk_groups);
+            class.entry(cls).or_default().push(lw);
+            if let Some((key, basis)) = spec {
+                let kind = if key.starts_with("width") {
+                    "width"
+                } else {
+                    "lanes"
+                };
+                kinds.entry(kind).or_default().push(lw - basis);
+                specific.entry(key).or_default().push(lw - basis);
+            }
+        }
+        let mut groups = BTreeMap::new();
+        for (key, xs) in class {
+            groups.insert(
+                key,
+                shrunk(&xs, global.mean_log_width, global.sigma_log_width),
+            );
+        }
+        let parents: BTreeMap<&str, WidthGroup> = kinds
+            .iter()
+            .map(|(kind, xs)| {
+                let n = xs.len() as f64;
+                let mean = xs.iter().sum::<f64>() / n;
+                (*kind, shrunk(xs, mean, global.sigma_log_width))
+            })
+            .collect();
+        for (key, xs) in specific {
+            let kind = if key.starts_with("width") {
+                "width"
+            } else {
+                "lanes"
+            };
+            let p = parents[kind];
+            groups.insert(key, shrunk(&xs, p.mean, p.sigma));
+        }
+        TagPrior {
+            sidewalk_groups,
+            global,
+            groups,
+        }
+    }
+
+    /// The prior of a segment with these tags.
+    pub fn for_tags(&self, tags: &SegmentTags) -> GeometryPrior {
+        let (spec, cls) = tags.groups(self.sidewalk_groups);
+        let (basis, group) = match spec.and_then(|(k, b)| self.groups.get(&k).map(|g| (b, g))) {
+            Some(found) => found,
+            None => match self.groups.get(&cls) {
+                Some(g) => (0.0, g),
+                None => return self.global,
+            },
+        };
+        GeometryPrior {
+            mean_log_width: basis + group.mean,
+            sigma_log_width: group.sigma,
+            ..self.global
+        }
+    }
+
+    /// The first value out of range, named by its field.
+    pub fn check(&self) -> Result<(), String> {
+        for (key, g) in &self.groups {
+            if !g.mean.is_finite() {
+                return Err(format!(
+                    "tag_prior.groups[{key}].mean = {} is not finite",
+                    g.mean
+                ));
+            }
+            if !(g.sigma.is_finite() && g.sigma > 0.0) {
+                return Err(format!(
+                    "tag_prior.groups[{key}].sigma = {} is out of range (expected a finite number > 0)",
+                    g.sigma
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The prior tables of a set of segments, one table per distinct prior.
+#[derive(Debug, Clone)]
+pub struct PriorTables {
+    tables: Vec<Vec<f64>>,
+    index: Vec<usize>,
+}
+
+impl PriorTables {
+    /// One table per distinct prior among `priors` (one prior per segment, in order).
+    pub fn new(priors: &[GeometryPrior], grid: &ThetaGrid) -> PriorTables {
+        let mut seen: Vec<GeometryPrior> = Vec::new();
+        let mut tables = Vec::new();
+        let index = priors
+            .iter()
+            .map(|p| match seen.iter().position(|q| q == p) {
+                Some(i) => i,
+                None => {
+                    seen.push(*p);
+                    tables.push(prior_table(p, grid));
+                    seen.len() - 1
+                }
+            })
+            .collect();
+        PriorTables { tables, index }
+    }
+
+    /// The table of segment `k` (its position in the list given to [`PriorTables::new`]).
+    pub fn table(&self, k: usize) -> &[f64] {
+        &self.tables[self.index[k]]
+    }
+
+    /// Distinct tables.
+    pub fn distinct(&self) -> usize {
+        self.tables.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    fn tags(class: &str, width: Option<f64>, lanes: Option<u32>, no_sw: bool) -> SegmentTags {
+        SegmentTags {
+            class: class.into(),
+            width_m: width,
+            lanes,
+            no_sidewalk: no_sw,
+        }
+    }
+
+    #[test]
+    fn classes_learn_their_own_widths_and_unseen_ones_fall_back() {
+        let mut samples = Vec::new();
+        for i in 0..30 {
+            let j = f64::from(i % 5) * 0.1;
+            samples.push((tags("service", None, None, false), (0.0, 3.5 + j)));
+            samples.push((tags("primary", None, None, false), (0.2, 13.0 + j)));
+        }
+        let p = TagPrior::fit(&samples, false);
+        let service = p.for_tags(&tags("service", None, None, false));
+        let primary = p.for_tags(&tags("primary", None, None, true));
+        assert!(
+            (service.mean_log_width.exp() - 3.7).abs() < 0.3,
+            "{service:?}"
+        );
+        assert!(
+            (primary.mean_log_width.exp() - 13.2).abs() < 0.8,
+            "{primary:?}"
+        );
+        assert!(service.sigma_log_width < p.global.sigma_log_width);
+        // Offsets are global.
+        assert_eq!(service.mean_offset_m, p.global.mean_offset_m);
+        assert_eq!(p.for_tags(&tags("tertiary", None, None, false)), p.global);
+        // A tag never seen in training falls back to the class.
+        assert_eq!(
+            p.for_tags(&tags("service", Some(9.0), None, false)),
+            service
+        );
+    }
+
+    #[test]
+    fn width_tags_and_lanes_scale_their_groups() {
+        let mut samples = Vec::new();
+        for w in [6.0, 8.0, 10.0, 12.0, 14.0, 16.0] {
+            samples.push((tags("residential", Some(w), None, false), (0.0, w)));
+        }
+        for l in [1u32, 2, 3, 4] {
+            samples.push((
+                tags("secondary", None, Some(l), false),
+                (0.0, 3.2 * f64::from(l)),
+            ));
+        }
+        let p = TagPrior::fit(&samples, false);
+        let w = p.for_tags(&tags("residential", Some(11.0), None, false));
+        assert!((w.mean_log_width.exp() - 11.0).abs() < 1e-9, "{w:?}");
+        assert!(w.sigma_log_width < 0.5 * p.global.sigma_log_width, "{w:?}");
+        let l = p.for_tags(&tags("secondary", None, Some(5), false));
+        assert!((l.mean_log_width.exp() - 16.0).abs() < 1e-6, "{l:?}");
+    }
+
+    #[test]
+    fn a_small_group_is_shrunk_toward_its_parent() {
+        let mut samples: Vec<_> = (0..40)
+            .map(|i| {
+                (
+                    tags("residential", None, None, false),
+                    (0.0, 7.0 + f64::from(i % 3)),
+                )
+            })
+            .collect();
+        samples.push((tags("busway", None, None, false), (0.0, 30.0)));
+        let p = TagPrior::fit(&samples, false);
+        let b = p.for_tags(&tags("busway", None, None, false));
+        let g = p.global.mean_log_width;
+        // One segment moves the mean a quarter of the way (1 / (1 + 3)).
+        assert!((b.mean_log_width - (g + 0.25 * (30f64.ln() - g))).abs() < 1e-9);
+    }
+
+    #[test]
+    fn sidewalk_no_is_its_own_group_only_with_sidewalk() {
+        let mut samples = Vec::new();
+        for i in 0..20 {
+            let j = f64::from(i % 4) * 0.2;
+            samples.push((tags("residential", None, None, false), (0.0, 12.0 + j)));
+            samples.push((tags("residential", None, None, true), (0.0, 7.0 + j)));
+        }
+        let ws = TagPrior::fit(&samples, true);
+        let with = ws.for_tags(&tags("residential", None, None, false));
+        let without = ws.for_tags(&tags("residential", None, None, true));
+        assert!(with.mean_log_width.exp() > 11.0 && without.mean_log_width.exp() < 8.0);
+        let da = TagPrior::fit(&samples, false);
+        assert_eq!(
+            da.for_tags(&tags("residential", None, None, false)),
+            da.for_tags(&tags("residential", None, None, true))
+        );
+    }
+
+    #[test]
+    fn prior_tables_are_shared_between_equal_priors() {
+        let grid = crate::model::GeometryOptions::default().theta_grid();
+        let a = GeometryPrior::fit(&[(0.0, 7.0), (0.5, 9.0)]);
+        let b = GeometryPrior::fit(&[(0.0, 3.0), (0.5, 4.0)]);
+        let t = PriorTables::new(&[a, b, a, a, b], &grid);
+        assert_eq!(t.distinct(), 2);
+        assert_eq!(t.table(2), prior_table(&a, &grid).as_slice());
+        assert_eq!(t.table(4), prior_table(&b, &grid).as_slice());
+    }
+}
