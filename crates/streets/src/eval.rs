@@ -6,8 +6,8 @@
 use crate::dataset::StreetsDataset;
 use crate::inference::{McmcOptions, Network};
 use crate::model::{
-    network_edges, segment_bins, BinClassifier, ClassifierOptions, GeometryOptions, SegmentBins,
-    Target,
+    has_truth, network_edges, segment_bins, true_geometry, BinClassifier, ClassifierOptions,
+    GeometryOptions, SegmentBins, Target,
 };
 use crate::potentials::{
     segment_potential, tempered_with_prior, width_spread_m, Confusion, GeometryPrior,
@@ -230,27 +230,6 @@ impl Counts {
             (false, true) => self.fn_ += 1,
             _ => {}
         }
-    }
-}
-
-/// True geometry (offset, width) of a segment for a target.
-fn true_geometry(ds: &StreetsDataset, s: usize, target: Target) -> (f64, f64) {
-    let t = &ds.segments[s];
-    match target {
-        Target::DrivingArea => (t.offset_m, t.width_m),
-        Target::WithSidewalk => (
-            t.outer_offset_m.unwrap_or(t.offset_m),
-            t.width_m + 2.0 * t.sidewalk_m,
-        ),
-    }
-}
-
-/// Whether a segment has a true geometry for a target (real data may see the driving area's
-/// edges but not the sidewalk's).
-fn has_truth(ds: &StreetsDataset, s: usize, target: Target) -> bool {
-    match target {
-        Target::DrivingArea => true,
-        Target::WithSidewalk => ds.segments[s].outer_observed,
     }
 }
 

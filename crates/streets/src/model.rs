@@ -382,6 +382,27 @@ impl TrainingBins {
     }
 }
 
+/// True geometry (offset, width) of a segment for a target.
+pub fn true_geometry(ds: &crate::dataset::StreetsDataset, s: usize, target: Target) -> (f64, f64) {
+    let t = &ds.segments[s];
+    match target {
+        Target::DrivingArea => (t.offset_m, t.width_m),
+        Target::WithSidewalk => (
+            t.outer_offset_m.unwrap_or(t.offset_m),
+            t.width_m + 2.0 * t.sidewalk_m,
+        ),
+    }
+}
+
+/// Whether a segment has a true geometry for a target (real data may see the driving area's
+/// edges but not the sidewalk's).
+pub fn has_truth(ds: &crate::dataset::StreetsDataset, s: usize, target: Target) -> bool {
+    match target {
+        Target::DrivingArea => true,
+        Target::WithSidewalk => ds.segments[s].outer_observed,
+    }
+}
+
 /// Features and labels (for `target`) of all usable labelled bins of a dataset's observed
 /// drivable segments.
 pub fn dataset_bins(
@@ -396,12 +417,12 @@ pub fn dataset_bins(
     let mut out = TrainingBins::default();
     for (&s, b) in which.iter().zip(&bins) {
         let Some(b) = b else { continue };
-        let t = &ds.segments[s];
-        out.geometries.push(match target {
-            Target::DrivingArea => (t.offset_m, t.width_m),
-            Target::WithSidewalk => (t.offset_m, t.width_m + 2.0 * t.sidewalk_m),
-        });
-        out.tags.push(SegmentTags::of(&ds.map, s));
+        // The prior learns from segments with a truth for the target (a real sequence may
+        // see the driving area's edges and not the sidewalk's).
+        if has_truth(ds, s, target) {
+            out.geometries.push(true_geometry(ds, s, target));
+            out.tags.push(SegmentTags::of(&ds.map, s));
+        }
         for k in b.usable() {
             if let Some(c) = b.features.truth[k] {
                 out.features.extend_from_slice(b.features.row(k));

@@ -297,3 +297,38 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
     )
     .is_err());
 }
+
+/// A model's geometry prior learns only from segments with a truth for its target: on
+/// KITTI-360 the sidewalk's outer edges were derived for fewer segments than the driving
+/// area's, and those without one are not taken as "no sidewalk".
+#[test]
+fn training_priors_skip_segments_without_a_truth_for_the_target() {
+    use streets::model::{dataset_bins, has_truth, GeometryOptions, Target};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/lidar/kitti360_2013_05_28_drive_0009");
+    let real = load(&dir, &roads_map()).unwrap();
+    let ds = &real.dataset;
+    let geometry = GeometryOptions::default();
+    let da = dataset_bins(ds, &geometry, Target::DrivingArea);
+    let ws = dataset_bins(ds, &geometry, Target::WithSidewalk);
+    assert_eq!(da.geometries.len(), da.tags.len());
+    assert_eq!(ws.geometries.len(), ws.tags.len());
+    let no_outer = (0..ds.segments.len())
+        .filter(|&s| {
+            ds.segments[s].observed
+                && ds.segments[s].drivable
+                && !has_truth(ds, s, Target::WithSidewalk)
+        })
+        .count();
+    assert!(
+        no_outer > 0,
+        "the drive should have segments without an outer truth"
+    );
+    assert!(
+        ws.geometries.len() < da.geometries.len(),
+        "{} {}",
+        ws.geometries.len(),
+        da.geometries.len()
+    );
+    assert!(!ws.geometries.is_empty());
+}
