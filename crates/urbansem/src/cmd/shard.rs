@@ -74,7 +74,7 @@ pub enum ShardCommand {
         yaw_step_deg: f64,
         /// Localization: the d_DCM caps of the `minimum` rounds, metres, increasing (a last
         /// round without a cap follows).
-        #[arg(long, value_delimiter = ',', default_value = "0.4,0.55,0.8")]
+        #[arg(long, value_delimiter = ',', default_values_t = localize::tiles::MINIMUM_CAPS_M)]
         minimum_caps_m: Vec<f64>,
         /// Print one JSON object.
         #[arg(long)]
