@@ -162,12 +162,27 @@ pub fn stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         rows.push(row(&format!("{target}: raw"), &t.raw));
         rows.push(row(&format!("{target}: single segment"), &t.single_segment));
         rows.push(row(&format!("{target}: full model"), &t.full_model));
+        let c = &t.confident;
+        rows.push(vec![
+            format!(
+                "{target}: full model where the width spread ≤ {:.0} m ({} of {} segments, {:.0} % of the length)",
+                c.width_sd_max_m,
+                c.segments,
+                c.of_segments,
+                100.0 * c.coverage
+            ),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+            c.rmse_w.map_or("n/a".into(), |v| format!("{v:.2}")),
+        ]);
         rows.push(row(&format!("{target}: opt. on truth"), &t.opt_on_truth));
         rows.push(row(&format!("{target}: true geometry"), &t.true_geometry));
     }
     let text_html = format!(
         "<p>A {:.0} m route simulated on the embedded city ({} points, simulated in {:.1} s), {} evaluated segments, \
-         5-fold round robin over segments (Table 4.1 analogue). Figure: OSM centre lines dashed blue, \
+         5-fold round robin over segments (Table 4.1 analogue), width priors learnt per OSM tag group \
+         (<code>width</code>, <code>lanes</code>, <code>highway</code> class) on the training folds. Figure: OSM centre lines dashed blue, \
          buildings green, estimated driving area black, true driving area grey (cf. Fig. 4.5).</p>{}",
         report.street_m,
         ds.cloud.len(),
