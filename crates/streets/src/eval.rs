@@ -223,6 +223,14 @@ impl Counts {
         }
     }
 
+    /// Adds a segment of length `l` whose estimated (offset, width) is `est` to the
+    /// length-weighted width and offset errors.
+    fn add_segment(&mut self, l: f64, est: (f64, f64), truth: (f64, f64)) {
+        self.w_err2 += l * (est.1 - truth.1).powi(2);
+        self.d_err2 += l * (est.0 - truth.0).powi(2);
+        self.w_len += l;
+    }
+
     fn add_bin(&mut self, predicted: bool, truth: bool) {
         match (predicted, truth) {
             (true, true) => self.tp += 1,
@@ -331,15 +339,11 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     ..options.classifier.clone()
                 },
             )?;
-            let prior = if options.tag_prior {
-                TagPrior::fit(&train_geom, target == Target::WithSidewalk)
-            } else {
-                TagPrior {
-                    sidewalk_groups: false,
-                    global: GeometryPrior::fit(&train_geom.iter().map(|t| t.1).collect::<Vec<_>>()),
-                    groups: BTreeMap::new(),
-                }
-            };
+            let mut prior = TagPrior::fit(&train_geom, target == Target::WithSidewalk);
+            if !options.tag_prior {
+                // One prior for every segment: the city-wide fit alone.
+                prior.groups.clear();
+            }
             sv_sum += clf.svm.support_count();
             for (sum_row, row) in conf_sum.iter_mut().zip(&clf.confusion.counts) {
                 for (s, c) in sum_row.iter_mut().zip(row) {
@@ -539,12 +543,11 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     c.add_bin(pred, truth);
                 }
                 if let Some(st) = states.filter(|_| has_truth(ds, eval_ids[k], target)) {
-                    let (d, w) = grid.geometry(st[k].0, st[k].1);
-                    let (d_true, w_true) = true_geometry(ds, eval_ids[k], target);
-                    let l = segs[eval_ids[k]].length_m;
-                    c.w_err2 += l * (w - w_true).powi(2);
-                    c.d_err2 += l * (d - d_true).powi(2);
-                    c.w_len += l;
+                    c.add_segment(
+                        segs[eval_ids[k]].length_m,
+                        grid.geometry(st[k].0, st[k].1),
+                        true_geometry(ds, eval_ids[k], target),
+                    );
                 }
             }
             c.scores()
@@ -556,28 +559,32 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             opt_on_truth: score(Some(&truth_states)),
             true_geometry: score(Some(&truth_cols)),
             confident: {
-                let (mut n, mut of, mut len, mut len_all, mut w2, mut d2) =
-                    (0, 0, 0.0, 0.0, 0.0, 0.0);
+                let (mut n, mut of, mut len_all) = (0, 0, 0.0);
+                let mut c = Counts {
+                    with_width: true,
+                    ..Counts::default()
+                };
                 for k in (0..eval_ids.len()).filter(|&k| has_truth(ds, eval_ids[k], target)) {
                     let l = segs[eval_ids[k]].length_m;
                     of += 1;
                     len_all += l;
                     if spread[k] <= CONFIDENT_WIDTH_SD_M {
-                        let (d, w) = grid.geometry(full_states[k].0, full_states[k].1);
-                        let (d_true, w_true) = true_geometry(ds, eval_ids[k], target);
                         n += 1;
-                        len += l;
-                        w2 += l * (w - w_true).powi(2);
-                        d2 += l * (d - d_true).powi(2);
+                        c.add_segment(
+                            l,
+                            grid.geometry(full_states[k].0, full_states[k].1),
+                            true_geometry(ds, eval_ids[k], target),
+                        );
                     }
                 }
+                let s = c.scores();
                 Confident {
                     width_sd_max_m: CONFIDENT_WIDTH_SD_M,
                     segments: n,
                     of_segments: of,
-                    coverage: len / len_all.max(1e-12),
-                    rmse_w: (n > 0).then(|| (w2 / len).sqrt()),
-                    rmse_d: (n > 0).then(|| (d2 / len).sqrt()),
+                    coverage: c.w_len / len_all.max(1e-12),
+                    rmse_w: s.rmse_w.filter(|_| n > 0),
+                    rmse_d: s.rmse_d.filter(|_| n > 0),
                 }
             },
         };

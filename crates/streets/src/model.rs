@@ -716,17 +716,15 @@ impl StreetModel {
                 "classifier.confusion.counts {counts:?} holds a count above 2^62"
             ));
         }
-        let p = &self.prior;
-        finite("prior.mean_offset_m", p.mean_offset_m)?;
-        positive("prior.sigma_offset_m", p.sigma_offset_m)?;
-        finite("prior.mean_log_width", p.mean_log_width)?;
-        positive("prior.sigma_log_width", p.sigma_log_width)?;
+        let geometry_prior = |name: &str, p: &GeometryPrior| {
+            finite(&format!("{name}.mean_offset_m"), p.mean_offset_m)?;
+            positive(&format!("{name}.sigma_offset_m"), p.sigma_offset_m)?;
+            finite(&format!("{name}.mean_log_width"), p.mean_log_width)?;
+            positive(&format!("{name}.sigma_log_width"), p.sigma_log_width)
+        };
+        geometry_prior("prior", &self.prior)?;
         if let Some(t) = &self.tag_prior {
-            let g = &t.global;
-            finite("tag_prior.global.mean_offset_m", g.mean_offset_m)?;
-            positive("tag_prior.global.sigma_offset_m", g.sigma_offset_m)?;
-            finite("tag_prior.global.mean_log_width", g.mean_log_width)?;
-            positive("tag_prior.global.sigma_log_width", g.sigma_log_width)?;
+            geometry_prior("tag_prior.global", &t.global)?;
             t.check()?;
         }
         Ok(())
@@ -959,7 +957,6 @@ impl StreetModel {
             return Err(no_overlap(map, cloud, cloud_name));
         }
         let grid = self.geometry.theta_grid();
-        let prior = self.prior_tables(map, &grid);
         let flat = GeometryPrior::flat();
         let pseudo: [[f64; 2]; 2] = self.classifier.confusion.counts.map(|row| {
             let total = (row[0] + row[1]).max(1) as f64;
@@ -988,7 +985,7 @@ impl StreetModel {
                     let p = tempered_with_prior(
                         &segment_potential(c, &clog, &flat, &grid),
                         &self.geometry.tempering,
-                        prior.table(*s),
+                        step.prior.table(*s),
                     );
                     (*s, p, *n)
                 })
