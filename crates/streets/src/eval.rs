@@ -13,7 +13,7 @@ use crate::potentials::{
     segment_potential, tempered_with_prior, width_spread_m, Confusion, GeometryPrior,
     SegmentPotential, Tempering,
 };
-use crate::prior::{PriorTables, SegmentTags, TagPrior};
+use crate::prior::{PriorTables, SegmentTags, SidewalkPrior, TagPrior};
 use crate::{Result, StreetsError};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -37,7 +37,18 @@ pub struct EvalOptions {
     /// Width priors per OSM tag group ([`crate::prior`]); off: one prior for every segment
     /// (thesis §4.4.2).
     pub tag_prior: bool,
+    /// The with-sidewalk prior centred on the segment's estimated driving area plus a
+    /// sidewalk margin learnt per class ([`crate::prior::SidewalkPrior`]); off: the tag prior
+    /// of the with-sidewalk widths. Needs [`EvalOptions::tag_prior`] (the margins are learnt
+    /// per tag group).
+    pub sidewalk_prior: bool,
 }
+
+/// Training bins of each fold's SVM in the evaluation (at most; a seeded subset). Twice
+/// [`ClassifierOptions`]' default for `streets train`, whose support vectors every user's
+/// cloud pays for at prediction: with 3000, one fold's classifier missed a whole way's
+/// sidewalk material on the embedded city in two of three seeds.
+pub const EVAL_MAX_TRAIN_BINS: usize = 6000;
 
 /// The default candidates: τ ∈ {8, 32, 128, 512} × floor ∈ {∞, 8} nats × prior weight ∈
 /// {1, 4} × coupling cap ∈ {∞, 10} nats.
@@ -64,11 +75,15 @@ impl Default for EvalOptions {
     fn default() -> Self {
         EvalOptions {
             geometry: GeometryOptions::default(),
-            classifier: ClassifierOptions::default(),
+            classifier: ClassifierOptions {
+                max_train_bins: EVAL_MAX_TRAIN_BINS,
+                ..ClassifierOptions::default()
+            },
             folds: 5,
             mcmc: McmcOptions::default(),
             temperings: default_temperings(),
             tag_prior: true,
+            sidewalk_prior: true,
         }
     }
 }
@@ -302,10 +317,31 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
     let mut geometries = BTreeMap::new();
     let (mut train_s, mut predict_s, mut potentials_s, mut inference_s, mut mcmc_s) =
         (0.0, 0.0, 0.0, 0.0, 0.0);
+    // The driving area's full-model states and width spreads, for the with-sidewalk prior.
+    type Driving = (Vec<(usize, usize)>, Vec<f64>);
+    let mut driving: Option<Driving> = None;
     for target in [Target::DrivingArea, Target::WithSidewalk] {
         let mut predicted: Vec<Vec<bool>> = vec![Vec::new(); eval_ids.len()];
         let mut priors = vec![GeometryPrior::flat(); eval_ids.len()];
         let mut fold_priors = Vec::with_capacity(folds);
+        let mut fold_sidewalk: Vec<Option<SidewalkPrior>> = Vec::with_capacity(folds);
+        // Segment k's prior: with sidewalk, centred on its estimated driving area when a
+        // margin prior was fitted; else its tag group's.
+        let segment_prior =
+            |prior: &TagPrior, sidewalk: Option<&SidewalkPrior>, k: usize| -> GeometryPrior {
+                match (sidewalk, &driving) {
+                    (Some(sp), Some((states, spread)))
+                        if target == Target::WithSidewalk && spread[k].is_finite() =>
+                    {
+                        sp.given_driving_area(
+                            &tags[k],
+                            grid.geometry(states[k].0, states[k].1),
+                            spread[k],
+                        )
+                    }
+                    _ => prior.for_tags(&tags[k]),
+                }
+            };
         let mut conf_sum = [[0u64; 2]; 2];
         let mut sv_sum = 0usize;
         for fold in 0..folds {
@@ -314,12 +350,22 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             let mut x = Vec::new();
             let mut y = Vec::new();
             let mut train_geom: Vec<(SegmentTags, (f64, f64))> = Vec::new();
+            let mut train_margin = Vec::new();
             for k in 0..eval_ids.len() {
                 if fold_of(k) == fold {
                     continue;
                 }
                 if has_truth(ds, eval_ids[k], target) {
                     train_geom.push((tags[k].clone(), true_geometry(ds, eval_ids[k], target)));
+                    if target == Target::WithSidewalk
+                        && has_truth(ds, eval_ids[k], Target::DrivingArea)
+                    {
+                        train_margin.push((
+                            tags[k].clone(),
+                            true_geometry(ds, eval_ids[k], Target::DrivingArea),
+                            true_geometry(ds, eval_ids[k], target),
+                        ));
+                    }
                 }
                 for (j, c) in classes[k].iter().enumerate() {
                     if let Some(c) = c {
@@ -368,10 +414,13 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 off += n;
             }
             predict_s += t.elapsed().as_secs_f64();
+            let sidewalk = SidewalkPrior::fit(&train_margin)
+                .filter(|_| options.sidewalk_prior && options.tag_prior);
             for &k in &test {
-                priors[k] = prior.for_tags(&tags[k]);
+                priors[k] = segment_prior(&prior, sidewalk.as_ref(), k);
             }
             fold_priors.push(prior);
+            fold_sidewalk.push(sidewalk);
         }
         // Potentials: C of fold f from the out-of-fold predictions of its training segments
         // (segments held out from the classifier that labelled them), the tempering selected on
@@ -390,7 +439,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 grid.columns_of(d, w)
             })
             .collect();
-        for (fold, fold_prior) in fold_priors.iter().enumerate() {
+        for (fold, (fold_prior, sidewalk)) in fold_priors.iter().zip(&fold_sidewalk).enumerate() {
             let mut truth = Vec::new();
             let mut pred = Vec::new();
             for k in (0..eval_ids.len()).filter(|&k| fold_of(k) != fold) {
@@ -404,9 +453,8 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             let clog = Confusion::from_pairs(&truth, &pred).log_likelihood();
             let flat = GeometryPrior::flat();
             let prior_log = PriorTables::new(
-                &tags
-                    .iter()
-                    .map(|t| fold_prior.for_tags(t))
+                &(0..eval_ids.len())
+                    .map(|k| segment_prior(fold_prior, sidewalk.as_ref(), k))
                     .collect::<Vec<_>>(),
                 &grid,
             );
@@ -614,6 +662,9 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 })
                 .collect(),
         );
+        if target == Target::DrivingArea {
+            driving = Some((full_states, spread));
+        }
         per_target.insert(target, scores);
     }
     seconds.insert("svm_training".into(), train_s);

@@ -208,6 +208,150 @@ impl TagPrior {
     }
 }
 
+/// Smallest spread of a sidewalk margin or of an offset difference, metres.
+pub const MIN_SIGMA_MARGIN_M: f64 = 0.1;
+
+/// One group's Gaussian on the sidewalk margin and on the centre shift, metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MarginGroup {
+    /// Mean margin: (width with sidewalk − driving-area width) / 2.
+    pub mean_m: f64,
+    /// Standard deviation of the margin.
+    pub sigma_m: f64,
+    /// Mean shift of the centre: offset with sidewalk − driving-area offset.
+    pub mean_shift_m: f64,
+    /// Standard deviation of the shift.
+    pub sigma_shift_m: f64,
+    /// Training segments in the group.
+    pub segments: usize,
+}
+
+/// A training segment for [`SidewalkPrior::fit`]: its tags, true driving area and true
+/// geometry with sidewalk, each (offset, width) in metres.
+pub type MarginSample = (SegmentTags, (f64, f64), (f64, f64));
+
+/// The with-sidewalk prior given a segment's driving area: the sidewalk margin per
+/// `highway` class (and `sidewalk=no`), learnt from training segments with both truths.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SidewalkPrior {
+    /// The margin over every training segment.
+    pub global: MarginGroup,
+    /// Groups by key (`highway=CLASS`, maybe with `;sidewalk=no`).
+    pub groups: BTreeMap<String, MarginGroup>,
+}
+
+/// Mean and spread of `xs` shrunk toward (`mean0`, `sigma0`) by [`PSEUDO_SEGMENTS`], with a
+/// floor of [`MIN_SIGMA_MARGIN_M`].
+fn shrunk_m(xs: &[f64], mean0: f64, sigma0: f64) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let k = PSEUDO_SEGMENTS;
+    let mean = (xs.iter().sum::<f64>() + k * mean0) / (n + k);
+    let var = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() + k * sigma0 * sigma0) / (n + k);
+    (mean, var.sqrt().max(MIN_SIGMA_MARGIN_M))
+}
+
+impl SidewalkPrior {
+    /// Fits the margins on training segments: tags, true driving area and true geometry
+    /// with sidewalk (offset, width). `None` without samples.
+    pub fn fit(samples: &[MarginSample]) -> Option<SidewalkPrior> {
+        if samples.is_empty() {
+            return None;
+        }
+        let margin = |s: &MarginSample| 0.5 * (s.2 .1 - s.1 .1);
+        let shift = |s: &MarginSample| s.2 .0 - s.1 .0;
+        let all_m: Vec<f64> = samples.iter().map(margin).collect();
+        let all_d: Vec<f64> = samples.iter().map(shift).collect();
+        let n = all_m.len() as f64;
+        let (gm, gsm) = {
+            let m = all_m.iter().sum::<f64>() / n;
+            let v = all_m.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n;
+            (m, v.sqrt().max(MIN_SIGMA_MARGIN_M))
+        };
+        let (gd, gsd) = {
+            let m = all_d.iter().sum::<f64>() / n;
+            let v = all_d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n;
+            (m, v.sqrt().max(MIN_SIGMA_MARGIN_M))
+        };
+        let global = MarginGroup {
+            mean_m: gm,
+            sigma_m: gsm,
+            mean_shift_m: gd,
+            sigma_shift_m: gsd,
+            segments: samples.len(),
+        };
+        let mut by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+        for s in samples {
+            let e = by.entry(s.0.groups(true).1).or_default();
+            e.0.push(margin(s));
+            e.1.push(shift(s));
+        }
+        let groups = by
+            .into_iter()
+            .map(|(key, (ms, ds))| {
+                let (mean_m, sigma_m) = shrunk_m(&ms, gm, gsm);
+                let (mean_shift_m, sigma_shift_m) = shrunk_m(&ds, gd, gsd);
+                (
+                    key,
+                    MarginGroup {
+                        mean_m,
+                        sigma_m,
+                        mean_shift_m,
+                        sigma_shift_m,
+                        segments: ms.len(),
+                    },
+                )
+            })
+            .collect();
+        Some(SidewalkPrior { global, groups })
+    }
+
+    /// The with-sidewalk prior of a segment with these tags whose driving area was estimated
+    /// as `driving` (offset, width) with width spread `spread_m`; offsets spread as the
+    /// learnt shift plus half the width spread (one kerb moves the centre by half as much).
+    pub fn given_driving_area(
+        &self,
+        tags: &SegmentTags,
+        driving: (f64, f64),
+        spread_m: f64,
+    ) -> GeometryPrior {
+        let g = self
+            .groups
+            .get(&tags.groups(true).1)
+            .unwrap_or(&self.global);
+        let width = (driving.1 + 2.0 * g.mean_m).max(0.5);
+        let sigma_w = (4.0 * g.sigma_m * g.sigma_m + spread_m * spread_m).sqrt();
+        let sigma_d = (g.sigma_shift_m.powi(2) + 0.25 * spread_m * spread_m).sqrt();
+        GeometryPrior {
+            mean_offset_m: driving.0 + g.mean_shift_m,
+            sigma_offset_m: sigma_d.max(0.2),
+            mean_log_width: width.ln(),
+            sigma_log_width: (sigma_w / width).max(MIN_SIGMA_LOG_WIDTH),
+        }
+    }
+
+    /// The first value out of range, named by its field.
+    pub fn check(&self) -> Result<(), String> {
+        for (key, g) in std::iter::once(("global".to_string(), &self.global))
+            .chain(self.groups.iter().map(|(k, g)| (format!("groups[{k}]"), g)))
+        {
+            for (name, v, positive) in [
+                ("mean_m", g.mean_m, false),
+                ("sigma_m", g.sigma_m, true),
+                ("mean_shift_m", g.mean_shift_m, false),
+                ("sigma_shift_m", g.sigma_shift_m, true),
+            ] {
+                if !v.is_finite() || (positive && v <= 0.0) {
+                    return Err(format!(
+                        "sidewalk_prior.{key}.{name} = {v} is out of range (expected a finite number{})",
+                        if positive { " > 0" } else { "" }
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The prior tables of a set of segments, one table per distinct prior.
 #[derive(Debug, Clone)]
 pub struct PriorTables {
@@ -344,6 +488,49 @@ mod tests {
             da.for_tags(&tags("residential", None, None, false)),
             da.for_tags(&tags("residential", None, None, true))
         );
+    }
+
+    #[test]
+    fn sidewalk_margins_are_learnt_per_class_and_centred_on_the_driving_area() {
+        let mut samples = Vec::new();
+        for i in 0..20 {
+            let j = f64::from(i % 5) * 0.1;
+            let da = 5.0 + f64::from(i % 7);
+            // Primary roads: 3 m sidewalks, shifted 0.2 m to the left; service: none.
+            samples.push((
+                tags("primary", None, Some(2), false),
+                (0.1, da),
+                (0.3, da + 2.0 * (3.0 + j)),
+            ));
+            samples.push((
+                tags("service", None, None, false),
+                (0.0, 3.5),
+                (0.0, 3.5 + 2.0 * j),
+            ));
+        }
+        assert_eq!(SidewalkPrior::fit(&[]), None);
+        let p = SidewalkPrior::fit(&samples).unwrap();
+        p.check().unwrap();
+        let primary = &p.groups["highway=primary"];
+        assert!((primary.mean_m - 3.2).abs() < 0.2, "{primary:?}");
+        assert!((primary.mean_shift_m - 0.2).abs() < 0.05, "{primary:?}");
+        assert!(p.groups["highway=service"].mean_m < 0.5);
+        // Centred on the driving area plus both margins, whatever the lanes say.
+        let g = p.given_driving_area(&tags("primary", None, Some(4), false), (1.0, 14.0), 0.0);
+        assert!((g.mean_log_width.exp() - (14.0 + 2.0 * primary.mean_m)).abs() < 1e-9);
+        assert!((g.mean_offset_m - (1.0 + primary.mean_shift_m)).abs() < 1e-9);
+        // An uncertain driving area widens the prior; an unseen class takes the global margin.
+        let loose = p.given_driving_area(&tags("primary", None, None, false), (1.0, 14.0), 2.0);
+        assert!(loose.sigma_log_width > g.sigma_log_width);
+        assert!(loose.sigma_offset_m > g.sigma_offset_m);
+        let other = p.given_driving_area(&tags("tertiary", None, None, false), (0.0, 8.0), 0.0);
+        assert!((other.mean_log_width.exp() - (8.0 + 2.0 * p.global.mean_m)).abs() < 1e-9);
+        let mut bad = p.clone();
+        bad.groups.get_mut("highway=service").unwrap().sigma_m = 0.0;
+        assert!(bad
+            .check()
+            .unwrap_err()
+            .contains("sidewalk_prior.groups[highway=service].sigma_m"));
     }
 
     #[test]

@@ -1285,9 +1285,9 @@ fn streets_train_needs_a_source_and_sequences_as_dir_equals_map() {
 
 /// Issue 17: the streets README's default-city rows, with the README's commands (fewer MCMC
 /// iterations: the full model is max-product's, which MCMC does not change). Measured with
-/// tag priors 0.61 / 1.44 m full-model RMSE_w (driving area / with sidewalk), pinned 0.15 m
-/// above; with `--no-tag-prior` 1.44 / 1.74 m, which the tag priors must beat on the driving
-/// area by at least 0.4 m; the confident share is reported and its RMSE is finite.
+/// tag priors 0.58 / 0.36 m full-model RMSE_w (driving area / with sidewalk), pinned 0.15 m
+/// above; with `--no-tag-prior` 1.42 / 1.59 m, which the tag priors must beat on both
+/// targets by at least 0.4 m; the confident share is reported and its RMSE is finite.
 #[test]
 fn simulated_streets_hold_the_readme_numbers() {
     let dir = tempfile::tempdir().unwrap();
@@ -1326,8 +1326,10 @@ fn simulated_streets_hold_the_readme_numbers() {
         rmse(&tags, "driving_area"),
         rmse(&tags, "with_sidewalk")
     );
-    assert!(rmse(&tags, "driving_area") <= 0.61 + 0.15, "{tags}");
-    assert!(rmse(&tags, "with_sidewalk") <= 1.44 + 0.15, "{tags}");
+    // Measured 2026-11-29 (6000 training bins per fold, the with-sidewalk prior centred on
+    // the estimated driving area): 0.58 / 0.36 m. Pinned 0.15 m above.
+    assert!(rmse(&tags, "driving_area") <= 0.58 + 0.15, "{tags}");
+    assert!(rmse(&tags, "with_sidewalk") <= 0.36 + 0.15, "{tags}");
     for target in ["driving_area", "with_sidewalk"] {
         let t = &tags[target];
         assert!(
@@ -1349,10 +1351,9 @@ fn simulated_streets_hold_the_readme_numbers() {
         rmse(&one, "driving_area"),
         rmse(&one, "with_sidewalk")
     );
-    assert!(
-        rmse(&tags, "driving_area") + 0.4 <= rmse(&one, "driving_area"),
-        "{one}"
-    );
+    for target in ["driving_area", "with_sidewalk"] {
+        assert!(rmse(&tags, target) + 0.4 <= rmse(&one, target), "{one}");
+    }
 }
 
 /// Issue 17: the shipped default street model is what its documented command builds (so it

@@ -39,9 +39,10 @@ impl From<TargetArg> for Target {
 /// Options shared by the commands that train.
 #[derive(Args, Clone)]
 pub struct TrainingArgs {
-    /// Largest number of training bins per SVM (a seeded subset).
-    #[arg(long, default_value_t = 3000)]
-    pub max_train_bins: usize,
+    /// Largest number of training bins per SVM (a seeded subset) [default: 3000; `streets
+    /// eval` and `eval-real`: 6000 per fold].
+    #[arg(long)]
+    pub max_train_bins: Option<usize>,
     /// SVM box constraint C.
     #[arg(long, default_value_t = 4.0)]
     pub svm_c: f64,
@@ -51,13 +52,19 @@ pub struct TrainingArgs {
 }
 
 impl TrainingArgs {
+    /// The classifier options of `streets train` and `transfer`.
     fn classifier(&self) -> ClassifierOptions {
+        self.classifier_with(ClassifierOptions::default().max_train_bins)
+    }
+
+    /// The classifier options, with `default_bins` training bins unless given.
+    fn classifier_with(&self, default_bins: usize) -> ClassifierOptions {
         ClassifierOptions {
             svm: SvmOptions {
                 c: self.svm_c,
                 ..SvmOptions::default()
             },
-            max_train_bins: self.max_train_bins,
+            max_train_bins: self.max_train_bins.unwrap_or(default_bins),
             seed: self.seed,
             ..ClassifierOptions::default()
         }
@@ -80,6 +87,10 @@ pub struct EvalArgs {
     /// (`width`, `lanes`, `highway` class).
     #[arg(long)]
     no_tag_prior: bool,
+    /// With sidewalk: the width prior of the segment's tag group instead of one centred on
+    /// its estimated driving area plus a sidewalk margin learnt per `highway` class.
+    #[arg(long)]
+    no_sidewalk_prior: bool,
     /// Training options.
     #[command(flatten)]
     pub training: TrainingArgs,
@@ -88,11 +99,14 @@ pub struct EvalArgs {
 impl EvalArgs {
     fn options(&self) -> EvalOptions {
         let mut options = EvalOptions {
-            classifier: self.training.classifier(),
+            classifier: self
+                .training
+                .classifier_with(streets::eval::EVAL_MAX_TRAIN_BINS),
             ..EvalOptions::default()
         };
         options.geometry.max_turn_deg = self.max_turn_deg;
         options.tag_prior = !self.no_tag_prior;
+        options.sidewalk_prior = !self.no_sidewalk_prior;
         options.mcmc.chains = self.chains;
         options.mcmc.iterations = self.iterations;
         options.mcmc.seed = self.training.seed;
