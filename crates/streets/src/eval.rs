@@ -414,8 +414,9 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 off += n;
             }
             predict_s += t.elapsed().as_secs_f64();
-            let sidewalk = SidewalkPrior::fit(&train_margin)
-                .filter(|_| options.sidewalk_prior && options.tag_prior);
+            let sidewalk = (options.sidewalk_prior && options.tag_prior)
+                .then(|| SidewalkPrior::fit(&train_margin))
+                .flatten();
             for &k in &test {
                 priors[k] = segment_prior(&prior, sidewalk.as_ref(), k);
             }

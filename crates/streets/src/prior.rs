@@ -105,15 +105,21 @@ pub struct TagPrior {
 
 /// Mean and spread of `xs` shrunk toward (`mean0`, `sigma0`) by [`PSEUDO_SEGMENTS`].
 fn shrunk(xs: &[f64], mean0: f64, sigma0: f64) -> WidthGroup {
-    let n = xs.len() as f64;
-    let k = PSEUDO_SEGMENTS;
-    let mean = (xs.iter().sum::<f64>() + k * mean0) / (n + k);
-    let var = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() + k * sigma0 * sigma0) / (n + k);
+    let (mean, sigma) = pooled(xs, PSEUDO_SEGMENTS, mean0, sigma0);
     WidthGroup {
         mean,
-        sigma: var.sqrt().max(MIN_SIGMA_LOG_WIDTH),
+        sigma: sigma.max(MIN_SIGMA_LOG_WIDTH),
         segments: xs.len(),
     }
+}
+
+/// Mean and standard deviation of `xs` together with `k` pseudo-observations of mean
+/// `mean0` and spread `sigma0` (`k` = 0: of `xs` alone).
+fn pooled(xs: &[f64], k: f64, mean0: f64, sigma0: f64) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = (xs.iter().sum::<f64>() + k * mean0) / (n + k);
+    let var = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() + k * sigma0 * sigma0) / (n + k);
+    (mean, var.sqrt())
 }
 
 impl TagPrior {
@@ -243,11 +249,8 @@ pub struct SidewalkPrior {
 /// Mean and spread of `xs` shrunk toward (`mean0`, `sigma0`) by [`PSEUDO_SEGMENTS`], with a
 /// floor of [`MIN_SIGMA_MARGIN_M`].
 fn shrunk_m(xs: &[f64], mean0: f64, sigma0: f64) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let k = PSEUDO_SEGMENTS;
-    let mean = (xs.iter().sum::<f64>() + k * mean0) / (n + k);
-    let var = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() + k * sigma0 * sigma0) / (n + k);
-    (mean, var.sqrt().max(MIN_SIGMA_MARGIN_M))
+    let (mean, sigma) = pooled(xs, PSEUDO_SEGMENTS, mean0, sigma0);
+    (mean, sigma.max(MIN_SIGMA_MARGIN_M))
 }
 
 impl SidewalkPrior {
@@ -261,17 +264,10 @@ impl SidewalkPrior {
         let shift = |s: &MarginSample| s.2 .0 - s.1 .0;
         let all_m: Vec<f64> = samples.iter().map(margin).collect();
         let all_d: Vec<f64> = samples.iter().map(shift).collect();
-        let n = all_m.len() as f64;
-        let (gm, gsm) = {
-            let m = all_m.iter().sum::<f64>() / n;
-            let v = all_m.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n;
-            (m, v.sqrt().max(MIN_SIGMA_MARGIN_M))
-        };
-        let (gd, gsd) = {
-            let m = all_d.iter().sum::<f64>() / n;
-            let v = all_d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n;
-            (m, v.sqrt().max(MIN_SIGMA_MARGIN_M))
-        };
+        let (gm, gsm) = pooled(&all_m, 0.0, 0.0, 0.0);
+        let gsm = gsm.max(MIN_SIGMA_MARGIN_M);
+        let (gd, gsd) = pooled(&all_d, 0.0, 0.0, 0.0);
+        let gsd = gsd.max(MIN_SIGMA_MARGIN_M);
         let global = MarginGroup {
             mean_m: gm,
             sigma_m: gsm,
