@@ -34,12 +34,19 @@
 //! - amodal geometry ([`crate::amodal`], from class priors learnt on annotated training
 //!   boxes): the azimuth overlap of the completed intervals (each continued behind the
 //!   other where the other hides it), the centre and nearest-corner range differences of
-//!   the completed boxes, and how far each continues behind the other.
+//!   the completed boxes, and how far each continues behind the other;
+//! - ground under the hidden middle: from a's [`expected_centre`] (its box centre moved
+//!   back by the class' amodal centre offset; a tree's trunk foot) the top-view distance to
+//!   the convex hull of b's cells within [`LOCAL_GROUND_RADIUS_M`] (a car parked at the kerb
+//!   hides the street under and behind it, so the nearest visible ground to its near side
+//!   is the sidewalk in front of it, while the street's cells on either side still enclose
+//!   its middle), how much farther that is than the nearest ground surface's, and whether b
+//!   is that ground surface.
 //!
 //! Cost per pair: O(|a| log |hull b| + |b|) with objects subsampled to at most
 //! [`MAX_FEATURE_CELLS`] cells for the hull tests.
 
-use crate::amodal::{completed_view, hidden_extent_m, ClassPriors};
+use crate::amodal::{completed_view, hidden_extent_m, ClassPrior, ClassPriors};
 pub use crate::view::{
     convex_hull, edge_occlusion, ViewObject, CONTACT_SLICE_M, MAX_FEATURE_CELLS, OCCLUSION_DEPTH_M,
     OCCLUSION_WINDOW_RAD,
@@ -49,7 +56,7 @@ use geodata::classes::Class;
 use geodata::osm::geometry::point_segment_distance;
 
 /// Names of the features, in vector order.
-pub const FEATURE_NAMES: [&str; 48] = [
+pub const FEATURE_NAMES: [&str; 51] = [
     "centroid_distance",
     "box_distance_min",
     "box_distance_max",
@@ -98,6 +105,9 @@ pub const FEATURE_NAMES: [&str; 48] = [
     "amodal_range_nearest_corner_diff",
     "hidden_extent_a_behind_b",
     "hidden_extent_b_behind_a",
+    "centre_distance_to_b_local_hull",
+    "centre_distance_beyond_nearest_ground_hull",
+    "b_is_ground_nearest_centre_hull",
 ];
 
 /// Number of features.
@@ -105,6 +115,60 @@ pub const FEATURE_COUNT: usize = FEATURE_NAMES.len();
 
 /// Radius about the contact point within which ground cells are counted, metres.
 pub const CONTACT_RADIUS_M: f64 = 1.0;
+
+/// Radius about a thing's estimated footprint centre within which a ground surface's cells
+/// form its local hull ([`local_hull_distance`]), metres: a parked car's length plus the
+/// visible ground on either side of it.
+pub const LOCAL_GROUND_RADIUS_M: f64 = 6.0;
+
+/// The cap of [`local_hull_distance`] (no cells of the surface within the radius), metres.
+pub const LOCAL_HULL_CAP_M: f64 = 10.0;
+
+/// Where `a`'s footprint centre is expected to be, top view: the contact point for round
+/// classes (a trunk's foot marks a crown's box), else the estimated box centre moved away
+/// from the observer by the class prior's median centre-range offset (the scan sees a
+/// thing's near side; the ground under its middle is hidden by the thing itself).
+pub fn expected_centre(a: &ViewObject, prior: &ClassPrior) -> [f64; 2] {
+    if prior.foot_box.is_some() {
+        return [a.contact[0], a.contact[1]];
+    }
+    let c = a.box_centre;
+    let r = c[0].hypot(c[1]);
+    if r < 1e-9 {
+        return [c[0], c[1]];
+    }
+    let k = (r + prior.centre_range_offset_m.max(0.0)) / r;
+    [c[0] * k, c[1] * k]
+}
+
+/// Top-view distance from `p` to the convex hull of `b`'s cells within
+/// [`LOCAL_GROUND_RADIUS_M`] of it (0 inside; [`LOCAL_HULL_CAP_M`] with fewer than three such
+/// cells): whether `p` lies *within* a ground surface whose cells under and behind a thing
+/// are hidden by the thing, where the nearest visible cell may belong to the surface in
+/// front of it.
+pub fn local_hull_distance(p: [f64; 2], b: &ViewObject) -> f64 {
+    let r2 = LOCAL_GROUND_RADIUS_M * LOCAL_GROUND_RADIUS_M;
+    let near: Vec<[f64; 2]> = b
+        .footprint_cells
+        .iter()
+        .filter(|q| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) <= r2)
+        .map(|q| [q[0], q[1]])
+        .collect();
+    if near.len() < 3 {
+        return LOCAL_HULL_CAP_M;
+    }
+    let hull = convex_hull(near);
+    if hull.len() < 3 {
+        return LOCAL_HULL_CAP_M;
+    }
+    if in_convex(&hull, p, 0.0) {
+        return 0.0;
+    }
+    (0..hull.len())
+        .map(|i| point_segment_distance(p, hull[i], hull[(i + 1) % hull.len()]))
+        .fold(f64::INFINITY, f64::min)
+        .min(LOCAL_HULL_CAP_M)
+}
 
 /// Whether a class is a ground surface (no LeftOf/Behind; things stand on it).
 pub fn is_ground(class: Class) -> bool {
@@ -160,24 +224,32 @@ pub struct SubjectContext {
     pub nearest_ground_m: f64,
     /// Ground cells of the scene within [`CONTACT_RADIUS_M`] of the contact point.
     pub ground_cells_near: usize,
+    /// Smallest [`local_hull_distance`] from the subject's [`expected_centre`] to any ground
+    /// surface of the scene ([`LOCAL_HULL_CAP_M`] if none).
+    pub nearest_ground_hull_m: f64,
 }
 
 impl SubjectContext {
-    /// The context of `objects[a]` among `objects`.
-    pub fn new(objects: &[ViewObject], a: usize) -> SubjectContext {
+    /// The context of `objects[a]` among `objects`, with the amodal class priors.
+    pub fn new(objects: &[ViewObject], a: usize, priors: &ClassPriors) -> SubjectContext {
         let mut out = SubjectContext {
             nearest_ground_m: 50.0,
             ground_cells_near: 0,
+            nearest_ground_hull_m: LOCAL_HULL_CAP_M,
         };
         let Some(subject) = objects.get(a) else {
             return out;
         };
+        let centre = expected_centre(subject, &priors.get(subject.class));
         for (g, o) in objects.iter().enumerate() {
             if g == a || !is_ground(o.class) {
                 continue;
             }
             out.nearest_ground_m = out.nearest_ground_m.min(contact_distance(subject, o));
             out.ground_cells_near += cells_near_contact(subject, o);
+            out.nearest_ground_hull_m = out
+                .nearest_ground_hull_m
+                .min(local_hull_distance(centre, o));
         }
         out
     }
@@ -329,6 +401,16 @@ pub fn pair_features(
     };
     f[46] = behind(a, a_by_b, &pa);
     f[47] = behind(b, b_by_a, &pb);
+    let hull_m = if is_ground(b.class) {
+        local_hull_distance(expected_centre(a, &pa), b)
+    } else {
+        LOCAL_HULL_CAP_M
+    };
+    f[48] = hull_m;
+    f[49] = (hull_m - context.nearest_ground_hull_m).clamp(0.0, LOCAL_HULL_CAP_M);
+    f[50] = f64::from(u8::from(
+        is_ground(b.class) && hull_m <= context.nearest_ground_hull_m && hull_m < LOCAL_HULL_CAP_M,
+    ));
     f
 }
 
@@ -443,6 +525,7 @@ mod tests {
         let none = SubjectContext {
             nearest_ground_m: 50.0,
             ground_cells_near: 0,
+            nearest_ground_hull_m: LOCAL_HULL_CAP_M,
         };
         let f = pair_features(&left, &right, &none, &ClassPriors::default(), 0.05);
         assert!(f[19] > 0.0, "a's right boundary is left of b's left one");
@@ -503,6 +586,77 @@ mod tests {
     }
 
     #[test]
+    fn a_car_at_the_kerb_stands_in_the_street_behind_it() {
+        // Seen from the sidewalk (x 1–5 m), a car parked at the kerb (x = 5 m) shows its near
+        // side; the street under and behind it (x 5–12 m) is in its shadow, so the nearest
+        // visible ground to its foot is the sidewalk. Its expected centre lies in the street.
+        let vp = Viewpoint {
+            position: [0.0, 0.0, 0.0],
+            yaw_rad: 0.0,
+        };
+        let grid = |x0: f64, x1: f64, keep: &dyn Fn(f64, f64) -> bool| -> Vec<[f64; 3]> {
+            let mut v = Vec::new();
+            for i in 0..=((x1 - x0) / 0.25) as i32 {
+                for j in -40..=40 {
+                    let (x, y) = (x0 + 0.25 * f64::from(i), 0.25 * f64::from(j));
+                    if keep(x, y) {
+                        v.push([x, y, 0.0]);
+                    }
+                }
+            }
+            v
+        };
+        let ground = |id, cells: Vec<[f64; 3]>, x0: f64, x1: f64, class| {
+            let bbox = OrientedBox {
+                centre: [0.5 * (x0 + x1), 0.0, 0.0],
+                half_extents: [0.5 * (x1 - x0), 10.0, 0.05],
+                yaw_rad: 0.0,
+            };
+            ViewObject::new(id, class, &cells, &bbox, &vp)
+        };
+        let shadow = |x: f64, y: f64| x > 5.3 && y.abs() < 2.25 * x / 5.3;
+        let sidewalk = ground(2, grid(1.0, 5.0, &|_, _| true), 1.0, 5.0, Class::Sidewalk);
+        let street = ground(
+            3,
+            grid(5.35, 12.0, &|x, y| !shadow(x, y)),
+            5.0,
+            12.0,
+            Class::Street,
+        );
+        let car_cells: Vec<[f64; 3]> = (0..=18)
+            .flat_map(|j| {
+                (1..=6).map(move |k| [5.3, -2.25 + 0.25 * f64::from(j), 0.25 * f64::from(k)])
+            })
+            .collect();
+        let bbox = OrientedBox {
+            centre: [5.5, 0.0, 0.75],
+            half_extents: [0.2, 2.25, 0.75],
+            yaw_rad: 0.0,
+        };
+        let car = ViewObject::new(1, Class::Car, &car_cells, &bbox, &vp);
+        let mut priors = ClassPriors::default();
+        priors.classes[usize::from(Class::Car.id())].centre_range_offset_m = 0.7;
+        let centre = expected_centre(&car, &priors.get(Class::Car));
+        assert!((centre[0] - 6.2).abs() < 1e-9 && centre[1].abs() < 1e-9);
+        assert_eq!(local_hull_distance(centre, &street), 0.0);
+        assert!((local_hull_distance(centre, &sidewalk) - 1.2).abs() < 1e-9);
+        let objects = vec![car, sidewalk, street];
+        let context = SubjectContext::new(&objects, 0, &priors);
+        let [on_sidewalk, on_street] =
+            [1, 2].map(|b| pair_features(&objects[0], &objects[b], &context, &priors, 0.05));
+        // The contact point's nearest ground is the sidewalk, the centre's hull the street.
+        assert_eq!((on_sidewalk[40], on_street[40]), (1.0, 0.0));
+        assert_eq!((on_sidewalk[50], on_street[50]), (0.0, 1.0));
+        assert_eq!(on_street[49], 0.0);
+        assert!(on_sidewalk[49] > 1.0);
+        // Too few cells of a surface within the radius: the cap.
+        assert_eq!(
+            local_hull_distance([40.0, 0.0], &objects[2]),
+            LOCAL_HULL_CAP_M
+        );
+    }
+
+    #[test]
     fn contact_point_is_the_foot_and_picks_the_nearest_ground() {
         let vp = Viewpoint {
             position: [0.0, 0.0, 0.0],
@@ -543,8 +697,8 @@ mod tests {
             ground(2, -0.5, 1.5, Class::Sidewalk),
             ground(3, -4.0, -0.7, Class::Street),
         ];
-        let context = SubjectContext::new(&objects, 0);
         let none = ClassPriors::default();
+        let context = SubjectContext::new(&objects, 0, &none);
         let [on_sidewalk, on_street] =
             [1, 2].map(|b| pair_features(&objects[0], &objects[b], &context, &none, 0.05));
         assert_eq!((on_sidewalk[40], on_street[40]), (1.0, 0.0));

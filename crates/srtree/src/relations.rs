@@ -139,7 +139,7 @@ fn raw_features(
 ) -> Vec<[f64; FEATURE_COUNT]> {
     let context: Vec<SubjectContext> = (0..objects.len())
         .into_par_iter()
-        .map(|a| SubjectContext::new(objects, a))
+        .map(|a| SubjectContext::new(objects, a, priors))
         .collect();
     pairs
         .par_iter()
