@@ -91,6 +91,36 @@ def test_without_a_model_the_shipped_default_model_is_used(small):
     assert fc == streets.estimate(d / "city.osm", d / "cloud.ply", shipped)
 
 
+def test_with_sidewalk_equals_the_cli_and_centres_on_the_driving_area(cli, small):
+    """A with-sidewalk model with its sidewalk margins: the CLI's GeoJSON, with the shipped
+    driving-area model or a given one; the wrong kind of model is a ValueError."""
+    d, _ = small
+    run(
+        cli, "streets", "train", "--dataset", d, "--target", "with-sidewalk",
+        "--out", d / "ws.json", "--max-train-bins", "300",
+    )
+    for driving in [None, d / "model.json"]:
+        out = d / "ws.geojson"
+        extra = [] if driving is None else ["--driving-model", driving]
+        run(
+            cli, "streets", "estimate", "--map", d / "city.osm", "--cloud", d / "cloud.ply",
+            "--model", d / "ws.json", "--out", out, *extra,
+        )
+        fc = streets.estimate(d / "city.osm", d / "cloud.ply", d / "ws.json", driving_model=driving)
+        assert fc == json.loads(out.read_text())
+        assert fc["features"][0]["properties"]["target"] == "with_sidewalk"
+    shipped = streets.estimate(d / "city.osm", d / "cloud.ply", target="with_sidewalk")
+    assert shipped["features"][0]["properties"]["target"] == "with_sidewalk"
+    with pytest.raises(ValueError, match="driving-area model"):
+        streets.estimate(d / "city.osm", d / "cloud.ply", d / "ws.json", driving_model=d / "ws.json")
+    with pytest.raises(ValueError, match="with-sidewalk model"):
+        streets.estimate(d / "city.osm", d / "cloud.ply", d / "model.json", driving_model=d / "model.json")
+    with pytest.raises(ValueError, match="target"):
+        streets.estimate(d / "city.osm", d / "cloud.ply", d / "model.json", target="with_sidewalk")
+    with pytest.raises(ValueError, match="expected"):
+        streets.estimate(d / "city.osm", d / "cloud.ply", target="sidewalk")
+
+
 def test_bad_input_is_a_clear_error(small, tmp_path):
     d, _ = small
     with pytest.raises(urbansem.CloudError, match="no-such-cloud.ply"):

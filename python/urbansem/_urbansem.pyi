@@ -415,6 +415,9 @@ def streets_estimate(
     model_path: Optional[_Path] = None,
     model_json: Optional[bytes] = None,
     cloud_frame: str = "local",
+    target: Optional[str] = None,
+    driving_model_path: Optional[_Path] = None,
+    driving_model_json: Optional[bytes] = None,
 ) -> Dict[str, Any]:
     """Street offset and width per drivable segment: the GeoJSON ``urbansem streets estimate`` writes."""
 

@@ -46,18 +46,36 @@ def _cloud(cloud: Union[PathLike, Mapping[str, Any]]) -> Union[str, Dict[str, np
     return os.fspath(cloud)
 
 
+def _model_args(model: Optional[Union[PathLike, Mapping[str, Any], bytes]], prefix: str) -> Dict[str, Any]:
+    """The keyword arguments that pass ``model`` (a path, its parsed dict or its bytes)."""
+    if model is None:
+        return {}
+    if isinstance(model, Mapping):
+        return {f"{prefix}_json": json.dumps(model).encode()}
+    if isinstance(model, (bytes, bytearray)):
+        return {f"{prefix}_json": bytes(model)}
+    return {f"{prefix}_path": os.fspath(model)}
+
+
 def estimate(
     map: Union[OsmMap, PathLike],
     cloud: Union[PathLike, Mapping[str, Any]],
     model: Optional[Union[PathLike, Mapping[str, Any], bytes]] = None,
     *,
     cloud_frame: str = "local",
+    target: Optional[str] = None,
+    driving_model: Optional[Union[PathLike, Mapping[str, Any], bytes]] = None,
 ) -> Dict[str, Any]:
     """Estimates offset and width per drivable street segment of ``map`` from ``cloud`` (a
     path, or a dict of arrays as :func:`urbansem.read_cloud` returns) with ``model`` (the JSON
     of ``urbansem streets train``: a path, its parsed dict or its bytes; ``None``: the shipped
-    default model, trained on simulated scans, as ``urbansem streets estimate`` without
+    model of ``target``, trained on simulated scans, as ``urbansem streets estimate`` without
     ``--model``).
+
+    ``target`` is ``"driving_area"`` (the default without a model) or ``"with_sidewalk"``;
+    with a model it must be the model's. A with-sidewalk model with sidewalk margins centres
+    each segment's prior on the driving area estimated first by ``driving_model`` (same forms;
+    ``None``: the shipped driving-area model), as ``--driving-model`` does.
 
     ``cloud_frame`` is the cloud's frame as ``--cloud-frame`` takes it (``local``,
     ``utm:32N``, ``enu:LAT,LON``). Returns the RFC 7946 FeatureCollection (a dict) that
@@ -66,13 +84,14 @@ def estimate(
     """
     if not isinstance(map, OsmMap):
         map = os.fspath(map)
-    if model is None:
-        return _estimate(map, _cloud(cloud), cloud_frame=cloud_frame)
-    if isinstance(model, Mapping):
-        return _estimate(map, _cloud(cloud), model_json=json.dumps(model).encode(), cloud_frame=cloud_frame)
-    if isinstance(model, (bytes, bytearray)):
-        return _estimate(map, _cloud(cloud), model_json=bytes(model), cloud_frame=cloud_frame)
-    return _estimate(map, _cloud(cloud), model_path=os.fspath(model), cloud_frame=cloud_frame)
+    return _estimate(
+        map,
+        _cloud(cloud),
+        cloud_frame=cloud_frame,
+        target=target,
+        **_model_args(model, "model"),
+        **_model_args(driving_model, "driving_model"),
+    )
 
 
 def transfer(

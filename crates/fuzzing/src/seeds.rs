@@ -580,6 +580,7 @@ fn street_model_json() -> Option<Vec<u8>> {
         geometry,
         classifier,
         prior: streets::potentials::GeometryPrior::fit(&geoms),
+        sidewalk_prior: None,
         tag_prior: Some(streets::prior::TagPrior::fit(
             &geoms
                 .iter()

@@ -150,6 +150,9 @@ pub struct ModelRealReport {
     pub rmse_d: Option<f64>,
     /// Every passed segment.
     pub segments: Vec<ModelRealRow>,
+    /// With sidewalk: whether each segment's prior was centred on a driving-area estimate
+    /// of the same cloud plus the model's sidewalk margins.
+    pub driving_area_prior: bool,
     /// Wall time of reading and registering the sequence and of the estimate, seconds.
     pub seconds: std::collections::BTreeMap<String, f64>,
 }
@@ -164,6 +167,7 @@ pub fn eval_real_model(
     dataset: &Path,
     map: &Path,
     model: &crate::model::StreetModel,
+    driving: Option<&crate::model::StreetModel>,
     self_calibrate: usize,
     progress: &dyn Fn(usize, usize),
 ) -> Result<ModelRealReport> {
@@ -196,7 +200,7 @@ pub fn eval_real_model(
         &real.dataset,
         &real.passed,
         &truths,
-        model,
+        (model, driving),
         self_calibrate,
         (&map.display().to_string(), &dataset.display().to_string()),
         seconds,
@@ -208,6 +212,7 @@ pub fn eval_real_model(
 pub fn eval_dataset_model(
     dir: &Path,
     model: &crate::model::StreetModel,
+    driving: Option<&crate::model::StreetModel>,
     self_calibrate: usize,
 ) -> Result<ModelRealReport> {
     let t = Instant::now();
@@ -235,7 +240,7 @@ pub fn eval_dataset_model(
         &ds,
         &which,
         &truths,
-        model,
+        (model, driving),
         self_calibrate,
         (&ds.map_path.display().to_string(), &name),
         seconds,
@@ -244,12 +249,17 @@ pub fn eval_dataset_model(
 
 /// Estimates `ds` with `model` (self-calibrated when `self_calibrate` > 0) and scores the
 /// segments `which` against `truths` (one per segment; `None`: no truth). `names`: (map,
-/// cloud) for messages.
+/// cloud) for messages. A with-sidewalk model with sidewalk margins and a driving-area
+/// model: the driving area is estimated first and centres the with-sidewalk priors, as
+/// `streets estimate` does.
 fn score_model(
     ds: &StreetsDataset,
     which: &[usize],
     truths: &[Option<(f64, f64)>],
-    model: &crate::model::StreetModel,
+    (model, driving): (
+        &crate::model::StreetModel,
+        Option<&crate::model::StreetModel>,
+    ),
     self_calibrate: usize,
     names: (&str, &str),
     mut seconds: std::collections::BTreeMap<String, f64>,
@@ -257,11 +267,10 @@ fn score_model(
     let t = Instant::now();
     let (map_name, cloud_name) = names;
     let (osm, cloud) = (&ds.map, &ds.cloud);
-    let est = if self_calibrate > 0 {
-        model.estimate_self_calibrated(osm, cloud, cloud_name, map_name, self_calibrate)?
-    } else {
-        model.estimate(osm, cloud, map_name, cloud_name)?
-    };
+    let driving_area_prior = model.wants_driving_area()
+        && driving.is_some_and(|d| d.target == crate::model::Target::DrivingArea);
+    let est =
+        model.estimate_with_driving(driving, osm, cloud, (map_name, cloud_name), self_calibrate)?;
     seconds.insert("estimate".to_string(), t.elapsed().as_secs_f64());
     let (mut predicted, mut truth) = (Vec::new(), Vec::new());
     let bins = crate::model::segment_bins(osm, cloud, which, &model.geometry);
@@ -311,6 +320,7 @@ fn score_model(
         rmse_w: (len > 0.0).then(|| (w2 / len).sqrt()),
         rmse_d: (len > 0.0).then(|| (d2 / len).sqrt()),
         segments: rows,
+        driving_area_prior,
         seconds,
     })
 }

@@ -8,7 +8,7 @@ use crate::potentials::{
     segment_potential, tempered_with_prior, ColumnCounts, Confusion, GeometryPrior,
     SegmentPotential, Tempering, ThetaGrid,
 };
-use crate::prior::{PriorTables, SegmentTags, TagPrior};
+use crate::prior::{MarginSample, PriorTables, SegmentTags, SidewalkPrior, TagPrior};
 use crate::svm::{Svm, SvmOptions};
 use crate::{Result, StreetsError};
 use geodata::classes::Class;
@@ -367,6 +367,9 @@ pub struct TrainingBins {
     pub geometries: Vec<(f64, f64)>,
     /// The OSM tags of the same segments, in the same order.
     pub tags: Vec<SegmentTags>,
+    /// With sidewalk: the segments with both truths (tags, driving area, with sidewalk),
+    /// for the [`SidewalkPrior`]; empty for the driving area.
+    pub margins: Vec<MarginSample>,
 }
 
 impl TrainingBins {
@@ -379,6 +382,14 @@ impl TrainingBins {
             .zip(self.geometries.iter().copied())
             .collect();
         TagPrior::fit(&samples, target == Target::WithSidewalk)
+    }
+
+    /// The sidewalk margins fitted on these segments (with sidewalk only; `None` for the
+    /// driving area or without a segment that has both truths).
+    pub fn sidewalk_prior(&self, target: Target) -> Option<SidewalkPrior> {
+        (target == Target::WithSidewalk)
+            .then(|| SidewalkPrior::fit(&self.margins))
+            .flatten()
     }
 }
 
@@ -422,6 +433,13 @@ pub fn dataset_bins(
         if has_truth(ds, s, target) {
             out.geometries.push(true_geometry(ds, s, target));
             out.tags.push(SegmentTags::of(&ds.map, s));
+            if target == Target::WithSidewalk && has_truth(ds, s, Target::DrivingArea) {
+                out.margins.push((
+                    SegmentTags::of(&ds.map, s),
+                    true_geometry(ds, s, Target::DrivingArea),
+                    true_geometry(ds, s, target),
+                ));
+            }
         }
         for k in b.usable() {
             if let Some(c) = b.features.truth[k] {
@@ -443,6 +461,12 @@ pub const DEFAULT_MODEL_JSON: &[u8] = include_bytes!("../models/default.json");
 /// How errors and reports name the shipped default model.
 pub const DEFAULT_MODEL_NAME: &str = "<urbansem default street model>";
 
+/// The shipped with-sidewalk model's JSON ([`StreetModel::shipped`]).
+pub const WITH_SIDEWALK_MODEL_JSON: &[u8] = include_bytes!("../models/with_sidewalk.json");
+
+/// How errors and reports name the shipped with-sidewalk model.
+pub const WITH_SIDEWALK_MODEL_NAME: &str = "<urbansem default with-sidewalk street model>";
+
 /// A trained model for `urbansem streets estimate`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StreetModel {
@@ -458,6 +482,11 @@ pub struct StreetModel {
     /// every segment.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tag_prior: Option<TagPrior>,
+    /// With sidewalk: the sidewalk margins per class, for a prior centred on each segment's
+    /// estimated driving area ([`StreetModel::estimate_given_driving_area`]); absent for the
+    /// driving area and in models written before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sidewalk_prior: Option<SidewalkPrior>,
 }
 
 /// One segment's estimate.
@@ -512,6 +541,7 @@ impl StreetModel {
             classifier,
             prior: GeometryPrior::fit(&bins.geometries),
             tag_prior: Some(bins.tag_prior(target)),
+            sidewalk_prior: bins.sidewalk_prior(target),
         })
     }
 
@@ -554,6 +584,7 @@ impl StreetModel {
             }
             all.geometries.extend_from_slice(&bins.geometries);
             all.tags.extend(bins.tags);
+            all.margins.extend(bins.margins);
         }
         let classifier = BinClassifier::train(&all.features, &all.labels, classifier)?;
         Ok(StreetModel {
@@ -562,6 +593,7 @@ impl StreetModel {
             classifier,
             prior: GeometryPrior::fit(&all.geometries),
             tag_prior: Some(all.tag_prior(target)),
+            sidewalk_prior: all.sidewalk_prior(target),
         })
     }
 
@@ -591,6 +623,20 @@ impl StreetModel {
     /// Its measured accuracy on real scans is in the crate README ("The shipped default model").
     pub fn shipped_default() -> Result<StreetModel> {
         StreetModel::from_json(DEFAULT_MODEL_JSON, Path::new(DEFAULT_MODEL_NAME))
+    }
+
+    /// The shipped model for `target`: [`StreetModel::shipped_default`] for the driving area;
+    /// with sidewalk, the model built by the same command with `--target with-sidewalk --out
+    /// crates/streets/models/with_sidewalk.json` (same data and licence, its sidewalk margins
+    /// learnt on the same segments; a test rebuilds it byte for byte).
+    pub fn shipped(target: Target) -> Result<StreetModel> {
+        match target {
+            Target::DrivingArea => StreetModel::shipped_default(),
+            Target::WithSidewalk => StreetModel::from_json(
+                WITH_SIDEWALK_MODEL_JSON,
+                Path::new(WITH_SIDEWALK_MODEL_NAME),
+            ),
+        }
     }
 
     /// The first value out of range, described with its field and the accepted range.
@@ -727,6 +773,15 @@ impl StreetModel {
             geometry_prior("tag_prior.global", &t.global)?;
             t.check()?;
         }
+        if let Some(sp) = &self.sidewalk_prior {
+            if self.target != Target::WithSidewalk {
+                return Err(format!(
+                    "sidewalk_prior is set on a {} model (only with-sidewalk models have one)",
+                    self.target.key()
+                ));
+            }
+            sp.check()?;
+        }
         Ok(())
     }
 }
@@ -764,6 +819,18 @@ impl<'a> PotentialStep<'a> {
     /// Indexes `cloud` against the corridors of `map`'s segments (O(P + S)).
     pub fn new(model: &'a StreetModel, map: &'a OsmMap, cloud: &'a PointCloud) -> Self {
         let grid = model.geometry.theta_grid();
+        let prior = model.prior_tables(map, &grid);
+        Self::with_prior(model, map, cloud, prior)
+    }
+
+    /// [`PotentialStep::new`] with the given prior tables (one per segment of `map`).
+    fn with_prior(
+        model: &'a StreetModel,
+        map: &'a OsmMap,
+        cloud: &'a PointCloud,
+        prior: PriorTables,
+    ) -> Self {
+        let grid = model.geometry.theta_grid();
         PotentialStep {
             model,
             cloud,
@@ -774,7 +841,7 @@ impl<'a> PotentialStep<'a> {
                 &model.geometry.corridor,
             ),
             confusion_log: model.classifier.confusion.log_likelihood(),
-            prior: model.prior_tables(map, &grid),
+            prior,
             grid,
         }
     }
@@ -872,6 +939,32 @@ impl StreetModel {
         PriorTables::new(&priors, grid)
     }
 
+    /// The prior of every segment of `map` given driving-area estimates of the same cloud:
+    /// with a [`SidewalkPrior`], a segment with an estimate (and its width spread) gets a
+    /// prior centred on that driving area plus its class' sidewalk margins, as `streets
+    /// eval` does; every other segment its [`StreetModel::segment_prior`].
+    pub fn priors_given_driving_area(
+        &self,
+        map: &OsmMap,
+        driving: &[SegmentEstimate],
+    ) -> Vec<GeometryPrior> {
+        let mut priors: Vec<GeometryPrior> = (0..map.streets.segments.len())
+            .map(|s| self.segment_prior(map, s))
+            .collect();
+        if let Some(sp) = &self.sidewalk_prior {
+            for e in driving {
+                if let (Some(p), Some(sd)) = (priors.get_mut(e.segment), e.width_sd_m) {
+                    *p = sp.given_driving_area(
+                        &SegmentTags::of(map, e.segment),
+                        (e.offset_m, e.width_m),
+                        sd,
+                    );
+                }
+            }
+        }
+        priors
+    }
+
     /// Estimates offset and width of every segment of `map` that `cloud` covers.
     ///
     /// Inference is [`Network::max_product`], which solves each connected component of the
@@ -884,8 +977,96 @@ impl StreetModel {
         map_name: &str,
         cloud_name: &str,
     ) -> Result<Estimates> {
+        let step = PotentialStep::new(self, map, cloud);
+        self.estimate_with(step, map, map_name, cloud_name)
+    }
+
+    /// Whether this model centres its priors on a driving-area estimate: a with-sidewalk
+    /// model with sidewalk margins.
+    pub fn wants_driving_area(&self) -> bool {
+        self.target == Target::WithSidewalk && self.sidewalk_prior.is_some()
+    }
+
+    /// [`StreetModel::estimate`], or, for a model that [wants the driving
+    /// area](StreetModel::wants_driving_area) and a driving-area model `driving`, the driving
+    /// area estimated first and then [`StreetModel::estimate_given_driving_area`];
+    /// `self_calibrate` > 0: both self-calibrated with at most that many rounds
+    /// ([`StreetModel::estimate_self_calibrated`]). `names`: (map, cloud) for messages.
+    pub fn estimate_with_driving(
+        &self,
+        driving: Option<&StreetModel>,
+        map: &OsmMap,
+        cloud: &PointCloud,
+        names: (&str, &str),
+        self_calibrate: usize,
+    ) -> Result<Estimates> {
+        let (map_name, cloud_name) = names;
+        let driving =
+            driving.filter(|d| self.wants_driving_area() && d.target == Target::DrivingArea);
+        let plain = |m: &StreetModel| {
+            if self_calibrate > 0 {
+                m.estimate_self_calibrated(map, cloud, cloud_name, map_name, self_calibrate)
+            } else {
+                m.estimate(map, cloud, map_name, cloud_name)
+            }
+        };
+        let Some(d) = driving else {
+            return plain(self);
+        };
+        let de = plain(d)?;
+        if self_calibrate > 0 {
+            self.estimate_self_calibrated_given_driving_area(
+                map,
+                cloud,
+                cloud_name,
+                map_name,
+                self_calibrate,
+                &de.segments,
+            )
+        } else {
+            self.estimate_given_driving_area(map, cloud, map_name, cloud_name, &de.segments)
+        }
+    }
+
+    /// [`StreetModel::estimate`] for a with-sidewalk model, each segment's prior centred on
+    /// its estimated driving area (`driving`, e.g. the [`StreetModel::estimate`] of a
+    /// driving-area model on the same cloud) where the model has a [`SidewalkPrior`]
+    /// ([`StreetModel::priors_given_driving_area`]).
+    pub fn estimate_given_driving_area(
+        &self,
+        map: &OsmMap,
+        cloud: &PointCloud,
+        map_name: &str,
+        cloud_name: &str,
+        driving: &[SegmentEstimate],
+    ) -> Result<Estimates> {
+        let step = self.step_given_driving_area(map, cloud, driving);
+        self.estimate_with(step, map, map_name, cloud_name)
+    }
+
+    /// The potential step with [`StreetModel::priors_given_driving_area`].
+    fn step_given_driving_area<'a>(
+        &'a self,
+        map: &'a OsmMap,
+        cloud: &'a PointCloud,
+        driving: &[SegmentEstimate],
+    ) -> PotentialStep<'a> {
+        let priors = self.priors_given_driving_area(map, driving);
+        let tables = PriorTables::new(&priors, &self.geometry.theta_grid());
+        PotentialStep::with_prior(self, map, cloud, tables)
+    }
+
+    /// The estimate with the given potential step.
+    fn estimate_with(
+        &self,
+        step: PotentialStep<'_>,
+        map: &OsmMap,
+        map_name: &str,
+        cloud_name: &str,
+    ) -> Result<Estimates> {
+        let cloud = step.cloud;
         let which = drivable_segments(map, map_name)?;
-        let outcomes = PotentialStep::new(self, map, cloud).outcomes(&which)?;
+        let outcomes = step.outcomes(&which)?;
         let too_short = outcomes
             .iter()
             .filter(|o| matches!(o, SegmentOutcome::TooShort))
@@ -937,8 +1118,36 @@ impl StreetModel {
         map_name: &str,
         iterations: usize,
     ) -> Result<Estimates> {
-        let which = drivable_segments(map, map_name)?;
         let step = PotentialStep::new(self, map, cloud);
+        self.self_calibrated_with(step, map, cloud_name, map_name, iterations)
+    }
+
+    /// [`StreetModel::estimate_self_calibrated`] with the priors of
+    /// [`StreetModel::estimate_given_driving_area`].
+    pub fn estimate_self_calibrated_given_driving_area(
+        &self,
+        map: &OsmMap,
+        cloud: &PointCloud,
+        cloud_name: &str,
+        map_name: &str,
+        iterations: usize,
+        driving: &[SegmentEstimate],
+    ) -> Result<Estimates> {
+        let step = self.step_given_driving_area(map, cloud, driving);
+        self.self_calibrated_with(step, map, cloud_name, map_name, iterations)
+    }
+
+    /// The self-calibrated estimate with the given potential step.
+    fn self_calibrated_with(
+        &self,
+        step: PotentialStep<'_>,
+        map: &OsmMap,
+        cloud_name: &str,
+        map_name: &str,
+        iterations: usize,
+    ) -> Result<Estimates> {
+        let cloud = step.cloud;
+        let which = drivable_segments(map, map_name)?;
         let counted = step.column_counts(&which)?;
         let too_short = counted.iter().filter(|c| c.is_none()).count();
         let unobserved = counted.iter().filter(|c| matches!(c, Some(None))).count();
@@ -1124,6 +1333,7 @@ mod tests {
                 },
             },
             prior: GeometryPrior::fit(&[(0.0, 7.0), (0.5, 9.0)]),
+            sidewalk_prior: None,
             tag_prior: Some(TagPrior::fit(
                 &[(0.0, 7.0), (0.5, 9.0), (0.2, 4.0)].map(|g| {
                     let tags = SegmentTags {

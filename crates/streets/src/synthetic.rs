@@ -211,6 +211,7 @@ pub fn lattice_model(lattice: &Lattice) -> crate::Result<crate::model::StreetMod
         geometry,
         classifier: BinClassifier::train(&x, &y, &options)?,
         prior: crate::potentials::GeometryPrior::fit(&drivable),
+        sidewalk_prior: None,
         tag_prior: None,
     })
 }

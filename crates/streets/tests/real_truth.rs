@@ -249,7 +249,7 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
     // drivable segment has the simulator's truth, and the classifier finds its own training
     // drive's street bins (measured F1 0.874; RMSE_w 3.1 m: the two 14 m boulevard segments
     // get the prior's 6.4–6.6 m).
-    let sim = streets::jobs::eval_dataset_model(&dir, &model, 0).unwrap();
+    let sim = streets::jobs::eval_dataset_model(&dir, &model, None, 0).unwrap();
     assert!(
         sim.with_truth >= 20 && sim.covered == sim.with_truth,
         "{sim:?}"
@@ -259,7 +259,8 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
     assert!(!model.classifier.scaler.mean.is_empty());
     let kitti = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/lidar/kitti360_2013_05_28_drive_0009");
-    let r = streets::jobs::eval_real_model(&kitti, &roads_map(), &model, 0, &|_, _| {}).unwrap();
+    let r =
+        streets::jobs::eval_real_model(&kitti, &roads_map(), &model, None, 0, &|_, _| {}).unwrap();
     assert!(r.passed >= 12, "{r:?}");
     assert!(r.covered >= 10, "{r:?}");
     let (mut w2, mut len) = (0.0, 0.0);
@@ -283,7 +284,7 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
         (zero.too_short, zero.unobserved)
     );
     let calibrated =
-        streets::jobs::eval_real_model(&kitti, &roads_map(), &model, 20, &|_, _| {}).unwrap();
+        streets::jobs::eval_real_model(&kitti, &roads_map(), &model, None, 20, &|_, _| {}).unwrap();
     assert_eq!(calibrated.covered, r.covered);
     assert!(calibrated.rmse_w.unwrap().is_finite());
     let rmse_w = r.rmse_w.unwrap();

@@ -167,6 +167,7 @@ fn model_for(ds: &StreetsDataset) -> StreetModel {
         geometry,
         classifier,
         prior,
+        sidewalk_prior: None,
         tag_prior: None,
     }
 }
@@ -251,4 +252,74 @@ fn malformed_dataset_files_are_named_with_their_line() {
     .unwrap();
     let err = StreetsDataset::load(&dir).err().unwrap().to_string();
     assert!(err.contains("expected \"streets\""), "{err}");
+}
+
+#[test]
+fn a_with_sidewalk_model_centres_its_prior_on_the_estimated_driving_area() {
+    let ds = StreetsDataset::load(fixture("sidewalk-prior")).unwrap();
+    let options = ClassifierOptions {
+        max_train_bins: 800,
+        calibration_bins: 800,
+        ..ClassifierOptions::default()
+    };
+    let driving = StreetModel::train(&ds, Target::DrivingArea, &options).unwrap();
+    let sidewalk = StreetModel::train(&ds, Target::WithSidewalk, &options).unwrap();
+    // Only the with-sidewalk model learns margins: every fixture segment has 2 m sidewalks
+    // on both sides, centred on its driving area.
+    assert_eq!(driving.sidewalk_prior, None);
+    let margins = sidewalk.sidewalk_prior.clone().unwrap();
+    assert_eq!(margins.global.segments, 11);
+    assert!((margins.global.mean_m - 2.0).abs() < 1e-9, "{margins:?}");
+    assert!(margins.global.mean_shift_m.abs() < 1e-9);
+    // The prior of an estimated segment is centred on its driving area plus both margins;
+    // a segment without a driving-area estimate keeps its tag group's.
+    let d = driving
+        .estimate(&ds.map, &ds.cloud, "map.osm", "cloud.ply")
+        .unwrap();
+    assert_eq!(d.segments.len(), 11);
+    let mut partial = d.segments.clone();
+    let dropped = partial.remove(0);
+    let priors = sidewalk.priors_given_driving_area(&ds.map, &partial);
+    assert_eq!(priors.len(), 11);
+    for e in &partial {
+        let p = &priors[e.segment];
+        assert!(
+            (p.mean_log_width.exp() - (e.width_m + 4.0)).abs() < 1e-9,
+            "{p:?} {e:?}"
+        );
+        assert!((p.mean_offset_m - e.offset_m).abs() < 1e-9);
+    }
+    assert_eq!(
+        priors[dropped.segment],
+        sidewalk.segment_prior(&ds.map, dropped.segment)
+    );
+    // Estimated with that prior, every width is within 1 m of the truth.
+    let w = sidewalk
+        .estimate_given_driving_area(&ds.map, &ds.cloud, "map.osm", "cloud.ply", &d.segments)
+        .unwrap();
+    assert_eq!(w.segments.len(), 11);
+    for e in &w.segments {
+        let t = &ds.segments[e.segment];
+        let truth = t.width_m + 2.0 * t.sidewalk_m;
+        assert!((e.width_m - truth).abs() < 1.0, "{e:?} vs {truth}");
+    }
+    // The margins survive the model file; a NaN margin is named when the file is read.
+    let mut v = serde_json::to_value(&sidewalk).unwrap();
+    let back = StreetModel::from_json(
+        &serde_json::to_vec(&v).unwrap(),
+        std::path::Path::new("m.json"),
+    )
+    .unwrap();
+    assert_eq!(back, sidewalk);
+    v["sidewalk_prior"]["global"]["sigma_m"] = serde_json::json!(-1.0);
+    let err = StreetModel::from_json(
+        &serde_json::to_vec(&v).unwrap(),
+        std::path::Path::new("m.json"),
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("sidewalk_prior.global.sigma_m"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("m.json"), "{err}");
 }

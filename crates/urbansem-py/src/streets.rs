@@ -15,7 +15,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 use std::sync::Arc;
-use streets::model::StreetModel;
+use streets::model::{StreetModel, Target};
 
 /// Adds the streets functions to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -51,13 +51,41 @@ fn cloud_of_dict(d: &Bound<'_, PyDict>) -> PyResult<PointCloud> {
     )
 }
 
+/// A model given as a path or as JSON bytes (`what` names it in errors); neither: `None`.
+fn model_of(
+    path: Option<PathBuf>,
+    json: Option<Vec<u8>>,
+    what: &str,
+) -> PyResult<Option<StreetModel>> {
+    match (path, json) {
+        (Some(p), None) => {
+            let bytes = std::fs::read(&p).map_err(|e| {
+                StreetsError::new_err(format!("reading the model {}: {e}", p.display()))
+            })?;
+            StreetModel::from_json(&bytes, &p).map(Some)
+        }
+        (None, Some(b)) => StreetModel::from_json(&b, std::path::Path::new(what)).map(Some),
+        (None, None) => Ok(None),
+        (Some(_), Some(_)) => {
+            return Err(PyValueError::new_err(format!(
+                "give the {what} as a path or as JSON, not both"
+            )))
+        }
+    }
+    .map_err(raise!(StreetsError))
+}
+
 /// Estimates offset and width per drivable OSM segment from a cloud (a path, or a dict of
 /// arrays as `read_cloud` returns) and a model (`urbansem streets train`'s JSON, as a path or
-/// as bytes; neither: the shipped default model): the RFC 7946 FeatureCollection `urbansem
-/// streets estimate` writes, as a dict.
+/// as bytes; neither: the shipped model of `target`, "driving_area" by default): the RFC 7946
+/// FeatureCollection `urbansem streets estimate` writes, as a dict. A with-sidewalk model
+/// with sidewalk margins centres its priors on the driving area estimated first with the
+/// driving model (path or bytes; neither: the shipped one), as `--driving-model` does.
 #[pyfunction]
 #[pyo3(name = "streets_estimate", signature = (map, cloud, *, model_path = None,
-    model_json = None, cloud_frame = "local"))]
+    model_json = None, cloud_frame = "local", target = None, driving_model_path = None,
+    driving_model_json = None))]
+#[allow(clippy::too_many_arguments)]
 fn streets_estimate<'py>(
     py: Python<'py>,
     map: &Bound<'py, PyAny>,
@@ -65,26 +93,58 @@ fn streets_estimate<'py>(
     model_path: Option<PathBuf>,
     model_json: Option<Vec<u8>>,
     cloud_frame: &str,
+    target: Option<&str>,
+    driving_model_path: Option<PathBuf>,
+    driving_model_json: Option<Vec<u8>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let frame: CloudFrame = cloud_frame
         .parse()
         .map_err(|e| PyValueError::new_err(chain(&e)))?;
-    let model = match (model_path, model_json) {
-        (Some(p), None) => {
-            let bytes = std::fs::read(&p).map_err(|e| {
-                StreetsError::new_err(format!("reading the model {}: {e}", p.display()))
-            })?;
-            StreetModel::from_json(&bytes, &p)
+    let target = match target {
+        None => None,
+        Some("driving_area") => Some(Target::DrivingArea),
+        Some("with_sidewalk") => Some(Target::WithSidewalk),
+        Some(t) => {
+            return Err(PyValueError::new_err(format!(
+                "target {t:?}: expected \"driving_area\" or \"with_sidewalk\""
+            )))
         }
-        (None, Some(b)) => StreetModel::from_json(&b, std::path::Path::new("<model>")),
-        (None, None) => StreetModel::shipped_default(),
-        (Some(_), Some(_)) => {
+    };
+    let model = match model_of(model_path, model_json, "<model>")? {
+        Some(m) => {
+            if let Some(t) = target.filter(|&t| t != m.target) {
+                return Err(PyValueError::new_err(format!(
+                    "target {:?} but the model is a {:?} model",
+                    t.key(),
+                    m.target.key()
+                )));
+            }
+            m
+        }
+        None => StreetModel::shipped(target.unwrap_or(Target::DrivingArea))
+            .map_err(raise!(StreetsError))?,
+    };
+    let driving = model_of(driving_model_path, driving_model_json, "<driving model>")?;
+    let driving = if model.wants_driving_area() {
+        let d = match driving {
+            Some(d) => d,
+            None => StreetModel::shipped_default().map_err(raise!(StreetsError))?,
+        };
+        if d.target != Target::DrivingArea {
+            return Err(PyValueError::new_err(format!(
+                "the driving model is a {:?} model; it must be a driving-area model",
+                d.target.key()
+            )));
+        }
+        Some(d)
+    } else {
+        if driving.is_some() {
             return Err(PyValueError::new_err(
-                "give the model as model_path or model_json, not both",
-            ))
+                "a driving model is for a with-sidewalk model with sidewalk margins",
+            ));
         }
-    }
-    .map_err(raise!(StreetsError))?;
+        None
+    };
     let (osm, map_name): (Arc<OsmMap>, String) = match map.cast::<PyOsmMap>() {
         Ok(m) => {
             let m = m.get();
@@ -127,7 +187,7 @@ fn streets_estimate<'py>(
             .into_map_frame(&mut pc, &osm.frame)
             .map_err(|e| format!("moving {cloud_name} into the map's frame: {}", chain(&e)))?;
         let est = model
-            .estimate(&osm, &pc, &map_name, &cloud_name)
+            .estimate_with_driving(driving.as_ref(), &osm, &pc, (&map_name, &cloud_name), 0)
             .map_err(|e| chain(&e))?;
         let fc = streets::geojson::feature_collection(&osm, &est.segments, model.target);
         streets::geojson::validate(&fc).map_err(|e| format!("internal: {e}"))?;

@@ -1416,6 +1416,64 @@ fn the_shipped_default_street_model_is_what_its_documented_command_builds() {
     }
     assert_eq!(outputs[0], outputs[1]);
     assert!(String::from_utf8_lossy(&outputs[0]).contains("\"width\""));
+    // The with-sidewalk model: the same command with --target with-sidewalk.
+    let shipped_ws = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../streets/models/with_sidewalk.json"
+    );
+    let ws = dir.path().join("with_sidewalk.json");
+    let o = urbansem()
+        .args(["streets", "train", "--dataset"])
+        .arg(format!("{},{}", emb.display(), hel.display()))
+        .args([
+            "--normalise",
+            "--no-colour",
+            "--target",
+            "with-sidewalk",
+            "--out",
+        ])
+        .arg(&ws)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(&ws).unwrap() == std::fs::read(shipped_ws).unwrap(),
+        "crates/streets/models/with_sidewalk.json is not what its command builds: rebuild it (crates/streets/README.md)"
+    );
+    // `--target with-sidewalk` without --model: the shipped with-sidewalk model, its prior
+    // centred on the shipped driving-area model's estimates.
+    let out = dir.path().join("ws.geojson");
+    let o = urbansem()
+        .args(["streets", "estimate", "--target", "with-sidewalk", "--map"])
+        .arg(emb.join("city.osm"))
+        .arg("--cloud")
+        .arg(emb.join("cloud.ply"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no --driving-model"));
+    let fc: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(fc["features"][0]["properties"]["target"], "with_sidewalk");
+    // A --target that is not the model's is a usage error.
+    let o = urbansem()
+        .args(["streets", "estimate", "--target", "driving-area", "--map"])
+        .arg(emb.join("city.osm"))
+        .arg("--cloud")
+        .arg(emb.join("cloud.ply"))
+        .arg("--model")
+        .arg(shipped_ws)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--target driving-area") && err.contains("with-sidewalk model"),
+        "{err}"
+    );
 }
 
 /// Issue 17 with issue 19: a streets plan without `--model` uses the shipped default model,
@@ -1496,4 +1554,68 @@ fn localize_eval_takes_a_kitti360_sequence() {
     let (code, err) = eval(None);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("kitti360"), "{err}");
+}
+
+/// Issue 17: a with-sidewalk model carries its sidewalk margins, and `streets estimate`
+/// centres its prior on the driving area estimated first (`--driving-model`, default the
+/// shipped model); a driving model of the wrong kind is a usage error named before any data
+/// is read.
+#[test]
+fn streets_estimate_with_sidewalk_centres_on_the_driving_area() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("sim");
+    sim_dataset("streets", &["--scans", "4"], &data);
+    let ws = dir.path().join("ws.json");
+    let o = urbansem()
+        .args(["streets", "train", "--target", "with-sidewalk", "--dataset"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&ws)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let model: serde_json::Value = serde_json::from_slice(&std::fs::read(&ws).unwrap()).unwrap();
+    assert!(
+        model["sidewalk_prior"]["global"]["mean_m"]
+            .as_f64()
+            .unwrap()
+            > 0.5,
+        "{}",
+        model["sidewalk_prior"]
+    );
+    let estimate = |driving: Option<&std::path::Path>, model: &std::path::Path| {
+        let out = dir.path().join("out.geojson");
+        let mut cmd = urbansem();
+        cmd.args(["streets", "estimate", "--map"])
+            .arg(data.join("city.osm"))
+            .arg("--cloud")
+            .arg(data.join("cloud.ply"))
+            .arg("--model")
+            .arg(model)
+            .arg("--out")
+            .arg(&out);
+        if let Some(d) = driving {
+            cmd.arg("--driving-model").arg(d);
+        }
+        (cmd.output().unwrap(), out)
+    };
+    let (o, out) = estimate(None, &ws);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no --driving-model"));
+    let fc: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(fc["features"][0]["properties"]["target"], "with_sidewalk");
+    // The driving model must model the driving area.
+    let (o, _) = estimate(Some(&ws), &ws);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("ws.json") && err.contains("driving-area model"),
+        "{err}"
+    );
+    // A driving-area model takes no driving model.
+    let shipped = std::path::Path::new("../streets/models/default.json");
+    let (o, _) = estimate(Some(shipped), shipped);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("is for a with-sidewalk model"), "{err}");
 }

@@ -142,6 +142,10 @@ pub enum StreetsCommand {
         /// cloud, at most this many rounds (0: the model's calibration matrix as it is).
         #[arg(long, default_value_t = 0)]
         self_calibrate: usize,
+        /// With a with-sidewalk --model: the driving-area model whose estimates centre the
+        /// with-sidewalk priors, as in `streets estimate` (default: the shipped model).
+        #[arg(long)]
+        driving_model: Option<PathBuf>,
     },
     /// Table 4.1 analogue on a real labelled sequence (KITTI-360 or MCD layout) and an OSM
     /// map of its streets: scans registered by their poses, each segment's true offset and
@@ -171,6 +175,10 @@ pub enum StreetsCommand {
         /// cloud, at most this many rounds (0: the model's calibration matrix as it is).
         #[arg(long, default_value_t = 0)]
         self_calibrate: usize,
+        /// With a with-sidewalk --model: the driving-area model whose estimates centre the
+        /// with-sidewalk priors, as in `streets estimate` (default: the shipped model).
+        #[arg(long)]
+        driving_model: Option<PathBuf>,
     },
     /// Train a model (classifier, confusion matrix, prior) on whole `streets` datasets and
     /// labelled real sequences together.
@@ -215,10 +223,20 @@ pub enum StreetsCommand {
         /// or enu:LAT,LON (east/north/up metres about a WGS84 anchor); converted exactly.
         #[arg(long, default_value = "local")]
         cloud_frame: geodata::georef::CloudFrame,
-        /// Model from `urbansem streets train` (default: the shipped model, trained on
-        /// simulated scans of the embedded city and of OSM Helsinki; see the streets README).
+        /// Model from `urbansem streets train` (default: the shipped model of --target,
+        /// trained on simulated scans of the embedded city and of OSM Helsinki; see the
+        /// streets README).
         #[arg(long)]
         model: Option<PathBuf>,
+        /// Street area to estimate with the shipped models (with --model: must be the
+        /// model's) [default: driving-area, or the --model's].
+        #[arg(long, value_enum)]
+        target: Option<TargetArg>,
+        /// With a with-sidewalk --model: the driving-area model whose estimates on the same
+        /// cloud centre each segment's with-sidewalk prior, plus its class' sidewalk margins
+        /// learnt in training (default: the shipped model).
+        #[arg(long)]
+        driving_model: Option<PathBuf>,
         /// Output GeoJSON.
         #[arg(long)]
         out: PathBuf,
@@ -314,9 +332,21 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             eval: _,
             model: Some(model),
             self_calibrate,
+            driving_model,
         } => {
             let model_value = model_for_eval(&model, segments_out.as_deref())?;
-            let r = streets::jobs::eval_dataset_model(&dataset, &model_value, self_calibrate)?;
+            let driving = driving_model_for(
+                &model_value,
+                &model.display().to_string(),
+                driving_model.as_deref(),
+                "streets eval",
+            )?;
+            let r = streets::jobs::eval_dataset_model(
+                &dataset,
+                &model_value,
+                driving.as_ref(),
+                self_calibrate,
+            )?;
             print_model_report(&r, json, &model, &dataset.display().to_string())
         }
         StreetsCommand::Eval {
@@ -327,9 +357,13 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             eval,
             model: None,
             self_calibrate,
+            driving_model,
         } => {
             if self_calibrate > 0 {
                 super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
+            }
+            if driving_model.is_some() {
+                super::usage!("--driving-model needs --model (the 5-fold evaluation estimates the driving area itself)");
             }
             let mut options = eval.options();
             options.geometry.corridor.mask_nearer_segments = !thesis_mask;
@@ -351,8 +385,15 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             eval: _,
             model: Some(model),
             self_calibrate,
+            driving_model,
         } => {
             let model_value = model_for_eval(&model, segments_out.as_deref())?;
+            let driving = driving_model_for(
+                &model_value,
+                &model.display().to_string(),
+                driving_model.as_deref(),
+                "streets eval-real",
+            )?;
             let progress = |done: usize, total: usize| {
                 if done == total || done % 10 == 0 {
                     eprintln!("streets eval-real: {done}/{total} scans registered");
@@ -362,6 +403,7 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
                 &dataset,
                 &map,
                 &model_value,
+                driving.as_ref(),
                 self_calibrate,
                 &progress,
             )?;
@@ -376,9 +418,13 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             eval,
             model: None,
             self_calibrate,
+            driving_model,
         } => {
             if self_calibrate > 0 {
                 super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
+            }
+            if driving_model.is_some() {
+                super::usage!("--driving-model needs --model (the 5-fold evaluation estimates the driving area itself)");
             }
             let r = streets::jobs::eval_real(
                 &dataset,
@@ -459,27 +505,57 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             bag,
             cloud_frame,
             model,
+            target,
+            driving_model,
             out,
         } => {
+            let model_name = model.as_ref().map(|p| p.display().to_string());
             let model = match model {
-                Some(path) => read_model(&path)?,
+                Some(path) => {
+                    let m = read_model(&path)?;
+                    if let Some(t) = target.map(Target::from).filter(|&t| t != m.target) {
+                        super::usage!(
+                            "--target {} but the model {} is a {} model",
+                            t.key().replace('_', "-"),
+                            path.display(),
+                            m.target.key().replace('_', "-")
+                        );
+                    }
+                    m
+                }
                 None => {
                     eprintln!(
                         "streets estimate: no --model, using the shipped default model (trained on simulated scans; its accuracy on real scans is in crates/streets/README.md)"
                     );
-                    StreetModel::shipped_default()?
+                    StreetModel::shipped(target.map_or(Target::DrivingArea, Target::from))?
                 }
             };
+            // A with-sidewalk model with sidewalk margins centres its prior on the driving
+            // area of the same cloud: the driving-area model is checked before any data is read.
+            let driving = driving_model_for(
+                &model,
+                model_name
+                    .as_deref()
+                    .unwrap_or(if model.target == Target::WithSidewalk {
+                        streets::model::WITH_SIDEWALK_MODEL_NAME
+                    } else {
+                        streets::model::DEFAULT_MODEL_NAME
+                    }),
+                driving_model.as_deref(),
+                "streets estimate",
+            )?;
             let osm = OsmMap::load(&map).with_context(|| format!("loading {}", map.display()))?;
             let (mut pc, _, _) = bag.read(&cloud)?;
             cloud_frame
                 .into_map_frame(&mut pc, &osm.frame)
                 .with_context(|| format!("moving {} into the map's frame", cloud.display()))?;
-            let est = model.estimate(
+            let (map_name, cloud_name) = (map.display().to_string(), cloud.display().to_string());
+            let est = model.estimate_with_driving(
+                driving.as_ref(),
                 &osm,
                 &pc,
-                &map.display().to_string(),
-                &cloud.display().to_string(),
+                (&map_name, &cloud_name),
+                0,
             )?;
             let fc = streets::geojson::feature_collection(&osm, &est.segments, model.target);
             streets::geojson::validate(&fc).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
@@ -575,6 +651,50 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
 
 /// The model of `streets eval --model` / `eval-real --model`, read and checked; a usage error
 /// with `--segments-out`, which belongs to the 5-fold evaluation.
+/// The driving-area model that centres a with-sidewalk model's priors (`None`: the model
+/// has no sidewalk margins): `path`, else the shipped default (said on stderr by `command`).
+/// A driving model of the wrong kind, or one given to a model without margins, is a usage
+/// error naming the files.
+fn driving_model_for(
+    model: &StreetModel,
+    model_name: &str,
+    path: Option<&std::path::Path>,
+    command: &str,
+) -> anyhow::Result<Option<StreetModel>> {
+    if !model.wants_driving_area() {
+        if path.is_some() {
+            super::usage!(
+                "--driving-model is for a with-sidewalk model with sidewalk margins; {model_name} is {}",
+                if model.target == Target::WithSidewalk {
+                    "a with-sidewalk model without them (trained before they existed: train it again)"
+                } else {
+                    "a driving-area model"
+                }
+            );
+        }
+        return Ok(None);
+    }
+    let (driving, name) = match path {
+        Some(p) => (read_model(p)?, p.display().to_string()),
+        None => {
+            eprintln!(
+                "{command}: no --driving-model, estimating the driving area that centres the with-sidewalk prior with the shipped default model"
+            );
+            (
+                StreetModel::shipped_default()?,
+                streets::model::DEFAULT_MODEL_NAME.to_string(),
+            )
+        }
+    };
+    if driving.target != Target::DrivingArea {
+        super::usage!(
+            "--driving-model {name} is a {} model; it must be a driving-area model (`streets train --target driving-area`)",
+            driving.target.key()
+        );
+    }
+    Ok(Some(driving))
+}
+
 fn model_for_eval(
     path: &std::path::Path,
     segments_out: Option<&std::path::Path>,
@@ -619,5 +739,8 @@ fn print_model_report(
         m(r.rmse_w),
         m(r.rmse_d)
     );
+    if r.driving_area_prior {
+        println!("with-sidewalk priors centred on the driving area estimated first, plus the model's sidewalk margins");
+    }
     Ok(())
 }
