@@ -14,6 +14,13 @@
 //! weights reflect the classifiers' accuracy on unseen scenes rather than on their own
 //! training data, against the annotated labels with the filtered ones flipped (flipped
 //! labels break transitivity at random and drove its weights to 0).
+//!
+//! Before the MLN, the On decisions pass the support constraint ([`decode_support`]): a
+//! thing stands on at most one ground surface, and a thing of a class that stood on one in
+//! at least [`SUPPORTED_RATE`] of the training cases (learnt per class, [`RelationModel::support_rates`])
+//! on exactly one, the surface with the highest decision value. The SVM row of the
+//! evaluation is the classifiers' own decisions; the MLN row starts from the constrained ones
+//! (also when its weights are learnt).
 
 use crate::amodal::ClassPriors;
 use crate::consistency::{
@@ -107,6 +114,55 @@ pub struct RelationModel {
     /// no such feature).
     #[serde(default)]
     pub rules: Vec<Rule>,
+    /// Per class id, the share of the training scenes' things of that class that stand on a
+    /// ground surface (filter-corrected labels), for [`decode_support`]; empty (models
+    /// written before it): no decoding.
+    #[serde(default)]
+    pub support_rates: Vec<f64>,
+}
+
+/// A class whose training things stood on a ground surface at least this often is taken to
+/// always stand on one ([`decode_support`]).
+pub const SUPPORTED_RATE: f64 = 0.9;
+
+/// The support constraint on the classifier's On decisions: a thing stands on at most one
+/// ground surface, and a thing of a class that stands on one at least [`SUPPORTED_RATE`] of
+/// the time in training (cars, poles, bicycles) on exactly one. Per subject `a`, among the
+/// ground surfaces `b` with a decision value `decision(a, b)`: with the class always
+/// supported, On holds for the highest decision alone; otherwise, where the classifier
+/// says On for several, for the highest of those alone. A far car whose ground the scan
+/// barely shows gets its most likely surface instead of none.
+pub fn decode_support(
+    objects: &[ViewObject],
+    svm: &mut Assignment,
+    decision: &dyn Fn(usize, usize) -> Option<f64>,
+    support_rates: &[f64],
+) {
+    for (a, oa) in objects.iter().enumerate() {
+        if is_ground(oa.class) {
+            continue;
+        }
+        let always = support_rates
+            .get(usize::from(oa.class.id()))
+            .is_some_and(|&r| r >= SUPPORTED_RATE);
+        let mut best: Option<(usize, f64)> = None;
+        for (b, ob) in objects.iter().enumerate() {
+            if b == a || !is_ground(ob.class) {
+                continue;
+            }
+            let Some(d) = decision(a, b) else { continue };
+            if (always || svm.get(Relation::On, a, b)) && best.is_none_or(|(_, bd)| d > bd) {
+                best = Some((b, d));
+            }
+        }
+        if let Some((best, _)) = best {
+            for (b, ob) in objects.iter().enumerate() {
+                if b != a && is_ground(ob.class) {
+                    svm.set(Relation::On, a, b, b == best);
+                }
+            }
+        }
+    }
 }
 
 /// The rule's verdict enters the classifier as 0 or this: four standard deviations of a
@@ -181,6 +237,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         .collect();
     let mut filtered = Vec::new();
     let mut rules = Vec::new();
+    let mut on_oof_decision: Vec<f64> = Vec::new();
     // The annotated labels with the filtered ones flipped: what the MLN learns from.
     let mut corrected: Vec<Assignment> = scenes
         .iter()
@@ -249,6 +306,9 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         for (i, &(s, a, b)) in owner.iter().enumerate() {
             oof[s].set(r, a, b, cv.out_of_fold[i]);
         }
+        if r == Relation::On {
+            on_oof_decision = cv.out_of_fold_decision.clone();
+        }
         let kx: Vec<Vec<f32>> = xr
             .into_iter()
             .zip(&keep)
@@ -270,6 +330,21 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         }
         filtered.push(keep.iter().filter(|&&k| !k).count());
         cv_scores.push(cv.scores);
+    }
+    let support_rates = support_rates(scenes);
+    // The MLN learns from the out-of-fold decisions with the support constraint applied, as
+    // it sees them at inference.
+    let mut decisions: Vec<BTreeMap<(usize, usize), f64>> = vec![BTreeMap::new(); scenes.len()];
+    for (&(s, a, b), &d) in owner.iter().zip(&on_oof_decision) {
+        decisions[s].insert((a, b), d);
+    }
+    for ((scene, y), d) in scenes.iter().zip(oof.iter_mut()).zip(&decisions) {
+        decode_support(
+            &scene.objects,
+            y,
+            &|a, b| d.get(&(a, b)).copied(),
+            &support_rates,
+        );
     }
     let mln_scenes: Vec<(MlnScene, Assignment)> = scenes
         .iter()
@@ -296,7 +371,40 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         hull_tolerance_m: tol,
         priors,
         rules,
+        support_rates,
     })
+}
+
+/// Per class id, the share of the scenes' non-ground things (subjects of a labelled pair)
+/// that the annotator put on some ground surface (0 for classes without such things). The
+/// annotated labels, not the noise filter's corrections: the filter also flips hard true
+/// labels, and a class that always stands on the ground keeps a rate near 1 under symmetric
+/// noise (a missed On is one flip among few), while one that never does stays far below.
+fn support_rates(scenes: &[Scene]) -> Vec<f64> {
+    let mut counts = [[0usize; 2]; Class::COUNT];
+    for scene in scenes {
+        let mut on = vec![None; scene.objects.len()];
+        for p in &scene.pairs {
+            let grounded =
+                is_ground(scene.objects[p.b].class) && p.annotated & Relation::On.bit() != 0;
+            let e = on[p.a].get_or_insert(false);
+            *e |= grounded;
+        }
+        for (o, on) in scene.objects.iter().zip(on) {
+            let Some(on) = on else { continue };
+            if is_ground(o.class) {
+                continue;
+            }
+            if let Some(c) = counts.get_mut(usize::from(o.class.id())) {
+                c[0] += 1;
+                c[1] += usize::from(on);
+            }
+        }
+    }
+    counts
+        .iter()
+        .map(|&[n, on]| if n > 0 { on as f64 / n as f64 } else { 0.0 })
+        .collect()
 }
 
 /// The classifier's and the MLN's relations of one scene's objects.
@@ -313,21 +421,35 @@ impl RelationModel {
     pub fn infer(&self, objects: &[ViewObject], infer: &InferOptions) -> Result<Inferred> {
         let pairs = candidate_pairs(objects);
         let raw = raw_features(objects, &pairs, &self.priors, self.hull_tolerance_m);
-        let mut svm = Assignment::empty(objects.len());
+        let n = objects.len();
+        let mut svm = Assignment::empty(n);
+        let mut on_decision = vec![None; n * n];
         for (&(a, b), r) in pairs.iter().zip(&raw) {
             let mut x = self.scaler.scale(r);
             let scaled = x.len();
             for (k, rel) in Relation::BASE.into_iter().enumerate() {
                 if let Some(s) = self.svms.get(k) {
                     push_rule(&mut x, r, self.rules.get(k));
-                    svm.set(rel, a, b, s.predict(&x));
+                    let d = s.decision(&x);
+                    svm.set(rel, a, b, d > 0.0);
+                    if rel == Relation::On {
+                        on_decision[a * n + b] = Some(d);
+                    }
                     x.truncate(scaled);
                 }
             }
         }
+        // The MLN starts from the decisions with the support constraint applied.
+        let mut evidence = svm.clone();
+        decode_support(
+            objects,
+            &mut evidence,
+            &|a, b| on_decision[a * n + b],
+            &self.support_rates,
+        );
         let scene = MlnScene {
             subject: subjects(objects),
-            svm: svm.clone(),
+            svm: evidence,
         };
         let mln = map_relations(&scene, &self.mln, infer)?;
         Ok(Inferred { svm, mln })
@@ -683,6 +805,61 @@ mod tests {
         assert_eq!((t.precision, t.recall, t.f1), (0.5, 0.5, 0.5));
         let f = c.false_value();
         assert!((f.precision - 2.0 / 3.0).abs() < 1e-12 && (f.recall - 2.0 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn support_decoding_keeps_one_ground_per_thing() {
+        let vp = Viewpoint {
+            position: [0.0; 3],
+            yaw_rad: 0.0,
+        };
+        let object = |id: u32, x: f64, class: Class| {
+            let cells = [[x, 0.0, 0.5], [x + 0.5, 0.0, 0.5]];
+            let bbox = crate::objects::OrientedBox {
+                centre: [x, 0.0, 0.5],
+                half_extents: [0.5; 3],
+                yaw_rad: 0.0,
+            };
+            ViewObject::new(id, class, &cells, &bbox, &vp)
+        };
+        // A car, a tree, a building; a street and a sidewalk.
+        let objects = vec![
+            object(1, 10.0, Class::Car),
+            object(2, 12.0, Class::Tree),
+            object(3, 20.0, Class::Building),
+            object(4, 10.0, Class::Street),
+            object(5, 8.0, Class::Sidewalk),
+        ];
+        let mut rates = vec![0.0; Class::COUNT];
+        rates[usize::from(Class::Car.id())] = 0.95;
+        rates[usize::from(Class::Tree.id())] = 0.8;
+        let decision = |a: usize, b: usize| match (a, b) {
+            (0, 3) => Some(-0.2),
+            (0, 4) => Some(-0.6),
+            (1, 3) => Some(0.4),
+            (1, 4) => Some(0.9),
+            (2, 3) => Some(-1.0),
+            (2, 4) => Some(-0.9),
+            _ => None,
+        };
+        let mut x = Assignment::empty(5);
+        // The tree is said to stand on both surfaces, the building on the street.
+        x.set(Relation::On, 1, 3, true);
+        x.set(Relation::On, 1, 4, true);
+        x.set(Relation::On, 2, 3, true);
+        x.set(Relation::LeftOf, 0, 1, true);
+        decode_support(&objects, &mut x, &decision, &rates);
+        // The car (always supported) gets its best surface although no decision is positive.
+        assert!(x.get(Relation::On, 0, 3) && !x.get(Relation::On, 0, 4));
+        // The tree keeps only the higher of its two.
+        assert!(!x.get(Relation::On, 1, 3) && x.get(Relation::On, 1, 4));
+        // The building (not always supported) keeps its single On; other relations untouched.
+        assert!(x.get(Relation::On, 2, 3) && !x.get(Relation::On, 2, 4));
+        assert!(x.get(Relation::LeftOf, 0, 1));
+        // Without rates (a model written before them) only the at-most-one part acts.
+        let mut y = Assignment::empty(5);
+        decode_support(&objects, &mut y, &decision, &[]);
+        assert_eq!(y, Assignment::empty(5));
     }
 
     #[test]
