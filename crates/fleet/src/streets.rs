@@ -56,7 +56,14 @@ pub fn plan_streets(
     let model_abs = absolute(model)?;
     let model_ref = FileRef::of(&model_abs, &model_abs.to_string_lossy())?;
     let bytes = std::fs::read(&model_abs).map_err(|e| io_err(&model_abs, e))?;
-    StreetModel::from_json(&bytes, &model_abs)?;
+    if StreetModel::from_json(&bytes, &model_abs)?.wants_driving_area() {
+        // Its prior needs the driving area of the same cloud estimated first, which the tile
+        // shards do not do: refused rather than estimated differently from `streets estimate`.
+        return Err(invalid(
+            &model_abs,
+            "a with-sidewalk model with sidewalk margins centres its priors on a driving-area estimate, which the streets shards do not run; plan a driving-area model (or use `urbansem streets estimate`)".into(),
+        ));
+    }
     let map_ref = FileRef::of(&map_abs, &map_abs.to_string_lossy())?;
     let osm = OsmMap::load(&map_abs)?;
     streets::model::drivable_segments(&osm, &map_abs.to_string_lossy())?;

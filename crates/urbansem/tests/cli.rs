@@ -1618,4 +1618,24 @@ fn streets_estimate_with_sidewalk_centres_on_the_driving_area() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("is for a with-sidewalk model"), "{err}");
+    // The streets shards do not estimate the driving area first: such a model is refused.
+    let o = urbansem()
+        .args(["shard", "plan", "--job", "streets", "--map"])
+        .arg(data.join("city.osm"))
+        .arg("--inputs")
+        .arg(data.join("cloud.ply"))
+        .arg("--model")
+        .arg(&ws)
+        .arg("--results")
+        .arg(dir.path().join("results"))
+        .arg("--out")
+        .arg(dir.path().join("plan.json"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("ws.json") && err.contains("sidewalk margins"),
+        "{err}"
+    );
 }
