@@ -120,6 +120,15 @@ pub enum SrtreeError {
         /// What is wrong and what was expected.
         message: String,
     },
+    /// A relation model file that does not fit this build (other feature count, wrong
+    /// dimensions, non-finite values).
+    #[error("{path}: not a usable relation model: {message}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// A cross-dataset split whose test dataset is among its training datasets.
     #[error("{path} is the test dataset; a cross-dataset split trains on other datasets")]
     TestAmongTraining {

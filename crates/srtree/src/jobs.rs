@@ -19,10 +19,18 @@ pub fn load_dataset(dir: &Path) -> Result<RelationsDataset> {
 }
 
 /// Reads a relation model written by `relations train`.
+/// Its dimensions and values are checked against this build's features
+/// ([`RelationModel::check`]): a model written by a build with other features is an error
+/// naming the file, never a silently different answer.
 pub fn read_model(path: &Path) -> Result<RelationModel> {
     let text = std::fs::read_to_string(path).context(|| format!("reading {}", path.display()))?;
-    Ok(serde_json::from_str(&text)
-        .context(|| format!("{}: not a relation model", path.display()))?)
+    let model: RelationModel = serde_json::from_str(&text)
+        .context(|| format!("{}: not a relation model", path.display()))?;
+    model.check().map_err(|message| SrtreeError::Model {
+        path: path.to_path_buf(),
+        message,
+    })?;
+    Ok(model)
 }
 
 /// Writes `text` to `path` atomically.

@@ -417,6 +417,71 @@ pub struct Inferred {
 }
 
 impl RelationModel {
+    /// The first thing that does not fit this build: the scaler's feature count
+    /// ([`FEATURE_COUNT`]), one classifier per base relation with one weight per scaled
+    /// feature (plus the rule verdict), rule tests on existing features, and finite values.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let sc = &self.scaler;
+        if sc.mean.len() != FEATURE_COUNT
+            || sc.std.len() != FEATURE_COUNT
+            || sc.thresholds.len() != FEATURE_COUNT
+        {
+            return Err(format!(
+                "its scaler has {} features, this build computes {FEATURE_COUNT} (written by another version: train it again)",
+                sc.mean.len()
+            ));
+        }
+        let finite = |name: &str, v: &[f64]| match v.iter().position(|x| !x.is_finite()) {
+            Some(k) => Err(format!("{name}[{k}] = {} is not finite", v[k])),
+            None => Ok(()),
+        };
+        finite("scaler.mean", &sc.mean)?;
+        finite("scaler.std", &sc.std)?;
+        for (k, t) in sc.thresholds.iter().enumerate() {
+            finite(&format!("scaler.thresholds[{k}]"), t)?;
+        }
+        if let Some(k) = sc.std.iter().position(|&v| v <= 0.0) {
+            return Err(format!("scaler.std[{k}] = {} is not positive", sc.std[k]));
+        }
+        if self.svms.len() != Relation::BASE.len() {
+            return Err(format!(
+                "{} classifiers, expected {} (On, LeftOf, Behind)",
+                self.svms.len(),
+                Relation::BASE.len()
+            ));
+        }
+        for (k, svm) in self.svms.iter().enumerate() {
+            let dims = sc.dims() + usize::from(self.rules.get(k).is_some());
+            if svm.w.len() != dims {
+                return Err(format!(
+                    "svms[{k}] has {} weights, its features have {dims}",
+                    svm.w.len()
+                ));
+            }
+            finite(&format!("svms[{k}].w"), &svm.w)?;
+            finite(&format!("svms[{k}].b"), &[svm.b])?;
+        }
+        for (k, rule) in self.rules.iter().enumerate() {
+            if let Some(t) = rule.tests.iter().find(|t| t.feature >= FEATURE_COUNT) {
+                return Err(format!(
+                    "rules[{k}] tests feature {}, this build computes {FEATURE_COUNT}",
+                    t.feature
+                ));
+            }
+        }
+        if let Some(k) = self
+            .support_rates
+            .iter()
+            .position(|r| !(0.0..=1.0).contains(r))
+        {
+            return Err(format!(
+                "support_rates[{k}] = {} is not a share",
+                self.support_rates[k]
+            ));
+        }
+        Ok(())
+    }
+
     /// SVM decisions for every candidate pair, then the MLN MAP.
     pub fn infer(&self, objects: &[ViewObject], infer: &InferOptions) -> Result<Inferred> {
         let pairs = candidate_pairs(objects);

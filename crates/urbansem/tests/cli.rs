@@ -639,6 +639,24 @@ fn relations_eval_trains_on_one_dataset_and_tests_on_every_scene_of_another() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-map.osm"));
     let out = infer(&["--cloud-frame", "utm:32N"]);
     assert_eq!(out.status.code(), Some(2), "--cloud-frame needs --osm");
+    assert!(infer(&[]).status.success());
+    // A model written by a build with fewer features, or with a corrupt weight, is named.
+    let good: serde_json::Value = serde_json::from_slice(&std::fs::read(&model).unwrap()).unwrap();
+    for (what, edit) in [("this build computes", "older"), ("svms[1]", "weights")] {
+        let mut bad = good.clone();
+        if edit == "older" {
+            for key in ["mean", "std", "thresholds"] {
+                bad["scaler"][key].as_array_mut().unwrap().truncate(48);
+            }
+        } else {
+            bad["svms"][1]["w"].as_array_mut().unwrap().pop();
+        }
+        std::fs::write(&model, serde_json::to_vec(&bad).unwrap()).unwrap();
+        let out = infer(&[]);
+        assert_eq!(out.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("model.json") && err.contains(what), "{err}");
+    }
 }
 
 /// A little-endian CDR `sensor_msgs/msg/PointCloud2` of x y z FLOAT32 points, frame "f".
