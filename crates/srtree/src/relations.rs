@@ -334,17 +334,17 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
     let support_rates = support_rates(scenes);
     // The MLN learns from the out-of-fold decisions with the support constraint applied, as
     // it sees them at inference.
-    let mut decisions: Vec<BTreeMap<(usize, usize), f64>> = vec![BTreeMap::new(); scenes.len()];
+    // Per scene, the On decision of each labelled pair (a·n + b), as `infer` holds them.
+    let mut decisions: Vec<Vec<Option<f64>>> = scenes
+        .iter()
+        .map(|scene| vec![None; scene.objects.len().pow(2)])
+        .collect();
     for (&(s, a, b), &d) in owner.iter().zip(&on_oof_decision) {
-        decisions[s].insert((a, b), d);
+        decisions[s][a * scenes[s].objects.len() + b] = Some(d);
     }
     for ((scene, y), d) in scenes.iter().zip(oof.iter_mut()).zip(&decisions) {
-        decode_support(
-            &scene.objects,
-            y,
-            &|a, b| d.get(&(a, b)).copied(),
-            &support_rates,
-        );
+        let n = scene.objects.len();
+        decode_support(&scene.objects, y, &|a, b| d[a * n + b], &support_rates);
     }
     let mln_scenes: Vec<(MlnScene, Assignment)> = scenes
         .iter()
