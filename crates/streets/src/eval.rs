@@ -6,8 +6,8 @@
 use crate::dataset::StreetsDataset;
 use crate::inference::{McmcOptions, Network};
 use crate::model::{
-    has_truth, network_edges, segment_bins, true_geometry, BinClassifier, ClassifierOptions,
-    GeometryOptions, SegmentBins, Target,
+    has_truth, margin_sample, network_edges, segment_bins, true_geometry, BinClassifier,
+    ClassifierOptions, GeometryOptions, SegmentBins, Target,
 };
 use crate::potentials::{
     segment_potential, tempered_with_prior, width_spread_m, Confusion, GeometryPrior,
@@ -357,14 +357,8 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 }
                 if has_truth(ds, eval_ids[k], target) {
                     train_geom.push((tags[k].clone(), true_geometry(ds, eval_ids[k], target)));
-                    if target == Target::WithSidewalk
-                        && has_truth(ds, eval_ids[k], Target::DrivingArea)
-                    {
-                        train_margin.push((
-                            tags[k].clone(),
-                            true_geometry(ds, eval_ids[k], Target::DrivingArea),
-                            true_geometry(ds, eval_ids[k], target),
-                        ));
+                    if target == Target::WithSidewalk {
+                        train_margin.extend(margin_sample(ds, eval_ids[k], &tags[k]));
                     }
                 }
                 for (j, c) in classes[k].iter().enumerate() {

@@ -267,8 +267,8 @@ fn score_model(
     let t = Instant::now();
     let (map_name, cloud_name) = names;
     let (osm, cloud) = (&ds.map, &ds.cloud);
-    let driving_area_prior = model.wants_driving_area()
-        && driving.is_some_and(|d| d.target == crate::model::Target::DrivingArea);
+    let driving_area_prior =
+        driving.is_some_and(|d| model.driving_model_mismatch(d.target).is_none());
     let est =
         model.estimate_with_driving(driving, osm, cloud, (map_name, cloud_name), self_calibrate)?;
     seconds.insert("estimate".to_string(), t.elapsed().as_secs_f64());

@@ -393,6 +393,22 @@ impl TrainingBins {
     }
 }
 
+/// Segment `s`'s sample for [`SidewalkPrior::fit`] (its tags, true driving area and true
+/// geometry with sidewalk) when it has both truths.
+pub fn margin_sample(
+    ds: &crate::dataset::StreetsDataset,
+    s: usize,
+    tags: &SegmentTags,
+) -> Option<MarginSample> {
+    (has_truth(ds, s, Target::DrivingArea) && has_truth(ds, s, Target::WithSidewalk)).then(|| {
+        (
+            tags.clone(),
+            true_geometry(ds, s, Target::DrivingArea),
+            true_geometry(ds, s, Target::WithSidewalk),
+        )
+    })
+}
+
 /// True geometry (offset, width) of a segment for a target.
 pub fn true_geometry(ds: &crate::dataset::StreetsDataset, s: usize, target: Target) -> (f64, f64) {
     let t = &ds.segments[s];
@@ -431,15 +447,12 @@ pub fn dataset_bins(
         // The prior learns from segments with a truth for the target (a real sequence may
         // see the driving area's edges and not the sidewalk's).
         if has_truth(ds, s, target) {
-            out.geometries.push(true_geometry(ds, s, target));
-            out.tags.push(SegmentTags::of(&ds.map, s));
-            if target == Target::WithSidewalk && has_truth(ds, s, Target::DrivingArea) {
-                out.margins.push((
-                    SegmentTags::of(&ds.map, s),
-                    true_geometry(ds, s, Target::DrivingArea),
-                    true_geometry(ds, s, target),
-                ));
+            let tags = SegmentTags::of(&ds.map, s);
+            if target == Target::WithSidewalk {
+                out.margins.extend(margin_sample(ds, s, &tags));
             }
+            out.geometries.push(true_geometry(ds, s, target));
+            out.tags.push(tags);
         }
         for k in b.usable() {
             if let Some(c) = b.features.truth[k] {
@@ -987,6 +1000,29 @@ impl StreetModel {
         self.target == Target::WithSidewalk && self.sidewalk_prior.is_some()
     }
 
+    /// What is wrong with a model of target `driving` as the model that estimates this
+    /// model's driving area, if anything: given to a model that does not [want
+    /// one](StreetModel::wants_driving_area) (whatever its target), or not a driving-area
+    /// model. The callers (CLI, Python) name the files around it.
+    pub fn driving_model_mismatch(&self, driving: Target) -> Option<String> {
+        if !self.wants_driving_area() {
+            return Some(format!(
+                "a driving model is for a with-sidewalk model with sidewalk margins; this is {}",
+                if self.target == Target::WithSidewalk {
+                    "a with-sidewalk model without them (trained before they existed: train it again)"
+                } else {
+                    "a driving-area model"
+                }
+            ));
+        }
+        (driving != Target::DrivingArea).then(|| {
+            format!(
+                "the driving model is a {} model; it must be a driving-area model (`streets train --target driving-area`)",
+                driving.key()
+            )
+        })
+    }
+
     /// [`StreetModel::estimate`], or, for a model that [wants the driving
     /// area](StreetModel::wants_driving_area) and a driving-area model `driving`, the driving
     /// area estimated first and then [`StreetModel::estimate_given_driving_area`];
@@ -1001,8 +1037,7 @@ impl StreetModel {
         self_calibrate: usize,
     ) -> Result<Estimates> {
         let (map_name, cloud_name) = names;
-        let driving =
-            driving.filter(|d| self.wants_driving_area() && d.target == Target::DrivingArea);
+        let driving = driving.filter(|d| self.driving_model_mismatch(d.target).is_none());
         let plain = |m: &StreetModel| {
             if self_calibrate > 0 {
                 m.estimate_self_calibrated(map, cloud, cloud_name, map_name, self_calibrate)

@@ -125,25 +125,17 @@ fn streets_estimate<'py>(
             .map_err(raise!(StreetsError))?,
     };
     let driving = model_of(driving_model_path, driving_model_json, "<driving model>")?;
-    let driving = if model.wants_driving_area() {
-        let d = match driving {
-            Some(d) => d,
-            None => StreetModel::shipped_default().map_err(raise!(StreetsError))?,
-        };
-        if d.target != Target::DrivingArea {
-            return Err(PyValueError::new_err(format!(
-                "the driving model is a {:?} model; it must be a driving-area model",
-                d.target.key()
-            )));
+    let driving = match driving {
+        Some(d) => {
+            if let Some(message) = model.driving_model_mismatch(d.target) {
+                return Err(PyValueError::new_err(message));
+            }
+            Some(d)
         }
-        Some(d)
-    } else {
-        if driving.is_some() {
-            return Err(PyValueError::new_err(
-                "a driving model is for a with-sidewalk model with sidewalk margins",
-            ));
+        None if model.wants_driving_area() => {
+            Some(StreetModel::shipped_default().map_err(raise!(StreetsError))?)
         }
-        None
+        None => None,
     };
     let (osm, map_name): (Arc<OsmMap>, String) = match map.cast::<PyOsmMap>() {
         Ok(m) => {

@@ -661,37 +661,33 @@ fn driving_model_for(
     path: Option<&std::path::Path>,
     command: &str,
 ) -> anyhow::Result<Option<StreetModel>> {
-    if !model.wants_driving_area() {
-        if path.is_some() {
-            super::usage!(
-                "--driving-model is for a with-sidewalk model with sidewalk margins; {model_name} is {}",
-                if model.target == Target::WithSidewalk {
-                    "a with-sidewalk model without them (trained before they existed: train it again)"
-                } else {
-                    "a driving-area model"
-                }
-            );
+    let driving = match path {
+        Some(p) => {
+            // A model that wants none is refused before the file is read.
+            let mismatch = |target| model.driving_model_mismatch(target);
+            if let Some(message) = mismatch(Target::DrivingArea) {
+                super::usage!(
+                    "{model_name} with --driving-model {}: {message}",
+                    p.display()
+                );
+            }
+            let driving = read_model(p)?;
+            if let Some(message) = mismatch(driving.target) {
+                super::usage!(
+                    "{model_name} with --driving-model {}: {message}",
+                    p.display()
+                );
+            }
+            driving
         }
-        return Ok(None);
-    }
-    let (driving, name) = match path {
-        Some(p) => (read_model(p)?, p.display().to_string()),
-        None => {
+        None if model.wants_driving_area() => {
             eprintln!(
                 "{command}: no --driving-model, estimating the driving area that centres the with-sidewalk prior with the shipped default model"
             );
-            (
-                StreetModel::shipped_default()?,
-                streets::model::DEFAULT_MODEL_NAME.to_string(),
-            )
+            StreetModel::shipped_default()?
         }
+        None => return Ok(None),
     };
-    if driving.target != Target::DrivingArea {
-        super::usage!(
-            "--driving-model {name} is a {} model; it must be a driving-area model (`streets train --target driving-area`)",
-            driving.target.key()
-        );
-    }
     Ok(Some(driving))
 }
 
