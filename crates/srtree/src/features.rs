@@ -110,6 +110,12 @@ pub const FEATURE_NAMES: [&str; 51] = [
     "b_is_ground_nearest_centre_hull",
 ];
 
+/// The features that are differences between a and b (centroid offsets, box gaps, azimuth
+/// differences, the completed boxes' range differences), whose sign means the same on every
+/// city's scale; the visible boxes' range differences are left out, as occlusion biases them
+/// and the completed ones estimate the same.
+pub const SIGNED_FEATURES: &[usize] = &[3, 4, 5, 6, 7, 8, 9, 10, 11, 18, 19, 20, 21, 23, 44, 45];
+
 /// Number of features.
 pub const FEATURE_COUNT: usize = FEATURE_NAMES.len();
 
