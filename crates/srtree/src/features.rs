@@ -116,6 +116,11 @@ pub const FEATURE_NAMES: [&str; 51] = [
 /// and the completed ones estimate the same.
 pub const SIGNED_FEATURES: &[usize] = &[3, 4, 5, 6, 7, 8, 9, 10, 11, 18, 19, 20, 21, 23, 44, 45];
 
+/// The features the rules do not test: absolute distances and heights (their thresholds
+/// fit one city's scale) and the visible boxes' overlap and range differences (the completed
+/// boxes' say the same with occlusion undone).
+pub const NOT_IN_RULES: &[usize] = &[0, 1, 2, 22, 25, 26, 32, 33];
+
 /// Number of features.
 pub const FEATURE_COUNT: usize = FEATURE_NAMES.len();
 

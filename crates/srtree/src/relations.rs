@@ -15,6 +15,13 @@
 //! training data, against the annotated labels with the filtered ones flipped (flipped
 //! labels break transitivity at random and drove its weights to 0).
 //!
+//! LeftOf and Behind then take the rule alone ([`LinearSvm::rule_alone`]) where the
+//! classifier's cross-validated F1 beats the rule's F1 on the kept training pairs by no more
+//! than [`TrainOptions::rule_alone_tolerance`] (Occam's choice): the other features' weights
+//! fit the training city, and where they add nothing there they cost on another (Behind
+//! trained on the embedded city: the rule alone 0.93, the classifier 0.88 on Helsinki). On
+//! keeps the classifier, whose decision values rank the ground surfaces ([`decode_support`]).
+//!
 //! Before the MLN, the On decisions pass the support constraint ([`decode_support`]): a
 //! thing stands on at most one ground surface, and a thing of a class that stood on one in
 //! at least [`SUPPORTED_RATE`] of the training cases (learnt per class, [`RelationModel::support_rates`])
@@ -61,6 +68,9 @@ pub struct TrainOptions {
     pub filter_svm: (f64, f64),
     /// The per-relation rule feature ([`crate::rules`]); `None`: no rule feature.
     pub rules: Option<RuleOptions>,
+    /// LeftOf and Behind take the rule alone where its F1 on the training pairs is at most
+    /// this much below the classifier's cross-validated F1; `None`: always the classifier.
+    pub rule_alone_tolerance: Option<f64>,
 }
 
 impl Default for TrainOptions {
@@ -78,6 +88,7 @@ impl Default for TrainOptions {
             filter_margin: 0.5,
             filter_svm: (0.1, 1.0),
             rules: Some(RuleOptions::default()),
+            rule_alone_tolerance: Some(0.01),
         }
     }
 }
@@ -293,7 +304,12 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
                 v
             })
             .collect();
-        rules.extend(rule);
+        rules.extend(rule.clone());
+        let dims = xr.first().map_or(0, Vec::len);
+        let rule_fires: Vec<bool> = raw
+            .iter()
+            .map(|f| rule.as_ref().is_some_and(|r| r.fires(f)))
+            .collect();
         let cv: CvResult = cross_validate(
             &xr,
             &y,
@@ -303,8 +319,30 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
             &grid,
             &options.svm,
         )?;
+        // Occam: the rule alone where the classifier over every feature does not beat it
+        // on held-out scenes by more than the tolerance.
+        let rule_alone = match (&rule, options.rule_alone_tolerance) {
+            (Some(_), Some(tol)) if r != Relation::On => {
+                let (pred, truth): (Vec<bool>, Vec<bool>) = rule_fires
+                    .iter()
+                    .zip(&y)
+                    .zip(&keep)
+                    .filter(|(_, &k)| k)
+                    .map(|((&f, &t), _)| (f, t))
+                    .unzip();
+                let rule_f1 = crate::svm::f1(&pred, &truth);
+                let best = cv.scores.iter().map(|s| s.2).fold(0.0, f64::max);
+                rule_f1 >= best - tol
+            }
+            _ => false,
+        };
         for (i, &(s, a, b)) in owner.iter().enumerate() {
-            oof[s].set(r, a, b, cv.out_of_fold[i]);
+            let v = if rule_alone {
+                rule_fires[i]
+            } else {
+                cv.out_of_fold[i]
+            };
+            oof[s].set(r, a, b, v);
         }
         if r == Relation::On {
             on_oof_decision = cv.out_of_fold_decision.clone();
@@ -321,7 +359,11 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
             .filter(|(_, &k)| k)
             .map(|(&v, _)| v)
             .collect();
-        svms.push(LinearSvm::train(&kx, &ky, &cv.best)?);
+        if rule_alone {
+            svms.push(LinearSvm::rule_alone(dims, cv.best.clone()));
+        } else {
+            svms.push(LinearSvm::train(&kx, &ky, &cv.best)?);
+        }
         for (i, &(s, a, b)) in owner.iter().enumerate() {
             if !keep[i] {
                 // The filter's verdict: the annotated label is taken to be flipped.

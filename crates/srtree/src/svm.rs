@@ -87,6 +87,21 @@ pub struct LinearSvm {
 }
 
 impl LinearSvm {
+    /// A classifier that says yes exactly where the rule feature (the last of `dims`,
+    /// [`crate::relations::RULE_SCALE`] when the rule fires, 0 otherwise) is set.
+    pub fn rule_alone(dims: usize, options: SvmOptions) -> LinearSvm {
+        let mut w = vec![0.0; dims];
+        if let Some(last) = w.last_mut() {
+            *last = 0.5;
+        }
+        LinearSvm {
+            w,
+            b: -1.0,
+            options,
+            epochs: 0,
+        }
+    }
+
     /// Trains on rows `x` with labels `y`.
     pub fn train(x: &[Vec<f32>], y: &[bool], options: &SvmOptions) -> Result<LinearSvm> {
         let fail = |message: String| SrtreeError::Training {
@@ -335,6 +350,15 @@ pub fn cross_validate(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_rule_alone_says_yes_exactly_where_the_rule_fires() {
+        let svm = LinearSvm::rule_alone(4, SvmOptions::default());
+        let scale = crate::relations::RULE_SCALE;
+        assert!(svm.decision(&[9.0, -9.0, 9.0, scale]) > 0.0);
+        assert!(svm.decision(&[9.0, -9.0, 9.0, 0.0]) < 0.0);
+        assert_eq!(svm.w.len(), 4);
+    }
+
     use super::*;
     use rand::Rng;
 
