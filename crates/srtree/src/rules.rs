@@ -216,10 +216,6 @@ impl Rule {
     }
 }
 
-/// Tests on 0/1 features whose excluded value holds at most `share` of the (noise-corrected)
-/// true positives, give or take two standard deviations of the flips there: necessary
-/// conditions (Behind needs both things in front and neither a ground surface), taken
-/// before the search so that its tests go to what discriminates.
 /// Adds the sign tests (`x_k > 0` or `x_k ≤ 0` on a [`SIGNED_FEATURES`] difference) that
 /// the rule's positives (almost) all pass: at most `loss` of the rule's estimated true
 /// positives fail, and at least one pair it covers fails.
@@ -268,6 +264,10 @@ fn sign_guards(
     rule
 }
 
+/// Tests on 0/1 features whose excluded value holds at most `share` of the (noise-corrected)
+/// true positives, give or take two standard deviations of the flips there: necessary
+/// conditions (Behind needs both things in front and neither a ground surface), taken
+/// before the search so that its tests go to what discriminates.
 fn preconditions(
     raw: &[[f64; FEATURE_COUNT]],
     y: &[bool],

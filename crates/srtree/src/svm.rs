@@ -92,7 +92,8 @@ impl LinearSvm {
     pub fn rule_alone(dims: usize, options: SvmOptions) -> LinearSvm {
         let mut w = vec![0.0; dims];
         if let Some(last) = w.last_mut() {
-            *last = 0.5;
+            // Decision +1 where the rule fires, -1 where it does not.
+            *last = 2.0 / f64::from(crate::relations::RULE_SCALE);
         }
         LinearSvm {
             w,
@@ -350,6 +351,9 @@ pub fn cross_validate(
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use rand::Rng;
+
     #[test]
     fn the_rule_alone_says_yes_exactly_where_the_rule_fires() {
         let svm = LinearSvm::rule_alone(4, SvmOptions::default());
@@ -358,9 +362,6 @@ mod tests {
         assert!(svm.decision(&[9.0, -9.0, 9.0, 0.0]) < 0.0);
         assert_eq!(svm.w.len(), 4);
     }
-
-    use super::*;
-    use rand::Rng;
 
     /// Primal objective ½‖w‖² + Σ C_i loss(y_i f(x_i)) with the bias regularised too.
     fn primal(svm: &LinearSvm, x: &[Vec<f32>], y: &[bool], c: f64, loss: Loss) -> f64 {
