@@ -360,7 +360,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
             .map(|(&v, _)| v)
             .collect();
         if rule_alone {
-            svms.push(LinearSvm::rule_alone(dims, cv.best.clone()));
+            svms.push(LinearSvm::rule_alone(dims, RULE_SCALE, cv.best.clone()));
         } else {
             svms.push(LinearSvm::train(&kx, &ky, &cv.best)?);
         }

@@ -87,13 +87,13 @@ pub struct LinearSvm {
 }
 
 impl LinearSvm {
-    /// A classifier that says yes exactly where the rule feature (the last of `dims`,
-    /// [`crate::relations::RULE_SCALE`] when the rule fires, 0 otherwise) is set.
-    pub fn rule_alone(dims: usize, options: SvmOptions) -> LinearSvm {
+    /// A classifier that says yes exactly where the rule feature (the last of `dims`:
+    /// `rule_value` when the rule fires, 0 otherwise) is set.
+    pub fn rule_alone(dims: usize, rule_value: f32, options: SvmOptions) -> LinearSvm {
         let mut w = vec![0.0; dims];
         if let Some(last) = w.last_mut() {
             // Decision +1 where the rule fires, -1 where it does not.
-            *last = 2.0 / f64::from(crate::relations::RULE_SCALE);
+            *last = 2.0 / f64::from(rule_value);
         }
         LinearSvm {
             w,
@@ -356,8 +356,8 @@ mod tests {
 
     #[test]
     fn the_rule_alone_says_yes_exactly_where_the_rule_fires() {
-        let svm = LinearSvm::rule_alone(4, SvmOptions::default());
-        let scale = crate::relations::RULE_SCALE;
+        let scale = 4.0;
+        let svm = LinearSvm::rule_alone(4, scale, SvmOptions::default());
         assert!(svm.decision(&[9.0, -9.0, 9.0, scale]) > 0.0);
         assert!(svm.decision(&[9.0, -9.0, 9.0, 0.0]) < 0.0);
         assert_eq!(svm.w.len(), 4);
