@@ -25,7 +25,9 @@
 //! Before the MLN, the On decisions pass the support constraint ([`decode_support`]): a
 //! thing stands on at most one ground surface, and a thing of a class that stood on one in
 //! at least [`SUPPORTED_RATE`] of the training cases (learnt per class, [`RelationModel::support_rates`])
-//! on exactly one, the surface with the highest decision value. The SVM row of the
+//! on exactly one, the surface with the highest decision value plus a learnt class prior
+//! ([`SurfacePrior`]: poles and trees mostly stand on sidewalks, cars on streets; its weight
+//! chosen on the out-of-fold decisions of the training scenes, 0 among the choices). The SVM row of the
 //! evaluation is the classifiers' own decisions; the MLN row starts from the constrained ones
 //! (also when its weights are learnt).
 
@@ -130,6 +132,68 @@ pub struct RelationModel {
     /// written before it): no decoding.
     #[serde(default)]
     pub support_rates: Vec<f64>,
+    /// Which ground surface each class stands on, for [`decode_support`] (default: none,
+    /// the decision values alone).
+    #[serde(default)]
+    pub surface_prior: SurfacePrior,
+}
+
+/// Which ground surface a thing of each class stands on, learnt on the training scenes: a
+/// bonus added to the On decision values where [`decode_support`] picks the surface.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SurfacePrior {
+    /// Per class id, ln((on a sidewalk + 1) / (on a street + 1)) over the training things of
+    /// that class annotated as standing on a ground surface.
+    pub sidewalk_log_odds: Vec<f64>,
+    /// Weight of the log odds in decision-value units (0: the decision values alone).
+    pub weight: f64,
+}
+
+/// The weights [`train`] chooses [`SurfacePrior::weight`] from, by the On F1 of the
+/// support-decoded out-of-fold decisions on the training scenes.
+pub const SURFACE_PRIOR_WEIGHTS: [f64; 6] = [0.0, 0.25, 0.5, 1.0, 2.0, 4.0];
+
+impl SurfacePrior {
+    /// The prior's bonus for a thing of class `thing` standing on a surface of class `ground`.
+    pub fn bonus(&self, thing: Class, ground: Class) -> f64 {
+        let lo = self
+            .sidewalk_log_odds
+            .get(usize::from(thing.id()))
+            .copied()
+            .unwrap_or(0.0);
+        match ground {
+            Class::Sidewalk => 0.5 * self.weight * lo,
+            Class::Street => -0.5 * self.weight * lo,
+            _ => 0.0,
+        }
+    }
+
+    /// The log odds counted from the annotated On pairs of the scenes, with weight 0.
+    fn count(scenes: &[Scene]) -> SurfacePrior {
+        let mut counts = [[0usize; 2]; Class::COUNT];
+        for scene in scenes {
+            for p in &scene.pairs {
+                let (a, b) = (scene.objects[p.a].class, scene.objects[p.b].class);
+                if p.annotated & Relation::On.bit() == 0 || is_ground(a) {
+                    continue;
+                }
+                if let Some(c) = counts.get_mut(usize::from(a.id())) {
+                    match b {
+                        Class::Sidewalk => c[0] += 1,
+                        Class::Street => c[1] += 1,
+                        _ => {}
+                    }
+                }
+            }
+        }
+        SurfacePrior {
+            sidewalk_log_odds: counts
+                .iter()
+                .map(|&[side, street]| ((side as f64 + 1.0) / (street as f64 + 1.0)).ln())
+                .collect(),
+            weight: 0.0,
+        }
+    }
 }
 
 /// A class whose training things stood on a ground surface at least this often is taken to
@@ -139,15 +203,17 @@ pub const SUPPORTED_RATE: f64 = 0.9;
 /// The support constraint on the classifier's On decisions: a thing stands on at most one
 /// ground surface, and a thing of a class that stands on one at least [`SUPPORTED_RATE`] of
 /// the time in training (cars, poles, bicycles) on exactly one. Per subject `a`, among the
-/// ground surfaces `b` with a decision value `decision(a, b)`: with the class always
-/// supported, On holds for the highest decision alone; otherwise, where the classifier
-/// says On for several, for the highest of those alone. A far car whose ground the scan
-/// barely shows gets its most likely surface instead of none.
+/// ground surfaces `b` with a decision value `decision(a, b)`, scored by the decision plus
+/// the surface prior's bonus: with the class always supported, On holds for the highest
+/// score alone; otherwise, where the classifier says On for several, for the highest of
+/// those alone. A far car whose ground the scan barely shows gets its most likely surface
+/// instead of none.
 pub fn decode_support(
     objects: &[ViewObject],
     svm: &mut Assignment,
     decision: &dyn Fn(usize, usize) -> Option<f64>,
     support_rates: &[f64],
+    prior: &SurfacePrior,
 ) {
     for (a, oa) in objects.iter().enumerate() {
         if is_ground(oa.class) {
@@ -162,6 +228,7 @@ pub fn decode_support(
                 continue;
             }
             let Some(d) = decision(a, b) else { continue };
+            let d = d + prior.bonus(oa.class, ob.class);
             if (always || svm.get(Relation::On, a, b)) && best.is_none_or(|(_, bd)| d > bd) {
                 best = Some((b, d));
             }
@@ -384,10 +451,46 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
     for (&(s, a, b), &d) in owner.iter().zip(&on_oof_decision) {
         decisions[s][a * scenes[s].objects.len() + b] = Some(d);
     }
-    for ((scene, y), d) in scenes.iter().zip(oof.iter_mut()).zip(&decisions) {
-        let n = scene.objects.len();
-        decode_support(&scene.objects, y, &|a, b| d[a * n + b], &support_rates);
+    // The surface prior's weight: the best On F1 of the decoded out-of-fold decisions
+    // against the filter-corrected labels (the first of equals: the smallest weight).
+    let decode_all = |oof: &mut [Assignment], prior: &SurfacePrior| {
+        for ((scene, y), d) in scenes.iter().zip(oof.iter_mut()).zip(&decisions) {
+            let n = scene.objects.len();
+            decode_support(
+                &scene.objects,
+                y,
+                &|a, b| d[a * n + b],
+                &support_rates,
+                prior,
+            );
+        }
+    };
+    let counted = SurfacePrior::count(scenes);
+    let mut surface_prior = counted.clone();
+    let mut best_f1 = f64::NEG_INFINITY;
+    for weight in SURFACE_PRIOR_WEIGHTS {
+        let prior = SurfacePrior {
+            weight,
+            ..counted.clone()
+        };
+        let mut decoded = oof.clone();
+        decode_all(&mut decoded, &prior);
+        let (pred, truth): (Vec<bool>, Vec<bool>) = owner
+            .iter()
+            .map(|&(s, a, b)| {
+                (
+                    decoded[s].get(Relation::On, a, b),
+                    corrected[s].get(Relation::On, a, b),
+                )
+            })
+            .unzip();
+        let f1 = crate::svm::f1(&pred, &truth);
+        if f1 > best_f1 + 1e-12 {
+            best_f1 = f1;
+            surface_prior = prior;
+        }
     }
+    decode_all(&mut oof, &surface_prior);
     let mln_scenes: Vec<(MlnScene, Assignment)> = scenes
         .iter()
         .zip(oof)
@@ -414,6 +517,7 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         priors,
         rules,
         support_rates,
+        surface_prior,
     })
 }
 
@@ -511,6 +615,11 @@ impl RelationModel {
                 ));
             }
         }
+        finite(
+            "surface_prior.sidewalk_log_odds",
+            &self.surface_prior.sidewalk_log_odds,
+        )?;
+        finite("surface_prior.weight", &[self.surface_prior.weight])?;
         if let Some(k) = self
             .support_rates
             .iter()
@@ -553,6 +662,7 @@ impl RelationModel {
             &mut evidence,
             &|a, b| on_decision[a * n + b],
             &self.support_rates,
+            &self.surface_prior,
         );
         let scene = MlnScene {
             subject: subjects(objects),
@@ -914,21 +1024,23 @@ mod tests {
         assert!((f.precision - 2.0 / 3.0).abs() < 1e-12 && (f.recall - 2.0 / 3.0).abs() < 1e-12);
     }
 
-    #[test]
-    fn support_decoding_keeps_one_ground_per_thing() {
+    /// A 1 m box with two cells at `x` metres along the view direction.
+    fn object(id: u32, x: f64, class: Class) -> ViewObject {
         let vp = Viewpoint {
             position: [0.0; 3],
             yaw_rad: 0.0,
         };
-        let object = |id: u32, x: f64, class: Class| {
-            let cells = [[x, 0.0, 0.5], [x + 0.5, 0.0, 0.5]];
-            let bbox = crate::objects::OrientedBox {
-                centre: [x, 0.0, 0.5],
-                half_extents: [0.5; 3],
-                yaw_rad: 0.0,
-            };
-            ViewObject::new(id, class, &cells, &bbox, &vp)
+        let cells = [[x, 0.0, 0.5], [x + 0.5, 0.0, 0.5]];
+        let bbox = crate::objects::OrientedBox {
+            centre: [x, 0.0, 0.5],
+            half_extents: [0.5; 3],
+            yaw_rad: 0.0,
         };
+        ViewObject::new(id, class, &cells, &bbox, &vp)
+    }
+
+    #[test]
+    fn support_decoding_keeps_one_ground_per_thing() {
         // A car, a tree, a building; a street and a sidewalk.
         let objects = vec![
             object(1, 10.0, Class::Car),
@@ -955,7 +1067,13 @@ mod tests {
         x.set(Relation::On, 1, 4, true);
         x.set(Relation::On, 2, 3, true);
         x.set(Relation::LeftOf, 0, 1, true);
-        decode_support(&objects, &mut x, &decision, &rates);
+        decode_support(
+            &objects,
+            &mut x,
+            &decision,
+            &rates,
+            &SurfacePrior::default(),
+        );
         // The car (always supported) gets its best surface although no decision is positive.
         assert!(x.get(Relation::On, 0, 3) && !x.get(Relation::On, 0, 4));
         // The tree keeps only the higher of its two.
@@ -965,8 +1083,51 @@ mod tests {
         assert!(x.get(Relation::LeftOf, 0, 1));
         // Without rates (a model written before them) only the at-most-one part acts.
         let mut y = Assignment::empty(5);
-        decode_support(&objects, &mut y, &decision, &[]);
+        decode_support(&objects, &mut y, &decision, &[], &SurfacePrior::default());
         assert_eq!(y, Assignment::empty(5));
+    }
+
+    #[test]
+    fn the_surface_prior_decides_between_close_decision_values() {
+        // A pole at the kerb: the street's decision value a little above the sidewalk's.
+        let objects = vec![
+            object(1, 10.0, Class::Pole),
+            object(2, 10.5, Class::Street),
+            object(3, 9.5, Class::Sidewalk),
+        ];
+        let decision = |a: usize, b: usize| match (a, b) {
+            (0, 1) => Some(0.3),
+            (0, 2) => Some(0.1),
+            _ => None,
+        };
+        let mut rates = vec![0.0; Class::COUNT];
+        rates[usize::from(Class::Pole.id())] = 0.95;
+        let mut log_odds = vec![0.0; Class::COUNT];
+        log_odds[usize::from(Class::Pole.id())] = 9f64.ln();
+        let decode = |weight: f64| {
+            let prior = SurfacePrior {
+                sidewalk_log_odds: log_odds.clone(),
+                weight,
+            };
+            let mut x = Assignment::empty(3);
+            decode_support(&objects, &mut x, &decision, &rates, &prior);
+            (x.get(Relation::On, 0, 1), x.get(Relation::On, 0, 2))
+        };
+        assert_eq!(decode(0.0), (true, false));
+        // Nine of ten training poles stood on a sidewalk: ln 9 / 2 ≈ 1.1 each way.
+        assert_eq!(decode(1.0), (false, true));
+        // The bonus is symmetric and zero for other classes.
+        let prior = SurfacePrior {
+            sidewalk_log_odds: log_odds.clone(),
+            weight: 1.0,
+        };
+        assert!(
+            (prior.bonus(Class::Pole, Class::Sidewalk) + prior.bonus(Class::Pole, Class::Street))
+                .abs()
+                < 1e-12
+        );
+        assert_eq!(prior.bonus(Class::Car, Class::Street), 0.0);
+        assert_eq!(prior.bonus(Class::Pole, Class::Building), 0.0);
     }
 
     #[test]
