@@ -27,7 +27,8 @@
 //! at least [`SUPPORTED_RATE`] of the training cases (learnt per class, [`RelationModel::support_rates`])
 //! on exactly one, the surface with the highest decision value plus a learnt class prior
 //! ([`SurfacePrior`]: poles and trees mostly stand on sidewalks, cars on streets; its weight
-//! chosen on the out-of-fold decisions of the training scenes, 0 among the choices). The SVM row of the
+//! chosen on the out-of-fold decisions of the training scenes, 0 among the choices), and, where
+//! that choice scores as well on them, on nothing but a ground surface. The SVM row of the
 //! evaluation is the classifiers' own decisions; the MLN row starts from the constrained ones
 //! (also when its weights are learnt).
 
@@ -147,6 +148,10 @@ pub struct SurfacePrior {
     pub sidewalk_log_odds: Vec<f64>,
     /// Weight of the log odds in decision-value units (0: the decision values alone).
     pub weight: f64,
+    /// On holds only with a ground surface as object (things never stood on things in
+    /// training).
+    #[serde(default)]
+    pub grounds_only: bool,
 }
 
 /// The weights [`train`] chooses [`SurfacePrior::weight`] from, by the On F1 of the
@@ -192,6 +197,7 @@ impl SurfacePrior {
                 .map(|&[side, street]| ((side as f64 + 1.0) / (street as f64 + 1.0)).ln())
                 .collect(),
             weight: 0.0,
+            grounds_only: false,
         }
     }
 }
@@ -202,7 +208,8 @@ pub const SUPPORTED_RATE: f64 = 0.9;
 
 /// The support constraint on the classifier's On decisions: a thing stands on at most one
 /// ground surface, and a thing of a class that stands on one at least [`SUPPORTED_RATE`] of
-/// the time in training (cars, poles, bicycles) on exactly one. Per subject `a`, among the
+/// the time in training (cars, poles, bicycles) on exactly one; with
+/// [`SurfacePrior::grounds_only`], on no other thing. Per subject `a`, among the
 /// ground surfaces `b` with a decision value `decision(a, b)`, scored by the decision plus
 /// the surface prior's bonus: with the class always supported, On holds for the highest
 /// score alone; otherwise, where the classifier says On for several, for the highest of
@@ -218,6 +225,13 @@ pub fn decode_support(
     for (a, oa) in objects.iter().enumerate() {
         if is_ground(oa.class) {
             continue;
+        }
+        if prior.grounds_only {
+            for (b, ob) in objects.iter().enumerate() {
+                if b != a && !is_ground(ob.class) {
+                    svm.set(Relation::On, a, b, false);
+                }
+            }
         }
         let always = support_rates
             .get(usize::from(oa.class.id()))
@@ -451,8 +465,9 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
     for (&(s, a, b), &d) in owner.iter().zip(&on_oof_decision) {
         decisions[s][a * scenes[s].objects.len() + b] = Some(d);
     }
-    // The surface prior's weight: the best On F1 of the decoded out-of-fold decisions
-    // against the filter-corrected labels (the first of equals: the smallest weight).
+    // The surface prior's weight and whether things stand only on ground surfaces: the best
+    // On F1 of the decoded out-of-fold decisions against the filter-corrected labels (the
+    // first of equals: grounds only, the smallest weight).
     let decode_all = |oof: &mut [Assignment], prior: &SurfacePrior| {
         for ((scene, y), d) in scenes.iter().zip(oof.iter_mut()).zip(&decisions) {
             let n = scene.objects.len();
@@ -468,9 +483,13 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
     let counted = SurfacePrior::count(scenes);
     let mut surface_prior = counted.clone();
     let mut best_f1 = f64::NEG_INFINITY;
-    for weight in SURFACE_PRIOR_WEIGHTS {
+    let choices = [true, false]
+        .into_iter()
+        .flat_map(|g| SURFACE_PRIOR_WEIGHTS.map(|w| (g, w)));
+    for (grounds_only, weight) in choices {
         let prior = SurfacePrior {
             weight,
+            grounds_only,
             ..counted.clone()
         };
         let mut decoded = oof.clone();
@@ -1108,6 +1127,7 @@ mod tests {
             let prior = SurfacePrior {
                 sidewalk_log_odds: log_odds.clone(),
                 weight,
+                grounds_only: false,
             };
             let mut x = Assignment::empty(3);
             decode_support(&objects, &mut x, &decision, &rates, &prior);
@@ -1117,9 +1137,10 @@ mod tests {
         // Nine of ten training poles stood on a sidewalk: ln 9 / 2 ≈ 1.1 each way.
         assert_eq!(decode(1.0), (false, true));
         // The bonus is symmetric and zero for other classes.
-        let prior = SurfacePrior {
+        let mut prior = SurfacePrior {
             sidewalk_log_odds: log_odds.clone(),
             weight: 1.0,
+            grounds_only: false,
         };
         assert!(
             (prior.bonus(Class::Pole, Class::Sidewalk) + prior.bonus(Class::Pole, Class::Street))
@@ -1128,6 +1149,20 @@ mod tests {
         );
         assert_eq!(prior.bonus(Class::Car, Class::Street), 0.0);
         assert_eq!(prior.bonus(Class::Pole, Class::Building), 0.0);
+        // Grounds only: a thing said to stand on another thing stands on none.
+        let objects = vec![
+            object(1, 10.0, Class::Other),
+            object(2, 10.5, Class::Tree),
+            object(3, 9.5, Class::Sidewalk),
+        ];
+        let mut x = Assignment::empty(3);
+        x.set(Relation::On, 0, 1, true);
+        x.set(Relation::Behind, 1, 0, true);
+        decode_support(&objects, &mut x, &|_, _| None, &[], &prior);
+        assert!(x.get(Relation::On, 0, 1));
+        prior.grounds_only = true;
+        decode_support(&objects, &mut x, &|_, _| None, &[], &prior);
+        assert!(!x.get(Relation::On, 0, 1) && x.get(Relation::Behind, 1, 0));
     }
 
     #[test]
