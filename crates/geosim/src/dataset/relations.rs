@@ -348,6 +348,12 @@ pub fn write_relations(
                 "Behind": "both in front, not ground; angular overlap >= 30% of the narrower; a's centre >= 1 m farther and a's nearest corner farther than b's",
             },
             "sensor": options.sensor,
+            "map_error": {
+                "options": options.scene.map_error,
+                "removed_buildings": scene.map_error.removed.len(),
+                "extra_buildings": scene.map_error.extra,
+                "mean_shift_m": scene.map_error.mean_shift_m,
+            },
             "summary": summary,
         }),
     )?;
@@ -422,6 +428,10 @@ mod tests {
             serde_json::from_slice(&std::fs::read(dir.join("dataset.json")).unwrap()).unwrap();
         assert_eq!(meta["train"], json!([0, 1, 2]));
         assert_eq!(meta["test"], json!([3]));
+        // The dataset names its map-error model (off by default: nothing removed or added).
+        assert_eq!(meta["map_error"]["removed_buildings"], json!(0));
+        assert_eq!(meta["map_error"]["extra_buildings"], json!(0));
+        assert!(meta["map_error"]["options"].is_object(), "{meta}");
         for key in ["On", "LeftOf", "Behind"] {
             assert!(
                 meta["true_pairs"][key].as_u64().unwrap() > 0,

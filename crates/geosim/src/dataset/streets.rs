@@ -127,6 +127,12 @@ pub fn write_streets(
             "sensor": options.sensor,
             "sensor_height_m": options.sensor_height_m,
             "observed_segments": points.iter().filter(|&&p| p >= 200).count(),
+            "map_error": {
+                "options": options.scene.map_error,
+                "removed_buildings": scene.map_error.removed.len(),
+                "extra_buildings": scene.map_error.extra,
+                "mean_shift_m": scene.map_error.mean_shift_m,
+            },
             "summary": summary,
         }),
     )?;
@@ -157,6 +163,9 @@ mod tests {
             serde_json::from_slice(&std::fs::read(dir.join("segments.json")).unwrap()).unwrap();
         assert_eq!(segments.len(), map.streets.segments.len());
         assert!(segments.iter().any(|s| s["observed"] == json!(true)));
+        let meta: Value =
+            serde_json::from_slice(&std::fs::read(dir.join("dataset.json")).unwrap()).unwrap();
+        assert_eq!(meta["map_error"]["removed_buildings"], json!(0), "{meta}");
         let cloud = geodata::cloud::read_cloud(dir.join("cloud.ply")).unwrap();
         let labels = cloud.label.as_ref().unwrap();
         let objects = cloud.object.as_ref().unwrap();
