@@ -481,6 +481,10 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         }
     };
     let counted = SurfacePrior::count(scenes);
+    let truth: Vec<bool> = owner
+        .iter()
+        .map(|&(s, a, b)| corrected[s].get(Relation::On, a, b))
+        .collect();
     let mut surface_prior = counted.clone();
     let mut best_f1 = f64::NEG_INFINITY;
     let choices = [true, false]
@@ -494,15 +498,10 @@ pub fn train(scenes: &[Scene], options: &TrainOptions) -> Result<RelationModel> 
         };
         let mut decoded = oof.clone();
         decode_all(&mut decoded, &prior);
-        let (pred, truth): (Vec<bool>, Vec<bool>) = owner
+        let pred: Vec<bool> = owner
             .iter()
-            .map(|&(s, a, b)| {
-                (
-                    decoded[s].get(Relation::On, a, b),
-                    corrected[s].get(Relation::On, a, b),
-                )
-            })
-            .unzip();
+            .map(|&(s, a, b)| decoded[s].get(Relation::On, a, b))
+            .collect();
         let f1 = crate::svm::f1(&pred, &truth);
         if f1 > best_f1 + 1e-12 {
             best_f1 = f1;

@@ -207,6 +207,9 @@ pub fn write_localization(
     let summary = scan_poses(&scene, &poses, &options.sensor, frame, seed, progress, each)?;
     write_json(&out.join("truth.json"), &truth)?;
     let (lat0, lon0) = scene.frame.origin();
+    let mut map_error = super::map_error_meta(&scene, &options.scene.map_error);
+    map_error["field"] = json!(scene.map_error.field);
+    map_error["truth_frame"] = json!("map: x, y, yaw, yaw_grid, lat, lon are the world pose p mapped to p + D(p) and turned by the field's local rotation; world_* are the pose in the simulated world");
     write_json(
         &out.join("dataset.json"),
         &json!({
@@ -220,14 +223,7 @@ pub fn write_localization(
             "sensor_height_m": options.sensor_height_m,
             "min_map_building_view": options.min_map_building_view,
             "view_range_m": options.view_range_m,
-            "map_error": {
-                "options": options.scene.map_error,
-                "removed_buildings": scene.map_error.removed.len(),
-                "extra_buildings": scene.map_error.extra,
-                "mean_shift_m": scene.map_error.mean_shift_m,
-                "field": scene.map_error.field,
-                "truth_frame": "map: x, y, yaw, yaw_grid, lat, lon are the world pose p mapped to p + D(p) and turned by the field's local rotation; world_* are the pose in the simulated world",
-            },
+            "map_error": map_error,
             "summary": summary,
         }),
     )?;

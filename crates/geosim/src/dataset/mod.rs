@@ -111,6 +111,17 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SimError + '_ {
 }
 
 /// Writes `value` as pretty JSON plus a newline to `path`, atomically.
+/// The `map_error` entry of a dataset's `dataset.json`: the model's options and what it did
+/// to the scene's map.
+fn map_error_meta(scene: &Scene, options: &crate::scene::MapErrorOptions) -> serde_json::Value {
+    serde_json::json!({
+        "options": options,
+        "removed_buildings": scene.map_error.removed.len(),
+        "extra_buildings": scene.map_error.extra,
+        "mean_shift_m": scene.map_error.mean_shift_m,
+    })
+}
+
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SimError> {
     let text = serde_json::to_string_pretty(value).map_err(|source| SimError::Json {
         path: path.to_path_buf(),

@@ -348,12 +348,7 @@ pub fn write_relations(
                 "Behind": "both in front, not ground; angular overlap >= 30% of the narrower; a's centre >= 1 m farther and a's nearest corner farther than b's",
             },
             "sensor": options.sensor,
-            "map_error": {
-                "options": options.scene.map_error,
-                "removed_buildings": scene.map_error.removed.len(),
-                "extra_buildings": scene.map_error.extra,
-                "mean_shift_m": scene.map_error.mean_shift_m,
-            },
+            "map_error": super::map_error_meta(&scene, &options.scene.map_error),
             "summary": summary,
         }),
     )?;

@@ -127,12 +127,7 @@ pub fn write_streets(
             "sensor": options.sensor,
             "sensor_height_m": options.sensor_height_m,
             "observed_segments": points.iter().filter(|&&p| p >= 200).count(),
-            "map_error": {
-                "options": options.scene.map_error,
-                "removed_buildings": scene.map_error.removed.len(),
-                "extra_buildings": scene.map_error.extra,
-                "mean_shift_m": scene.map_error.mean_shift_m,
-            },
+            "map_error": super::map_error_meta(&scene, &options.scene.map_error),
             "summary": summary,
         }),
     )?;
