@@ -8,7 +8,8 @@
 //! Without indices only the scans without an accurate candidate are printed. Environment
 //! overrides of the defaults: `YAW_STEP` (degrees), `FEASIBLE` (0: search every pose, filter
 //! after), `MAX_ACCEPT`, `NMS` (metres), `MERGE_DIST`, `MERGE_ANGLE` (degrees), `MERGE_GAP`,
-//! `FINAL_MIN`, `CLEARANCE`; `DIAG_SVG=DIR` writes a figure per printed scan (cells and
+//! `FINAL_MIN`, `CLEARANCE`, `SENSOR=manual` (the options above as given; default: the sensor
+//! profile measured per scan, as `localize` does); `DIAG_SVG=DIR` writes a figure per printed scan (cells and
 //! segments at the true pose over the map); `TIMING=1` prints only the mean search effort.
 
 use geodata::osm::index::MapIndex;
@@ -26,9 +27,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let only: Vec<usize> = args.map(|a| a.parse()).collect::<Result<_, _>>()?;
     let ds = SimDataset::open(&dir)?;
     let map = OsmMap::load(&ds.map_path)?;
-    // The environment variables below set the extraction options themselves.
+    // The sensor profile is measured per scan (as `localize` does) unless `SENSOR=manual`,
+    // where the environment variables below set the extraction options themselves.
+    let manual = std::env::var("SENSOR").is_ok_and(|v| v == "manual");
     let mut options = LocalizeOptions {
-        sensor: localize::sensor::SensorChoice::Manual,
+        sensor: if manual {
+            localize::sensor::SensorChoice::Manual
+        } else {
+            localize::sensor::SensorChoice::Auto
+        },
         ..LocalizeOptions::default()
     };
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
@@ -55,6 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(v) = env("CLEARANCE") {
         options.surfaces.clearance_m = v;
+        options.overrides.clearance_m = Some(v);
     }
     if let Some(v) = env("NMS") {
         options.search.nms_radius_m = v;
@@ -105,8 +113,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if in_set && failing_only {
             continue;
         }
-        let cells = vertical_cells(&scan.points, &o.surfaces)?;
-        let segments = extract_segments(&cells, &o.segments);
+        let (_, surf_o, seg_o) = localize::sensor::options_for_scan(
+            o.sensor,
+            &o.overrides,
+            (&o.surfaces, &o.segments),
+            &scan.points,
+        );
+        let cells = vertical_cells(&scan.points, &surf_o)?;
+        let segments = extract_segments(&cells, &seg_o);
         let seg_len: f64 = segments.iter().map(|s| s.length()).sum();
         let n_yaw = ((360.0 / o.search.yaw_step_deg).round() as usize).max(1);
         let templates: Vec<Template> = (0..n_yaw)

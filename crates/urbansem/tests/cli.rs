@@ -848,7 +848,14 @@ fn tiled_map_localizes_as_the_whole_map() {
     assert_eq!(a["n_accurate"], b["n_accurate"], "{b}");
     assert_eq!(a["top1_within_2m_3deg"], b["top1_within_2m_3deg"]);
     for k in 0..2 {
-        for key in ["top1", "top_costs", "raw_poses", "candidates", "confidence"] {
+        for key in [
+            "top1",
+            "top_costs",
+            "first_accurate_rank",
+            "raw_poses",
+            "candidates",
+            "confidence",
+        ] {
             assert_eq!(a["per_scan"][k][key], b["per_scan"][k][key], "{key}");
         }
     }

@@ -342,6 +342,8 @@ pub struct ScanRow {
     pub top1: BTreeMap<String, Top1Error>,
     /// Costs of the top candidate.
     pub top_costs: Option<Costs>,
+    /// Per method, the rank (1 = top) of the first candidate within 2 m / 3° of the truth.
+    pub first_accurate_rank: BTreeMap<String, Option<usize>>,
     /// Why the scan could not be localized, if so.
     pub message: Option<String>,
     /// Seconds per stage.
@@ -356,6 +358,18 @@ impl ScanRow {
         let top1 = RankMethod::ALL
             .iter()
             .map(|&m| (m.name().to_owned(), r.top1_error(m)))
+            .collect();
+        let strict = Accuracy::STRICT;
+        let first_accurate_rank = RankMethod::ALL
+            .iter()
+            .map(|&m| {
+                let rank = r
+                    .ranked_by(m)
+                    .iter()
+                    .position(|p| strict.accepts(p, &r.truth))
+                    .map(|k| k + 1);
+                (m.name().to_owned(), rank)
+            })
             .collect();
         ScanRow {
             scan: r.name.clone(),
@@ -373,6 +387,7 @@ impl ScanRow {
             confidence: r.result.confidence,
             top1,
             top_costs: r.top_costs,
+            first_accurate_rank,
             message: r.result.message.clone(),
             seconds: r.result.seconds,
             hashing_seconds: r.hashing_seconds,
@@ -995,6 +1010,33 @@ mod tests {
         assert_eq!(t.chamfer, Threshold { m: 4.0, rad: 0.2 });
         assert_eq!(t.hashing.m, 5.0);
         assert!((t.hashing.rad - std::f64::consts::FRAC_PI_6).abs() < 1e-15);
+    }
+
+    #[test]
+    fn the_first_accurate_rank_counts_from_one_per_method() {
+        let truth = Pose2 {
+            x: 10.0,
+            y: 20.0,
+            yaw_rad: 0.5,
+        };
+        let off = |dx: f64, dyaw: f64| Pose2 {
+            x: truth.x + dx,
+            y: truth.y,
+            yaw_rad: truth.yaw_rad + dyaw,
+        };
+        let mut outcome = ScanOutcome::new(
+            "s".into(),
+            truth,
+            Localization::empty(CostKind::Reverse),
+            vec![off(50.0, 0.0), off(0.5, 0.01)],
+            0.0,
+        );
+        // 2.5 m off is outside 2 m; 3° + 1° is outside 3°.
+        outcome.ranked[2] = vec![off(2.5, 0.0), off(0.0, 4f64.to_radians()), off(1.0, 0.0)];
+        let row = ScanRow::new(&outcome);
+        assert_eq!(row.first_accurate_rank["reverse"], Some(3));
+        assert_eq!(row.first_accurate_rank["hashing"], Some(2));
+        assert_eq!(row.first_accurate_rank["dcm"], None);
     }
 
     #[test]
