@@ -244,6 +244,7 @@ pub fn plan_map(
         stages,
         shards,
         model: None,
+        driving_model: None,
         tile_m: Some(tile_m),
         street_tiles: Vec::new(),
         map_job: Some(MapJob { resolution_m }),

@@ -43,7 +43,7 @@ pub fn merge_job(plan_path: &Path) -> Result<Merged> {
     match plan.job {
         Job::Localize => merge(plan_path).map(Merged::Localize),
         Job::Streets => {
-            let ids: Vec<usize> = plan.shards.iter().map(|s| s.id).collect();
+            let ids = crate::streets::answer_shards(&plan);
             let parts = read_results(plan_path, &plan, plan_crc, "the merge", &ids)?;
             crate::streets::merge_parts(plan_path, &plan, parts).map(Merged::Streets)
         }

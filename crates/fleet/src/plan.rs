@@ -134,6 +134,10 @@ pub struct Plan {
     /// The street model (streets job).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<FileRef>,
+    /// The driving-area model whose estimates centre a with-sidewalk model's priors (streets
+    /// job; its tiles are the first stage).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub driving_model: Option<FileRef>,
     /// Side of the street tiles, metres (streets job).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tile_m: Option<f64>,
@@ -301,6 +305,7 @@ pub fn plan_localize(
         stages,
         shards,
         model: None,
+        driving_model: None,
         tile_m: None,
         street_tiles: Vec::new(),
         map_job: None,

@@ -238,7 +238,7 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
         });
     }
     if plan.job == Job::Streets {
-        let lines = crate::streets::tile_lines(plan_path, &plan, &shard)?;
+        let lines = crate::streets::tile_lines(plan_path, &plan, plan_crc, &shard)?;
         return write_result(&plan, plan_crc, id, stage, &lines, t);
     }
     if plan.job == Job::Map {

@@ -15,6 +15,7 @@
 //! of `streets estimate`).
 
 use crate::plan::{absolute, tile_stage, Job, JobOptions, Plan, Shard, PLAN_FORMAT, PLAN_VERSION};
+use crate::run::read_results;
 use crate::{invalid, io_err, Result};
 use geodata::cloud::PointCloud;
 use geodata::osm::OsmMap;
@@ -24,8 +25,11 @@ use std::path::{Path, PathBuf};
 use streets::model::{Estimates, StreetModel};
 use streets::tiles::{merge_tiles, plan_tiles, TileEstimates};
 
-/// The stage name of the streets job's shards.
+/// The stage name of the streets job's shards (with a driving model: its second stage).
 pub const STAGE: &str = "tiles";
+/// The stage name of the driving-area tiles that come first for a with-sidewalk model with
+/// sidewalk margins.
+pub const DRIVING_STAGE: &str = "driving";
 
 /// The merged answer of a streets plan (`shard merge --out result.geojson`).
 #[derive(Debug, Clone, PartialEq)]
@@ -44,10 +48,16 @@ pub struct StreetsMerge {
 
 /// Plans the streets job: the cloud `cloud` (in the local frame of `map`) through the model
 /// `model`, one shard per `tile_m` street tile owning a drivable segment, results into `out`.
+///
+/// A with-sidewalk model with sidewalk margins ([`StreetModel::wants_driving_area`]) needs
+/// `driving_model`, a driving-area model: its tiles are a first stage (`driving`), and every
+/// with-sidewalk tile reads their merge, as `urbansem streets estimate` estimates the driving
+/// area of the whole cloud first. A driving model for any other model is an error.
 pub fn plan_streets(
     map: &Path,
     cloud: &Path,
     model: &Path,
+    driving_model: Option<&Path>,
     out: &Path,
     tile_m: f64,
 ) -> Result<Plan> {
@@ -56,14 +66,29 @@ pub fn plan_streets(
     let model_abs = absolute(model)?;
     let model_ref = FileRef::of(&model_abs, &model_abs.to_string_lossy())?;
     let bytes = std::fs::read(&model_abs).map_err(|e| io_err(&model_abs, e))?;
-    if StreetModel::from_json(&bytes, &model_abs)?.wants_driving_area() {
-        // Its prior needs the driving area of the same cloud estimated first, which the tile
-        // shards do not do: refused rather than estimated differently from `streets estimate`.
-        return Err(invalid(
-            &model_abs,
-            "a with-sidewalk model with sidewalk margins centres its priors on a driving-area estimate, which the streets shards do not run; plan a driving-area model (or use `urbansem streets estimate`)".into(),
-        ));
-    }
+    let street_model = StreetModel::from_json(&bytes, &model_abs)?;
+    let driving_ref = match driving_model {
+        None if street_model.wants_driving_area() => {
+            // Its prior needs the driving area of the same cloud estimated first.
+            return Err(invalid(
+                &model_abs,
+                "a with-sidewalk model with sidewalk margins centres its priors on a driving-area estimate: plan it with a driving-area model (`--driving-model`)".into(),
+            ));
+        }
+        None => None,
+        Some(d) => {
+            let d_abs = absolute(d)?;
+            let d_bytes = std::fs::read(&d_abs).map_err(|e| io_err(&d_abs, e))?;
+            let target = StreetModel::from_json(&d_bytes, &d_abs)?.target;
+            if let Some(message) = street_model.driving_model_mismatch(target) {
+                return Err(invalid(
+                    &d_abs,
+                    format!("as the driving model of {}: {message}", model_abs.display()),
+                ));
+            }
+            Some(FileRef::of(&d_abs, &d_abs.to_string_lossy())?)
+        }
+    };
     let map_ref = FileRef::of(&map_abs, &map_abs.to_string_lossy())?;
     let osm = OsmMap::load(&map_abs)?;
     streets::model::drivable_segments(&osm, &map_abs.to_string_lossy())?;
@@ -71,7 +96,24 @@ pub fn plan_streets(
     let cloud_ref = FileRef::of(&cloud_abs, &cloud_abs.to_string_lossy())?;
     std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
     let out_abs = absolute(out)?;
-    let (stages, shards) = tile_stage(STAGE, street_tiles.len(), [0, 1]);
+    let n = street_tiles.len();
+    let (stages, shards) = if driving_ref.is_some() {
+        // Stage 0 the driving area, stage 1 the with-sidewalk estimate, one shard per tile each.
+        let (mut stages, mut shards) = tile_stage(DRIVING_STAGE, n, [0, 1]);
+        let (last, more) = tile_stage(STAGE, n, [0, 1]);
+        stages.extend(last.into_iter().map(|mut st| {
+            st.shards.iter_mut().for_each(|id| *id += n);
+            st
+        }));
+        shards.extend(more.into_iter().map(|mut sh| {
+            sh.id += n;
+            sh.stage = 1;
+            sh
+        }));
+        (stages, shards)
+    } else {
+        tile_stage(STAGE, n, [0, 1])
+    };
     Ok(Plan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
@@ -84,11 +126,20 @@ pub fn plan_streets(
         stages,
         shards,
         model: Some(model_ref),
+        driving_model: driving_ref,
         tile_m: Some(tile_m),
         street_tiles,
         map_job: None,
         map_tiles: Vec::new(),
     })
+}
+
+/// The shards whose results make the answer: the last stage's (the with-sidewalk tiles when
+/// the plan estimates the driving area first).
+pub fn answer_shards(plan: &Plan) -> Vec<usize> {
+    plan.stages
+        .last()
+        .map_or_else(Vec::new, |s| s.shards.clone())
 }
 
 /// The bytes of a file the plan names, checked against the size and CRC-32 it recorded.
@@ -118,6 +169,12 @@ fn plan_model(plan_path: &Path, plan: &Plan) -> Result<StreetModel> {
     Ok(StreetModel::from_json(&bytes, &path)?)
 }
 
+/// The plan's driving-area model, checked against the plan.
+fn plan_driving_model(file: &FileRef) -> Result<StreetModel> {
+    let (path, bytes) = checked_bytes(file, "driving-area model")?;
+    Ok(StreetModel::from_json(&bytes, &path)?)
+}
+
 /// The plan's map, checked against the plan.
 fn plan_map(plan: &Plan) -> Result<OsmMap> {
     let (path, _) = checked_bytes(&plan.map, "map")?;
@@ -139,8 +196,15 @@ fn plan_cloud(plan_path: &Path, plan: &Plan) -> Result<PointCloud> {
     geodata::cloud::read_cloud(&path).map_err(|e| io_err(&path, e))
 }
 
-/// A streets shard's result lines: its tile's [`TileEstimates`] as one JSON line.
-pub fn tile_lines(plan_path: &Path, plan: &Plan, shard: &Shard) -> Result<Vec<String>> {
+/// A streets shard's result lines: its tile's [`TileEstimates`] as one JSON line (a
+/// with-sidewalk tile of a plan with a driving model reads the first stage's results,
+/// `plan_crc32` being the plan's checksum).
+pub fn tile_lines(
+    plan_path: &Path,
+    plan: &Plan,
+    plan_crc32: u32,
+    shard: &Shard,
+) -> Result<Vec<String>> {
     let tile = shard
         .tile
         .and_then(|k| plan.street_tiles.get(k))
@@ -155,11 +219,42 @@ pub fn tile_lines(plan_path: &Path, plan: &Plan, shard: &Shard) -> Result<Vec<St
                 ),
             )
         })?;
-    let model = plan_model(plan_path, plan)?;
     let map = plan_map(plan)?;
     let cloud = plan_cloud(plan_path, plan)?;
     let cloud_name = plan.inputs.first().map_or("", |f| f.path.as_str());
-    let estimates = model.estimate_tile(&map, &cloud, tile, &plan.map.path, cloud_name)?;
+    let estimates = match &plan.driving_model {
+        Some(file) if shard.stage == 0 => {
+            let driving = plan_driving_model(file)?;
+            driving.estimate_tile(&map, &cloud, tile, &plan.map.path, cloud_name)?
+        }
+        Some(_) => {
+            // The whole map's driving area: the merge of the first stage's tiles.
+            let first: Vec<usize> = plan
+                .stages
+                .first()
+                .map_or_else(Vec::new, |s| s.shards.clone());
+            let parts: Vec<TileEstimates> = read_results(
+                plan_path,
+                plan,
+                plan_crc32,
+                &format!("shard {}", shard.id),
+                &first,
+            )?;
+            let driving = merge_tiles(parts)?;
+            let model = plan_model(plan_path, plan)?;
+            model.estimate_tile_given_driving_area(
+                &map,
+                &cloud,
+                tile,
+                &plan.map.path,
+                &driving.segments,
+            )?
+        }
+        None => {
+            let model = plan_model(plan_path, plan)?;
+            model.estimate_tile(&map, &cloud, tile, &plan.map.path, cloud_name)?
+        }
+    };
     let line = serde_json::to_string(&estimates).map_err(|e| io_err(plan_path, e))?;
     Ok(vec![line])
 }
@@ -194,7 +289,7 @@ pub fn merge_parts(
         plan: plan_path.display().to_string(),
         estimates,
         geojson,
-        shards: plan.shards.len(),
+        shards: answer_shards(plan).len(),
         seconds: t.elapsed().as_secs_f64(),
     })
 }

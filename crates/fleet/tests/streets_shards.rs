@@ -37,7 +37,7 @@ fn sharded_streets_equal_the_whole_map_estimate_and_survive_reruns() {
     // 40 m tiles: many shards, and coupling components crossing tile borders.
     let plan_path = dir.path().join("plan.json");
     let results = dir.path().join("plan.d");
-    let plan = plan_streets(&map_path, &cloud_path, &model_path, &results, 40.0).unwrap();
+    let plan = plan_streets(&map_path, &cloud_path, &model_path, None, &results, 40.0).unwrap();
     plan.write(&plan_path).unwrap();
     let (read, _) = Plan::read(&plan_path).unwrap();
     assert_eq!(read, plan);
@@ -118,4 +118,119 @@ fn sharded_streets_equal_the_whole_map_estimate_and_survive_reruns() {
     std::fs::remove_file(plan.done_path(ids[0])).unwrap();
     let err = run_shard(&plan_path, ids[0], None).unwrap_err().to_string();
     assert!(err.contains("street model changed"), "{err}");
+}
+
+#[test]
+fn a_with_sidewalk_model_with_margins_runs_the_driving_area_first_and_equals_the_whole_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let map_path = dir.path().join("lattice.osm");
+    std::fs::write(&map_path, streets::synthetic::lattice_osm_xml()).unwrap();
+    let map = OsmMap::load(&map_path).unwrap();
+    let lattice = streets::synthetic::lattice().unwrap();
+    let cloud_path = dir.path().join("cloud.ply");
+    write_cloud(&cloud_path, &lattice.cloud).unwrap();
+    let write_model = |name: &str, m: &StreetModel| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, serde_json::to_vec(m).unwrap()).unwrap();
+        let back = StreetModel::from_json(&std::fs::read(&path).unwrap(), &path).unwrap();
+        (path, back)
+    };
+    let (driving_path, driving) = write_model(
+        "driving.json",
+        &streets::synthetic::lattice_model(&lattice).unwrap(),
+    );
+    let (sidewalk_path, sidewalk) = write_model(
+        "sidewalk.json",
+        &streets::synthetic::lattice_sidewalk_model(&lattice).unwrap(),
+    );
+    assert!(sidewalk.wants_driving_area());
+    let cloud = read_cloud(&cloud_path).unwrap();
+    let whole = sidewalk
+        .estimate_with_driving(Some(&driving), &map, &cloud, ("lattice", "cloud"), 0)
+        .unwrap();
+    assert!(whole.segments.len() >= 20, "{}", whole.segments.len());
+    // The driving area matters: without it the same model estimates otherwise.
+    let plain = sidewalk.estimate(&map, &cloud, "lattice", "cloud").unwrap();
+    assert_ne!(plain.segments, whole.segments);
+
+    // Without a driving model, and with a driving model of the wrong kind: refused by name.
+    let results = dir.path().join("plan.d");
+    let err = plan_streets(&map_path, &cloud_path, &sidewalk_path, None, &results, 40.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("sidewalk.json") && err.contains("--driving-model"),
+        "{err}"
+    );
+    let err = plan_streets(
+        &map_path,
+        &cloud_path,
+        &sidewalk_path,
+        Some(&sidewalk_path),
+        &results,
+        40.0,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("not a driving-area model") || err.contains("driving-area"),
+        "{err}"
+    );
+    let err = plan_streets(
+        &map_path,
+        &cloud_path,
+        &driving_path,
+        Some(&driving_path),
+        &results,
+        40.0,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("driving.json"), "{err}");
+
+    let plan = plan_streets(
+        &map_path,
+        &cloud_path,
+        &sidewalk_path,
+        Some(&driving_path),
+        &results,
+        40.0,
+    )
+    .unwrap();
+    let plan_path = dir.path().join("plan.json");
+    plan.write(&plan_path).unwrap();
+    let n = plan.street_tiles.len();
+    assert!(n >= 9, "{n} tiles");
+    let names: Vec<&str> = plan.stages.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["driving", "tiles"]);
+    assert_eq!(plan.shards.len(), 2 * n);
+    assert_eq!(plan.stages[1].shards, (n..2 * n).collect::<Vec<_>>());
+
+    // A with-sidewalk tile before the driving area is done names the stage it waits for.
+    match run_shard(&plan_path, n, None) {
+        Err(FleetError::NotReady { stage, missing, .. }) => {
+            assert_eq!(stage, "driving");
+            assert_eq!(missing.len(), n);
+        }
+        other => panic!("expected NotReady, got {other:?}"),
+    }
+    for wave in plan.waves() {
+        for id in wave.into_iter().rev() {
+            run_shard(&plan_path, id, None).unwrap();
+        }
+    }
+    let Merged::Streets(merged) = merge_job(&plan_path).unwrap() else {
+        panic!("a streets plan merged as another job");
+    };
+    assert_eq!(merged.shards, n);
+    assert_eq!(merged.estimates, whole, "merged tiles ≠ whole-map estimate");
+    let geojson = streets::geojson::feature_collection(&map, &whole.segments, sidewalk.target);
+    assert_eq!(merged.geojson, geojson);
+    // The driving-area model is checked like every file of the plan.
+    let mut bytes = std::fs::read(&driving_path).unwrap();
+    bytes.push(b'\n');
+    std::fs::write(&driving_path, &bytes).unwrap();
+    std::fs::remove_file(plan.done_path(0)).unwrap();
+    let err = run_shard(&plan_path, 0, None).unwrap_err().to_string();
+    assert!(err.contains("driving-area model changed"), "{err}");
 }

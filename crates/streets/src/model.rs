@@ -1080,7 +1080,7 @@ impl StreetModel {
     }
 
     /// The potential step with [`StreetModel::priors_given_driving_area`].
-    fn step_given_driving_area<'a>(
+    pub(crate) fn step_given_driving_area<'a>(
         &'a self,
         map: &'a OsmMap,
         cloud: &'a PointCloud,

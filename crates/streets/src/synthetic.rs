@@ -216,6 +216,43 @@ pub fn lattice_model(lattice: &Lattice) -> crate::Result<crate::model::StreetMod
     })
 }
 
+/// A with-sidewalk model for [`lattice`] with sidewalk margins learnt from its truth, so that
+/// its priors are centred on a driving-area estimate ([`lattice_model`]'s).
+pub fn lattice_sidewalk_model(lattice: &Lattice) -> crate::Result<crate::model::StreetModel> {
+    use crate::model::{BinClassifier, ClassifierOptions, Target};
+    let mut model = lattice_model(lattice)?;
+    let (x, y) = labelled_rows(
+        &lattice.map,
+        &lattice.cloud,
+        &model.geometry,
+        Target::WithSidewalk,
+    );
+    let options = ClassifierOptions {
+        max_train_bins: 150,
+        calibration_bins: 150,
+        ..ClassifierOptions::default()
+    };
+    let samples: Vec<crate::prior::MarginSample> = lattice
+        .truth
+        .iter()
+        .filter(|t| t.drivable)
+        .map(|t| {
+            let outer = (t.offset_m, t.width_m + 2.0 * t.sidewalk_m);
+            (
+                crate::prior::SegmentTags::of(&lattice.map, t.segment),
+                (t.offset_m, t.width_m),
+                outer,
+            )
+        })
+        .collect();
+    let outer: Vec<(f64, f64)> = samples.iter().map(|s| s.2).collect();
+    model.target = Target::WithSidewalk;
+    model.classifier = BinClassifier::train(&x, &y, &options)?;
+    model.prior = crate::potentials::GeometryPrior::fit(&outer);
+    model.sidewalk_prior = crate::prior::SidewalkPrior::fit(&samples);
+    Ok(model)
+}
+
 /// The feature rows and `target` labels of every usable labelled bin of the map's segments
 /// in the cloud: a classifier's training set.
 pub fn labelled_rows(

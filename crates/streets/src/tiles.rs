@@ -177,6 +177,33 @@ impl StreetModel {
         _cloud_name: &str,
     ) -> Result<TileEstimates> {
         drivable_segments(map, map_name)?;
+        self.estimate_tile_with(PotentialStep::new(self, map, cloud), map, tile)
+    }
+
+    /// [`StreetModel::estimate_tile`] for a with-sidewalk model whose priors are centred on
+    /// the driving area (`driving`, the whole map's driving-area estimates, e.g. the merge of
+    /// a driving-area model's tiles); equal to the owned segments' entries in
+    /// [`StreetModel::estimate_given_driving_area`] with the same `driving`.
+    pub fn estimate_tile_given_driving_area(
+        &self,
+        map: &OsmMap,
+        cloud: &PointCloud,
+        tile: &StreetTile,
+        map_name: &str,
+        driving: &[SegmentEstimate],
+    ) -> Result<TileEstimates> {
+        drivable_segments(map, map_name)?;
+        let step = self.step_given_driving_area(map, cloud, driving);
+        self.estimate_tile_with(step, map, tile)
+    }
+
+    /// The owned segments' estimates of `tile` with the potentials of `step`.
+    fn estimate_tile_with(
+        &self,
+        step: PotentialStep<'_>,
+        map: &OsmMap,
+        tile: &StreetTile,
+    ) -> Result<TileEstimates> {
         let segs = &map.streets.segments;
         if let Some(&segment) = tile.owned.iter().find(|&&s| s >= segs.len()) {
             return Err(StreetsError::TilePlan {
@@ -209,7 +236,6 @@ impl StreetModel {
             .collect();
         owned.sort_unstable();
         owned.dedup();
-        let step = PotentialStep::new(self, map, cloud);
         let mut reached = vec![false; segs.len()];
         owned.iter().for_each(|&s| reached[s] = true);
         let mut outcomes: BTreeMap<usize, SegmentOutcome> = BTreeMap::new();

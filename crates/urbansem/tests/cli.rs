@@ -1627,7 +1627,8 @@ fn streets_estimate_with_sidewalk_centres_on_the_driving_area() {
     let (o, out) = estimate(None, &ws);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no --driving-model"));
-    let fc: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let expected = std::fs::read(&out).unwrap();
+    let fc: serde_json::Value = serde_json::from_slice(&expected).unwrap();
     assert_eq!(fc["features"][0]["properties"]["target"], "with_sidewalk");
     // The driving model must model the driving area.
     let (o, _) = estimate(Some(&ws), &ws);
@@ -1643,24 +1644,72 @@ fn streets_estimate_with_sidewalk_centres_on_the_driving_area() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("is for a with-sidewalk model"), "{err}");
-    // The streets shards do not estimate the driving area first: such a model is refused.
+    // The streets shards estimate the driving area first (a `driving` stage, the shipped
+    // driving-area model by default) and merge into the GeoJSON `streets estimate` wrote.
+    let plan = dir.path().join("plan.json");
+    let results = dir.path().join("results");
     let o = urbansem()
-        .args(["shard", "plan", "--job", "streets", "--map"])
+        .args(["shard", "plan", "--job", "streets", "--json", "--map"])
         .arg(data.join("city.osm"))
         .arg("--inputs")
         .arg(data.join("cloud.ply"))
         .arg("--model")
         .arg(&ws)
         .arg("--results")
-        .arg(dir.path().join("results"))
+        .arg(&results)
         .arg("--out")
-        .arg(dir.path().join("plan.json"))
+        .arg(&plan)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no --driving-model"));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["stages"][0]["name"], "driving", "{v}");
+    assert_eq!(v["stages"][1]["name"], "tiles", "{v}");
+    let written = results.join("default-driving-model.json");
+    let shipped = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../streets/models/default.json"
+    );
+    assert!(std::fs::read(&written).unwrap() == std::fs::read(shipped).unwrap());
+    for id in 0..v["shards"].as_u64().unwrap() {
+        let o = urbansem()
+            .args(["shard", "run"])
+            .arg(&plan)
+            .arg("--shard")
+            .arg(id.to_string())
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let merged = dir.path().join("merged.geojson");
+    let o = urbansem()
+        .args(["shard", "merge"])
+        .arg(&plan)
+        .arg("--out")
+        .arg(&merged)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(&merged).unwrap() == expected,
+        "the merged shards differ from streets estimate"
+    );
+    // A driving model for a driving-area model is refused by name.
+    let o = urbansem()
+        .args(["shard", "plan", "--job", "streets", "--map"])
+        .arg(data.join("city.osm"))
+        .arg("--inputs")
+        .arg(data.join("cloud.ply"))
+        .arg("--driving-model")
+        .arg(shipped)
+        .arg("--results")
+        .arg(&results)
+        .arg("--out")
+        .arg(dir.path().join("plan2.json"))
         .output()
         .unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("ws.json") && err.contains("sidewalk margins"),
-        "{err}"
-    );
+    assert!(err.contains("is for a with-sidewalk model"), "{err}");
 }

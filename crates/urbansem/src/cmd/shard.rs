@@ -23,8 +23,9 @@ pub enum JobArg {
 pub enum ShardCommand {
     /// Split a job into shards and write the plan: for localization, stages of scan batches ×
     /// tiles (`extract`, `minimum`, `poses`) whose shards run in any order within a stage;
-    /// for streets, one stage (`tiles`) of a shard per street tile; for maps, one stage
-    /// (`map-tiles`) of a shard per map tile.
+    /// for streets, one stage (`tiles`) of a shard per street tile (a with-sidewalk model
+    /// with sidewalk margins: first a `driving` stage of driving-area tiles); for maps, one
+    /// stage (`map-tiles`) of a shard per map tile.
     Plan {
         /// The job.
         #[arg(long, value_enum)]
@@ -43,6 +44,15 @@ pub enum ShardCommand {
         /// model, written into the results folder so that the plan can check it like any file).
         #[arg(long)]
         model: Option<PathBuf>,
+        /// The driving-area model that centres a with-sidewalk model's priors (streets only;
+        /// default for a with-sidewalk model with sidewalk margins: the shipped driving-area
+        /// model, written into the results folder), as `streets estimate --driving-model`.
+        #[arg(long)]
+        driving_model: Option<PathBuf>,
+        /// Street area to estimate with the shipped models (streets only; with --model: must
+        /// be the model's) [default: driving-area, or the --model's].
+        #[arg(long, value_enum)]
+        target: Option<super::streets::TargetArg>,
         /// Side of the tiles, metres (streets: default 500; maps: default 100, a whole number
         /// of cells).
         #[arg(long)]
@@ -110,6 +120,8 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             map,
             inputs,
             model,
+            driving_model,
+            target,
             tile_m,
             resolution,
             out,
@@ -153,11 +165,54 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                     if !(tile_m.is_finite() && tile_m > 0.0) {
                         super::usage!("--tile-m {tile_m}: expected a tile side > 0 metres");
                     }
+                    let target = target.map(streets::model::Target::from);
                     let model = match model {
                         Some(model) => model,
-                        None => shipped_street_model_file(&results)?,
+                        None if target == Some(streets::model::Target::WithSidewalk) => {
+                            shipped_street_model_file(
+                                &results,
+                                "default-with-sidewalk-model.json",
+                                streets::model::WITH_SIDEWALK_MODEL_JSON,
+                                "with-sidewalk model",
+                            )?
+                        }
+                        None => shipped_street_model_file(
+                            &results,
+                            "default-street-model.json",
+                            streets::model::DEFAULT_MODEL_JSON,
+                            "model",
+                        )?,
                     };
-                    plan_streets(&map, &inputs, &model, &results, tile_m)?
+                    let bytes = std::fs::read(&model)
+                        .with_context(|| format!("reading the model {}", model.display()))?;
+                    let street_model = streets::model::StreetModel::from_json(&bytes, &model)?;
+                    if let Some(t) = target.filter(|&t| t != street_model.target) {
+                        super::usage!(
+                            "--target {} but the model {} is a {} model",
+                            t.key().replace('_', "-"),
+                            model.display(),
+                            street_model.target.key().replace('_', "-")
+                        );
+                    }
+                    let wants = street_model.wants_driving_area();
+                    let driving_model = match driving_model {
+                        Some(d) => Some(d),
+                        None if wants => Some(shipped_street_model_file(
+                            &results,
+                            "default-driving-model.json",
+                            streets::model::DEFAULT_MODEL_JSON,
+                            "driving-area model",
+                        )?),
+                        None => None,
+                    };
+                    plan_streets(
+                        &map,
+                        &inputs,
+                        &model,
+                        driving_model.as_deref(),
+                        &results,
+                        tile_m,
+                    )?
                 }
                 (JobArg::Map, _) => {
                     let tile_m = tile_m.unwrap_or(100.0);
@@ -273,13 +328,23 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
 
 /// Writes the shipped default street model into `results` (for a streets plan without
 /// `--model`) and returns its path.
-fn shipped_street_model_file(results: &Path) -> anyhow::Result<PathBuf> {
+fn shipped_street_model_file(
+    results: &Path,
+    name: &str,
+    json: &[u8],
+    what: &str,
+) -> anyhow::Result<PathBuf> {
     std::fs::create_dir_all(results).with_context(|| format!("creating {}", results.display()))?;
-    let path = results.join("default-street-model.json");
-    geodata::fsio::write_atomic(&path, streets::model::DEFAULT_MODEL_JSON)
+    let path = results.join(name);
+    geodata::fsio::write_atomic(&path, json)
         .with_context(|| format!("writing {}", path.display()))?;
     eprintln!(
-        "shard plan: no --model, the streets job uses the shipped default model ({})",
+        "shard plan: no --{}, the streets job uses the shipped default {what} ({})",
+        if what == "driving-area model" {
+            "driving-model"
+        } else {
+            "model"
+        },
         path.display()
     );
     Ok(path)
