@@ -88,6 +88,9 @@ pub struct ExtractRecord {
     pub sensor: Option<SensorRecord>,
     /// Wall clearance, metres.
     pub clearance_m: f64,
+    /// The scan's tilt from its walls and whether it was levelled (absent: off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub level: Option<localize::level::Levelling>,
     /// Vertical-surface cells.
     pub vertical_cells: usize,
     /// Shortest segment kept, metres.
@@ -121,6 +124,7 @@ impl ExtractRecord {
                     })
             }),
             clearance_m: self.clearance_m,
+            levelling: self.level,
             vertical_cells: self.vertical_cells,
             min_length_m: self.min_length_m,
             surfaces_s: 0.0,
@@ -462,6 +466,7 @@ fn extract_one(plan: &Plan, k: usize, options: &LocalizeOptions) -> Result<Strin
             beams: s.geometry.beams,
         }),
         clearance_m: e.clearance_m,
+        level: e.levelling,
         vertical_cells: e.vertical_cells,
         min_length_m: e.min_length_m,
     };

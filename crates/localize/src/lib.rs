@@ -7,6 +7,7 @@
 //!
 //! - [`sensor`]: the LiDAR's mount height, vertical field of view and beams (named profile or
 //!   detected from the scan) and the extraction options that follow.
+//! - [`level`]: the up direction of a tilted scan from its walls, and the scan levelled by it.
 //! - [`surfaces`]: voxel downsampling, normals per occupied cell, cells with a horizontal
 //!   normal (vertical surfaces) projected to the ground plane (§5.3.2).
 //! - [`segments`]: one 2-D histogram per normal-yaw bin, the progressive probabilistic Hough
@@ -49,6 +50,7 @@ pub mod geojson;
 pub mod hashing;
 pub mod index;
 pub mod jobs;
+pub mod level;
 pub mod pipeline;
 pub mod poses;
 pub mod rank;

@@ -18,6 +18,7 @@ use crate::candidates::{
 use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
 use crate::index::{PrepOptions, PreparedMap};
+use crate::level::{level, LevelOptions, Levelling};
 use crate::rank::{confidence, costs, rank_order, CostKind, CostOptions, Costs};
 use crate::refine::{refine_pose, RefineOptions};
 use crate::segments::{extract_segments, SegmentOptions};
@@ -38,6 +39,9 @@ pub struct LocalizeOptions {
     pub sensor: SensorChoice,
     /// User values over the sensor's extraction options.
     pub overrides: ExtractOverrides,
+    /// Levelling of a tilted scan by its walls before the extraction (`None`, the default:
+    /// the scan is taken as levelled).
+    pub level: Option<LevelOptions>,
     /// Surface extraction under [`SensorChoice::Manual`].
     pub surfaces: SurfaceOptions,
     /// Segment extraction under [`SensorChoice::Manual`] (its seed and Hough settings are
@@ -76,6 +80,7 @@ impl Default for LocalizeOptions {
         LocalizeOptions {
             sensor: SensorChoice::Auto,
             overrides: ExtractOverrides::default(),
+            level: None,
             surfaces: SurfaceOptions::default(),
             segments: SegmentOptions::default(),
             chamfer: ChamferOptions::default(),
@@ -161,6 +166,8 @@ pub struct ScanSegments {
     pub sensor: Option<SensorReport>,
     /// Wall clearance used, metres.
     pub clearance_m: f64,
+    /// What the levelling found and did (`None`: off).
+    pub levelling: Option<Levelling>,
     /// Vertical-surface cells found.
     pub vertical_cells: usize,
     /// Shortest segment kept, metres.
@@ -187,6 +194,8 @@ pub struct Localization {
     pub sensor: Option<SensorReport>,
     /// Wall clearance the surface extraction used, metres (0 for segments given directly).
     pub clearance_m: f64,
+    /// What the levelling of the scan found and did (`None`: off, or segments given).
+    pub levelling: Option<Levelling>,
     /// Vertical-surface cells found.
     pub vertical_cells: usize,
     /// Poses within the factor of the minimum before suppression.
@@ -213,6 +222,7 @@ impl Localization {
             confidence: 0.0,
             sensor: None,
             clearance_m: 0.0,
+            levelling: None,
             vertical_cells: 0,
             raw_poses: 0,
             after_suppression: 0,
@@ -228,6 +238,7 @@ impl Localization {
     pub fn record_extraction(&mut self, extracted: &ScanSegments) {
         self.sensor = extracted.sensor;
         self.clearance_m = extracted.clearance_m;
+        self.levelling = extracted.levelling;
         self.vertical_cells = extracted.vertical_cells;
         self.seconds.surfaces = extracted.surfaces_s;
         self.seconds.segments = extracted.segments_s;
@@ -428,6 +439,16 @@ impl<'m> Localizer<'m> {
 pub fn scan_segments(options: &LocalizeOptions, points: &[[f64; 3]]) -> Result<ScanSegments> {
     let t0 = Instant::now();
     crate::surfaces::check_points(points)?;
+    let levelled;
+    let (points, levelling) = match &options.level {
+        Some(lo) => {
+            let mut copy = points.to_vec();
+            let l = level(&mut copy, lo);
+            levelled = copy;
+            (levelled.as_slice(), Some(l))
+        }
+        None => (points, None),
+    };
     let (sensor, surfaces, mut segment_options) = options_for_scan(
         options.sensor,
         &options.overrides,
@@ -443,6 +464,7 @@ pub fn scan_segments(options: &LocalizeOptions, points: &[[f64; 3]]) -> Result<S
         segments,
         sensor,
         clearance_m: surfaces.clearance_m,
+        levelling,
         vertical_cells: cells.len(),
         min_length_m: segment_options.final_min_length_m,
         surfaces_s,

@@ -115,6 +115,8 @@ pub struct LocalizeReport {
     pub sensor: Option<SensorReport>,
     /// Wall clearance above ground, metres.
     pub clearance_m: f64,
+    /// The scan's tilt estimated from its walls and whether it was levelled (`null`: off).
+    pub level: Option<crate::level::Levelling>,
     /// Vertical-surface cells.
     pub vertical_cells: usize,
     /// Poses the search returned.
@@ -192,6 +194,7 @@ impl LocalizeReport {
             segments: result.segments.len(),
             sensor: result.sensor,
             clearance_m: result.clearance_m,
+            level: result.levelling,
             vertical_cells: result.vertical_cells,
             raw_poses: result.raw_poses,
             after_suppression: result.after_suppression,

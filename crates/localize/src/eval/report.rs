@@ -330,6 +330,8 @@ pub struct ScanRow {
     pub sensor: Option<SensorReport>,
     /// Wall clearance above ground used, metres.
     pub clearance_m: f64,
+    /// The scan's tilt estimated from its walls and whether it was levelled (`null`: off).
+    pub level: Option<crate::level::Levelling>,
     /// Poses the search returned.
     pub raw_poses: usize,
     /// Search statistics.
@@ -381,6 +383,7 @@ impl ScanRow {
             segments: r.result.segments.len(),
             sensor: r.result.sensor,
             clearance_m: r.result.clearance_m,
+            level: r.result.levelling,
             raw_poses: r.result.raw_poses,
             search: r.result.search,
             candidates: r.result.candidates.len(),

@@ -189,12 +189,36 @@ impl SensorArg {
     }
 }
 
+/// How a scan is levelled before the extraction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum LevelArg {
+    /// Estimate the up direction from the walls; level the scan when it leans 1–30°.
+    Auto,
+    /// Take the scan as gravity-levelled.
+    #[default]
+    Off,
+}
+
+impl LevelArg {
+    /// The library's levelling options (`None`: off).
+    pub fn options(self) -> Option<localize::level::LevelOptions> {
+        match self {
+            LevelArg::Auto => Some(localize::level::LevelOptions::default()),
+            LevelArg::Off => None,
+        }
+    }
+}
+
 /// The sensor profile and every knob of the wall extraction (unset: the profile's value).
 #[derive(Args, Clone, Default)]
 pub struct ExtractArgs {
     /// Sensor profile; `auto` estimates mount height, beams and field of view from each scan.
     #[arg(long, value_enum, default_value = "auto")]
     pub sensor: SensorArg,
+    /// Levelling of a tilted scan: `auto` estimates the up direction from the scan's walls
+    /// and levels it when it leans 1–30° (`localize::level`); `off` takes it as levelled.
+    #[arg(long, value_enum, default_value = "off")]
+    pub level: LevelArg,
     /// Wall points must be this high above the local ground, metres (cars, people below).
     #[arg(long)]
     pub clearance_m: Option<f64>,
@@ -476,6 +500,7 @@ fn options(
         rank_by: cost,
         sensor: extract.sensor.choice(),
         overrides: extract.overrides()?,
+        level: extract.level.options(),
         ..LocalizeOptions::default()
     };
     o.chamfer.grid_m = grid_m;
