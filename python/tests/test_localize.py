@@ -96,6 +96,20 @@ def test_candidates_equal_the_cli_json(cli, map_path, scans, results):
     assert got.cost == "reverse" and got.best.cost == got.best.reverse
 
 
+def test_level_auto_equals_the_cli_and_reports_the_tilt(cli, map_path, scans, results):
+    s, ply = scans[0]
+    levelled = urbansem.Localizer(map_path, level="auto").localize(s.points, name=str(ply))
+    expected = run_json(
+        cli, "localize", "--map", map_path, "--scan", ply, "--level", "auto", "--json"
+    )
+    assert without_seconds(levelled.report) == without_seconds(expected)
+    level = levelled.report["level"]
+    # The MCD scans lean about 3 degrees once levelled by their poses (README, Tilted sensors).
+    assert level["up"] is not None and 1.0 < level["tilt_deg"] < 6.0, level
+    assert level["applied"] is True
+    assert results[0].report["level"] is None
+
+
 def test_top_candidate_is_within_the_thesis_threshold(scans, results):
     for (s, _), r in zip(scans, results):
         assert r.best is not None, (s.name, r.message)
@@ -184,6 +198,8 @@ def test_bad_input_is_a_clear_error(localizer, scans, tmp_path):
         urbansem.Localizer(tmp_path / "no-such-map.osm")
     with pytest.raises(ValueError, match="unknown sensor"):
         urbansem.Localizer(tmp_path / "no-such-map.osm", sensor="lidar9000")
+    with pytest.raises(ValueError, match="use auto or off"):
+        urbansem.Localizer(tmp_path / "no-such-map.osm", level="tilted")
     with pytest.raises(ValueError, match="odometry has 1 poses for 2 scans"):
         localizer.track([pts, pts], np.zeros((1, 3)))
     with pytest.raises(ValueError, match="odometry must have shape"):

@@ -291,6 +291,7 @@ class Localizer:
         max_see_through: Optional[float] = None,
         min_cell_count: Optional[int] = None,
         min_segment_m: Optional[float] = None,
+        level: str = "off",
     ) -> None:
         """Prepares the map (the expensive part, done once)."""
         if not isinstance(map, OsmMap):
@@ -314,6 +315,7 @@ class Localizer:
             max_see_through=max_see_through,
             min_cell_count=min_cell_count,
             min_segment_m=min_segment_m,
+            level=level,
         )
 
     def localize(self, points: Any, *, top: int = 10, name: str = "<array>") -> LocalizeResult:

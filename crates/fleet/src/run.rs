@@ -242,7 +242,17 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
         });
     }
     if plan.job == Job::Streets {
-        let lines = crate::streets::tile_lines(plan_path, &plan, plan_crc, &shard)?;
+        let driving = match crate::streets::driving_shards(&plan, shard.stage) {
+            Some(ids) => Some(read_results(
+                plan_path,
+                &plan,
+                plan_crc,
+                &format!("shard {id}"),
+                &ids,
+            )?),
+            None => None,
+        };
+        let lines = crate::streets::tile_lines(plan_path, &plan, &shard, driving)?;
         return write_result(&plan, plan_crc, id, stage, &lines, t);
     }
     if plan.job == Job::Map {

@@ -15,7 +15,6 @@
 //! of `streets estimate`).
 
 use crate::plan::{absolute, tile_stage, Job, JobOptions, Plan, Shard, PLAN_FORMAT, PLAN_VERSION};
-use crate::run::read_results;
 use crate::{invalid, io_err, Result};
 use geodata::cloud::PointCloud;
 use geodata::osm::OsmMap;
@@ -134,6 +133,16 @@ pub fn plan_streets(
     })
 }
 
+/// The shards whose results a with-sidewalk shard of stage `stage` reads: the `driving`
+/// stage's, when the plan has a driving model and `stage` is the last.
+pub fn driving_shards(plan: &Plan, stage: usize) -> Option<Vec<usize>> {
+    (plan.driving_model.is_some() && stage > 0).then(|| {
+        plan.stages
+            .first()
+            .map_or_else(Vec::new, |s| s.shards.clone())
+    })
+}
+
 /// The shards whose results make the answer: the last stage's (the with-sidewalk tiles when
 /// the plan estimates the driving area first).
 pub fn answer_shards(plan: &Plan) -> Vec<usize> {
@@ -196,14 +205,14 @@ fn plan_cloud(plan_path: &Path, plan: &Plan) -> Result<PointCloud> {
     geodata::cloud::read_cloud(&path).map_err(|e| io_err(&path, e))
 }
 
-/// A streets shard's result lines: its tile's [`TileEstimates`] as one JSON line (a
-/// with-sidewalk tile of a plan with a driving model reads the first stage's results,
-/// `plan_crc32` being the plan's checksum).
+/// A streets shard's result lines: its tile's [`TileEstimates`] as one JSON line. A
+/// with-sidewalk tile of a plan with a driving model takes `driving`, the first stage's
+/// results (every tile's driving-area estimates; [`driving_shards`]).
 pub fn tile_lines(
     plan_path: &Path,
     plan: &Plan,
-    plan_crc32: u32,
     shard: &Shard,
+    driving: Option<Vec<TileEstimates>>,
 ) -> Result<Vec<String>> {
     let tile = shard
         .tile
@@ -229,17 +238,15 @@ pub fn tile_lines(
         }
         Some(_) => {
             // The whole map's driving area: the merge of the first stage's tiles.
-            let first: Vec<usize> = plan
-                .stages
-                .first()
-                .map_or_else(Vec::new, |s| s.shards.clone());
-            let parts: Vec<TileEstimates> = read_results(
-                plan_path,
-                plan,
-                plan_crc32,
-                &format!("shard {}", shard.id),
-                &first,
-            )?;
+            let parts = driving.ok_or_else(|| {
+                invalid(
+                    plan_path,
+                    format!(
+                        "internal: with-sidewalk shard {} without the driving-area results",
+                        shard.id
+                    ),
+                )
+            })?;
             let driving = merge_tiles(parts)?;
             let model = plan_model(plan_path, plan)?;
             model.estimate_tile_given_driving_area(

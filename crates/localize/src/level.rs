@@ -11,9 +11,11 @@
 //! their covariance small against the middle one) has that plane's normal. Voxels whose
 //! normal is within a band of the horizontal (for the current up) are walls; the new up is
 //! the eigenvector of the smallest eigenvalue of Σ n nᵀ over them (the direction least
-//! aligned with any wall normal), refined three times with a narrowing band. It is only
-//! defined when the walls face at least two directions (the middle eigenvalue of Σ n nᵀ is
-//! not small against the largest); otherwise the scan is left as it is. A tilt below
+//! aligned with any wall normal), refined with a narrowing band. Walls facing one direction
+//! only (the middle eigenvalue of Σ n nᵀ small against the largest; a straight street) fix
+//! the tilt across them; the tilt along them is then the ground's (a plane through the lowest
+//! point of each 1 m cell), whose grade across the walls the wall constraint removes.
+//! Without walls the scan is left as it is. A tilt below
 //! [`LevelOptions::min_tilt_deg`] is left alone too, so a scan that is levelled already is
 //! not changed by the estimate's noise. Cost O(points).
 //!
@@ -44,6 +46,10 @@ pub struct LevelOptions {
     /// Smallest ratio of the middle to the largest eigenvalue of Σ n nᵀ (walls facing two
     /// directions at least).
     pub min_spread: f64,
+    /// With walls facing one direction only, take the tilt along them from the ground.
+    pub ground_fallback: bool,
+    /// Reach of the ground fit, metres.
+    pub ground_range_m: f64,
     /// Tilts below this are not corrected, degrees.
     pub min_tilt_deg: f64,
     /// Tilts above this are not corrected (not a tilted car sensor), degrees.
@@ -60,6 +66,8 @@ impl Default for LevelOptions {
             max_flatness: 0.05,
             min_extent_m: 0.1,
             min_spread: 0.05,
+            ground_fallback: true,
+            ground_range_m: 20.0,
             min_tilt_deg: 1.0,
             max_tilt_deg: 30.0,
         }
@@ -143,8 +151,57 @@ fn planar_normals(points: &[[f64; 3]], o: &LevelOptions) -> Vec<Vector3<f64>> {
     normals
 }
 
+/// The normal of the ground around the sensor (up to `ground_range_m`): a plane fitted to
+/// the lowest point of every 1 m cell, twice without the cells more than 0.2 m off it.
+fn ground_normal(points: &[[f64; 3]], o: &LevelOptions) -> Option<Vector3<f64>> {
+    let mut lowest: FxHashMap<(i64, i64), [f64; 3]> = FxHashMap::default();
+    let mut order: Vec<(i64, i64)> = Vec::new();
+    for p in points {
+        if !p.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        let r = p[0].hypot(p[1]);
+        if r < o.min_range_m || r > o.ground_range_m {
+            continue;
+        }
+        let key = (p[0].floor() as i64, p[1].floor() as i64);
+        let e = lowest.entry(key).or_insert_with(|| {
+            order.push(key);
+            *p
+        });
+        if p[2] < e[2] {
+            *e = *p;
+        }
+    }
+    let cells: Vec<[f64; 3]> = order.iter().map(|k| lowest[k]).collect();
+    let mut plane: Option<Vector3<f64>> = None;
+    for _ in 0..3 {
+        let mut ata = Matrix3::<f64>::zeros();
+        let mut atb = Vector3::<f64>::zeros();
+        let mut n = 0;
+        for c in &cells {
+            if let Some(q) = plane {
+                if (c[2] - (q.x * c[0] + q.y * c[1] + q.z)).abs() > 0.2 {
+                    continue;
+                }
+            }
+            let v = Vector3::new(c[0], c[1], 1.0);
+            ata += v * v.transpose();
+            atb += v * c[2];
+            n += 1;
+        }
+        if n < 20 {
+            return None;
+        }
+        plane = Some(ata.lu().solve(&atb)?);
+    }
+    let q = plane?;
+    Some(Vector3::new(-q.x, -q.y, 1.0).normalize())
+}
+
 /// The up direction of a scan from its walls, with the wall voxels of the last refinement;
-/// `None` when the walls do not fix it.
+/// `None` when the walls do not fix it. Walls that all face one direction fix only the tilt
+/// across them: the component along them is then the ground's (a street's grade included).
 pub fn estimate_up(points: &[[f64; 3]], o: &LevelOptions) -> (Option<[f64; 3]>, usize) {
     let normals = planar_normals(points, o);
     let mut up = Vector3::new(0.0, 0.0, 1.0);
@@ -166,10 +223,26 @@ pub fn estimate_up(points: &[[f64; 3]], o: &LevelOptions) -> (Option<[f64; 3]>, 
         let mut idx = [0usize, 1, 2];
         idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
         let (l1, l2) = (eig.eigenvalues[idx[1]], eig.eigenvalues[idx[2]]);
-        if l2 <= 0.0 || l1 < o.min_spread * l2 {
+        if l2 <= 0.0 {
             return (None, walls);
         }
-        let mut v = eig.eigenvectors.column(idx[0]).into_owned();
+        let mut v = if l1 < o.min_spread * l2 {
+            // One wall direction w: up ⟂ w, the rest from the ground.
+            if !o.ground_fallback {
+                return (None, walls);
+            }
+            let Some(g) = ground_normal(points, o) else {
+                return (None, walls);
+            };
+            let w = eig.eigenvectors.column(idx[2]).into_owned();
+            let v = g - w * g.dot(&w);
+            if v.norm() < 0.5 {
+                return (None, walls);
+            }
+            v
+        } else {
+            eig.eigenvectors.column(idx[0]).into_owned()
+        };
         if v.z < 0.0 {
             v = -v;
         }
@@ -312,14 +385,23 @@ mod tests {
     }
 
     #[test]
-    fn one_wall_or_none_gives_no_estimate() {
-        let o = LevelOptions::default();
+    fn one_wall_takes_the_tilt_along_it_from_the_ground_or_gives_no_estimate() {
+        // Pitched 3° about y: the wall x = 10 faces along x, the ground's 5 % grade runs
+        // along x too, so the wall removes the grade and the ground gives the rest.
         let one: Vec<[f64; 3]> = corner(3.0, 0.0)
             .into_iter()
             .filter(|p| p[1] < 11.0)
             .collect();
-        let (up, _) = estimate_up(&one, &o);
-        assert!(up.is_none());
+        let (up, _) = estimate_up(&one, &LevelOptions::default());
+        let up = up.unwrap();
+        let tilt = up[2].acos().to_degrees();
+        assert!((tilt - 3.0).abs() < 0.1, "{up:?}");
+        let walls_only = LevelOptions {
+            ground_fallback: false,
+            ..LevelOptions::default()
+        };
+        assert!(estimate_up(&one, &walls_only).0.is_none());
+        let o = LevelOptions::default();
         let mut empty: Vec<[f64; 3]> = Vec::new();
         let l = level(&mut empty, &o);
         assert!(l.up.is_none() && !l.applied);

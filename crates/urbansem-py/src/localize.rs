@@ -185,7 +185,7 @@ impl PyLocalizer {
         yaw_step_deg = 0.5, clearance_m = None, voxel_m = None, max_range_m = None,
         min_range_m = None, min_z_m = None, max_z_m = None, ground_cell_m = None,
         column_radius_m = None, max_flatness = None, min_columns = None,
-        max_see_through = None, min_cell_count = None, min_segment_m = None))]
+        max_see_through = None, min_cell_count = None, min_segment_m = None, level = "off"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -207,7 +207,17 @@ impl PyLocalizer {
         max_see_through: Option<f64>,
         min_cell_count: Option<u32>,
         min_segment_m: Option<f64>,
+        level: &str,
     ) -> PyResult<Self> {
+        let level = match level {
+            "auto" => Some(localize::level::LevelOptions::default()),
+            "off" => None,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "level = {other:?}: use auto or off"
+                )))
+            }
+        };
         if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
             return Err(PyValueError::new_err(format!(
                 "yaw_step_deg = {yaw_step_deg}: expected a step in (0, 90] degrees"
@@ -236,6 +246,7 @@ impl PyLocalizer {
                 min_cell_count,
                 min_segment_m,
             )?,
+            level,
             ..LocalizeOptions::default()
         };
         options.chamfer.grid_m = grid_m;
