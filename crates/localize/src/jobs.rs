@@ -12,6 +12,7 @@ use crate::sensor::{ExtractOverrides, SensorKind};
 use crate::track::{read_odometry, TrackOptions};
 use crate::{LocalizeError, Result, WithContext};
 use geodata::osm::OsmMap;
+use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -530,16 +531,24 @@ pub struct ExtractEvalReport {
     pub seconds: ExtractEvalSeconds,
 }
 
-/// Scores wall extraction on every `stride`-th scan of a labelled KITTI-360 or MCD sequence.
+/// Scores wall extraction on every `stride`-th scan of a labelled KITTI-360 or MCD sequence,
+/// each levelled by its walls first when `level` is given.
 pub fn extract_eval_sequence(
     dataset: &Path,
     stride: usize,
     sensor: Option<SensorKind>,
     overrides: &ExtractOverrides,
+    level: Option<&crate::level::LevelOptions>,
 ) -> Result<ExtractEvalReport> {
     let t = Instant::now();
-    let (kind, scans) = labelled_scans(dataset, stride)
+    let (kind, mut scans) = labelled_scans(dataset, stride)
         .context_with(|| format!("reading {}", dataset.display()))?;
+    if let Some(lo) = level {
+        // Each point keeps its class: only the frame turns.
+        scans.par_iter_mut().for_each(|s| {
+            crate::level::level(&mut s.points, lo);
+        });
+    }
     if scans.is_empty() {
         return Err(LocalizeError::Dataset {
             path: dataset.to_path_buf(),

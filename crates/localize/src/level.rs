@@ -21,7 +21,8 @@
 //!
 //! Off by default ([`crate::pipeline::LocalizeOptions::level`]): on exactly levelled
 //! simulated scans the estimate is 0.4–1.1° off, and the MCD scans, which it finds rolled by
-//! about 3° (their ground agrees), localize slightly worse levelled (README, *Tilted sensors*).
+//! about 3° (a fixed offset of the dataset reader's extrinsic), localize slightly worse
+//! levelled (README, *Tilted sensors*).
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rustc_hash::FxHashMap;

@@ -727,6 +727,7 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
         args.stride,
         args.extract.sensor.kind(),
         &overrides,
+        args.extract.level.options().as_ref(),
     )?;
     if args.json {
         return super::print_json(&report);
