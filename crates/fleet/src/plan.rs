@@ -42,10 +42,17 @@ pub struct JobOptions {
     /// below its cap, for the scans no earlier round found a pose for; a last round has no cap.
     #[serde(default = "default_caps")]
     pub minimum_caps_m: Vec<f64>,
+    /// Levelling of tilted scans by their walls (`off` or `auto`, as `localize --level`).
+    #[serde(default = "default_level")]
+    pub level: String,
 }
 
 fn default_caps() -> Vec<f64> {
     localize::tiles::MINIMUM_CAPS_M.to_vec()
+}
+
+fn default_level() -> String {
+    "off".into()
 }
 
 impl Default for JobOptions {
@@ -56,6 +63,7 @@ impl Default for JobOptions {
             sensor: "auto".into(),
             yaw_step_deg: LocalizeOptions::default().search.yaw_step_deg,
             minimum_caps_m: default_caps(),
+            level: default_level(),
         }
     }
 }
@@ -79,6 +87,16 @@ impl JobOptions {
                     .find(|k| k.name() == self.sensor)
                     .ok_or_else(|| invalid(plan, format!("unknown sensor {:?}", self.sensor)))?,
             )
+        };
+        o.level = match self.level.as_str() {
+            "off" => None,
+            "auto" => Some(localize::level::LevelOptions::default()),
+            other => {
+                return Err(invalid(
+                    plan,
+                    format!("unknown level {other:?}: expected off or auto"),
+                ))
+            }
         };
         Ok(o)
     }
@@ -391,5 +409,37 @@ impl Plan {
     /// Shards per stage, in order.
     pub fn waves(&self) -> Vec<Vec<usize>> {
         self.stages.iter().map(|s| s.shards.clone()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn the_level_option_reaches_the_localizer_and_an_unknown_one_is_named() {
+        let plan = Path::new("plan.json");
+        let off = JobOptions::default().localize_options(0.5, plan).unwrap();
+        assert_eq!(off.level, None);
+        let auto = JobOptions {
+            level: "auto".into(),
+            ..JobOptions::default()
+        };
+        assert_eq!(
+            auto.localize_options(0.5, plan).unwrap().level,
+            Some(localize::level::LevelOptions::default())
+        );
+        let bad = JobOptions {
+            level: "tilted".into(),
+            ..JobOptions::default()
+        };
+        let err = bad.localize_options(0.5, plan).unwrap_err().to_string();
+        assert!(err.contains("plan.json") && err.contains("tilted"), "{err}");
+        // Plans written before the option read as `off`.
+        let mut v = serde_json::to_value(JobOptions::default()).unwrap();
+        v.as_object_mut().unwrap().remove("level");
+        let back: JobOptions = serde_json::from_value(v).unwrap();
+        assert_eq!(back.level, "off");
     }
 }

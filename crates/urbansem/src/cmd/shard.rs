@@ -79,6 +79,9 @@ pub enum ShardCommand {
         /// `os1-128`).
         #[arg(long, default_value = "auto")]
         sensor: String,
+        /// Localization: levelling of tilted scans by their walls, as `localize --level`.
+        #[arg(long, value_enum, default_value = "off")]
+        level: super::localize::LevelArg,
         /// Localization: yaw step of the search, degrees.
         #[arg(long, default_value_t = 0.5)]
         yaw_step_deg: f64,
@@ -130,6 +133,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             top,
             cost,
             sensor,
+            level,
             yaw_step_deg,
             minimum_caps_m,
             json,
@@ -149,6 +153,10 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                         sensor,
                         yaw_step_deg,
                         minimum_caps_m,
+                        level: match level {
+                            super::localize::LevelArg::Auto => "auto".into(),
+                            super::localize::LevelArg::Off => "off".into(),
+                        },
                     };
                     let known = geodata::sensors::SensorKind::ALL.map(|k| k.name());
                     if options.sensor != "auto" && !known.contains(&options.sensor.as_str()) {
