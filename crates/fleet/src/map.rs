@@ -17,7 +17,7 @@
 //! GeoJSON: each object's box footprint and each tile's core with its map file.
 
 use crate::plan::{
-    absolute, cloud_files, tile_stage, Job, JobOptions, MapJob, MapTile, Plan, Shard, PLAN_FORMAT,
+    absolute, cloud_files, tile_stages, Job, JobOptions, MapJob, MapTile, Plan, Shard, PLAN_FORMAT,
     PLAN_VERSION,
 };
 use crate::{invalid, io_err, FleetError, Result};
@@ -231,7 +231,7 @@ pub fn plan_map(
         .collect();
     std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
     let out_abs = absolute(out)?;
-    let (stages, shards) = tile_stage(STAGE, map_tiles.len(), [0, refs.len()]);
+    let (stages, shards) = tile_stages(&[STAGE], map_tiles.len(), [0, refs.len()]);
     Ok(Plan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,

@@ -88,16 +88,8 @@ impl JobOptions {
                     .ok_or_else(|| invalid(plan, format!("unknown sensor {:?}", self.sensor)))?,
             )
         };
-        o.level = match self.level.as_str() {
-            "off" => None,
-            "auto" => Some(localize::level::LevelOptions::default()),
-            other => {
-                return Err(invalid(
-                    plan,
-                    format!("unknown level {other:?}: expected off or auto"),
-                ))
-            }
-        };
+        o.level = localize::level::options_named(&self.level)
+            .map_err(|e| invalid(plan, format!("unknown level {:?}: {e}", self.level)))?;
         Ok(o)
     }
 }
@@ -220,21 +212,29 @@ pub(crate) fn cloud_files(dir: &Path, extensions: &[&str], what: &str) -> Result
     Ok(files)
 }
 
-/// The one stage `name` of a job with a shard per tile, each over the inputs `scans`.
-pub(crate) fn tile_stage(name: &str, tiles: usize, scans: [usize; 2]) -> (Vec<Stage>, Vec<Shard>) {
-    let shards: Vec<Shard> = (0..tiles)
-        .map(|k| Shard {
-            id: k,
-            stage: 0,
+/// The stages `names` of a job, one after another, each with a shard per tile over the
+/// inputs `scans` (shard ids run on across the stages).
+pub(crate) fn tile_stages(
+    names: &[&str],
+    tiles: usize,
+    scans: [usize; 2],
+) -> (Vec<Stage>, Vec<Shard>) {
+    let mut stages = Vec::new();
+    let mut shards = Vec::new();
+    for (stage, name) in names.iter().enumerate() {
+        let first = shards.len();
+        shards.extend((0..tiles).map(|k| Shard {
+            id: first + k,
+            stage,
             batch: 0,
             scans,
             tile: Some(k),
-        })
-        .collect();
-    let stages = vec![Stage {
-        name: name.into(),
-        shards: (0..tiles).collect(),
-    }];
+        }));
+        stages.push(Stage {
+            name: (*name).into(),
+            shards: (first..first + tiles).collect(),
+        });
+    }
     (stages, shards)
 }
 

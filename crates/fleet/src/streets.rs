@@ -14,7 +14,7 @@
 //! The cloud must already be in the map's local frame (the default `--cloud-frame local`
 //! of `streets estimate`).
 
-use crate::plan::{absolute, tile_stage, Job, JobOptions, Plan, Shard, PLAN_FORMAT, PLAN_VERSION};
+use crate::plan::{absolute, tile_stages, Job, JobOptions, Plan, Shard, PLAN_FORMAT, PLAN_VERSION};
 use crate::{invalid, io_err, Result};
 use geodata::cloud::PointCloud;
 use geodata::osm::OsmMap;
@@ -95,24 +95,13 @@ pub fn plan_streets(
     let cloud_ref = FileRef::of(&cloud_abs, &cloud_abs.to_string_lossy())?;
     std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
     let out_abs = absolute(out)?;
-    let n = street_tiles.len();
-    let (stages, shards) = if driving_ref.is_some() {
-        // Stage 0 the driving area, stage 1 the with-sidewalk estimate, one shard per tile each.
-        let (mut stages, mut shards) = tile_stage(DRIVING_STAGE, n, [0, 1]);
-        let (last, more) = tile_stage(STAGE, n, [0, 1]);
-        stages.extend(last.into_iter().map(|mut st| {
-            st.shards.iter_mut().for_each(|id| *id += n);
-            st
-        }));
-        shards.extend(more.into_iter().map(|mut sh| {
-            sh.id += n;
-            sh.stage = 1;
-            sh
-        }));
-        (stages, shards)
+    // With a driving model: stage 0 the driving area, stage 1 the with-sidewalk estimate.
+    let names: &[&str] = if driving_ref.is_some() {
+        &[DRIVING_STAGE, STAGE]
     } else {
-        tile_stage(STAGE, n, [0, 1])
+        &[STAGE]
     };
+    let (stages, shards) = tile_stages(names, street_tiles.len(), [0, 1]);
     Ok(Plan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,

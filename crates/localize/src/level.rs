@@ -75,6 +75,16 @@ impl Default for LevelOptions {
     }
 }
 
+/// The levelling of a mode name as the command line and plans write it: `off` is `None`,
+/// `auto` the default options; an unknown name is `Err` with what is expected.
+pub fn options_named(name: &str) -> Result<Option<LevelOptions>, &'static str> {
+    match name {
+        "off" => Ok(None),
+        "auto" => Ok(Some(LevelOptions::default())),
+        _ => Err("expected off or auto"),
+    }
+}
+
 /// What the levelling found and did.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Levelling {
@@ -97,17 +107,26 @@ struct Moments {
     ss: [[f64; 3]; 3],
 }
 
+/// Whether `p` is finite and lies `min_m`–`max_m` from the sensor horizontally.
+fn in_ring(p: &[f64; 3], min_m: f64, max_m: f64) -> bool {
+    let r = p[0].hypot(p[1]);
+    p.iter().all(|v| v.is_finite()) && r >= min_m && r <= max_m
+}
+
+/// The indices of a symmetric eigen-decomposition's values, smallest first.
+fn ascending(eig: &SymmetricEigen<f64, nalgebra::U3>) -> [usize; 3] {
+    let mut idx = [0usize, 1, 2];
+    idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    idx
+}
+
 /// The unit normals of the planar voxels of `points`.
 fn planar_normals(points: &[[f64; 3]], o: &LevelOptions) -> Vec<Vector3<f64>> {
     let inv = 1.0 / o.voxel_m;
     let mut voxels: FxHashMap<(i64, i64, i64), Moments> = FxHashMap::default();
     let mut order: Vec<(i64, i64, i64)> = Vec::new();
     for p in points {
-        if !p.iter().all(|v| v.is_finite()) {
-            continue;
-        }
-        let r = p[0].hypot(p[1]);
-        if r < o.min_range_m || r > o.max_range_m {
+        if !in_ring(p, o.min_range_m, o.max_range_m) {
             continue;
         }
         let key = (
@@ -137,8 +156,7 @@ fn planar_normals(points: &[[f64; 3]], o: &LevelOptions) -> Vec<Vector3<f64>> {
         let mean = [m.s[0] / n, m.s[1] / n, m.s[2] / n];
         let cov = Matrix3::from_fn(|i, j| m.ss[i][j] / n - mean[i] * mean[j]);
         let eig = SymmetricEigen::new(cov);
-        let mut idx = [0usize, 1, 2];
-        idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+        let idx = ascending(&eig);
         let (l0, l1) = (eig.eigenvalues[idx[0]], eig.eigenvalues[idx[1]]);
         if l1 < o.min_extent_m * o.min_extent_m || l0 > o.max_flatness * l1 {
             continue;
@@ -158,11 +176,7 @@ fn ground_normal(points: &[[f64; 3]], o: &LevelOptions) -> Option<Vector3<f64>> 
     let mut lowest: FxHashMap<(i64, i64), [f64; 3]> = FxHashMap::default();
     let mut order: Vec<(i64, i64)> = Vec::new();
     for p in points {
-        if !p.iter().all(|v| v.is_finite()) {
-            continue;
-        }
-        let r = p[0].hypot(p[1]);
-        if r < o.min_range_m || r > o.ground_range_m {
+        if !in_ring(p, o.min_range_m, o.ground_range_m) {
             continue;
         }
         let key = (p[0].floor() as i64, p[1].floor() as i64);
@@ -221,8 +235,7 @@ pub fn estimate_up(points: &[[f64; 3]], o: &LevelOptions) -> (Option<[f64; 3]>, 
             return (None, 0);
         }
         let eig = SymmetricEigen::new(m);
-        let mut idx = [0usize, 1, 2];
-        idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+        let idx = ascending(&eig);
         let (l1, l2) = (eig.eigenvalues[idx[1]], eig.eigenvalues[idx[2]]);
         if l2 <= 0.0 {
             return (None, walls);

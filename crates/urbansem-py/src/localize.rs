@@ -209,15 +209,8 @@ impl PyLocalizer {
         min_segment_m: Option<f64>,
         level: &str,
     ) -> PyResult<Self> {
-        let level = match level {
-            "auto" => Some(localize::level::LevelOptions::default()),
-            "off" => None,
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "level = {other:?}: use auto or off"
-                )))
-            }
-        };
+        let level = localize::level::options_named(level)
+            .map_err(|_| PyValueError::new_err(format!("level = {level:?}: use auto or off")))?;
         if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
             return Err(PyValueError::new_err(format!(
                 "yaw_step_deg = {yaw_step_deg}: expected a step in (0, 90] degrees"

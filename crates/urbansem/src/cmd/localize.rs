@@ -200,12 +200,18 @@ pub enum LevelArg {
 }
 
 impl LevelArg {
+    /// The mode's name (`auto`, `off`), as `localize::level::options_named` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            LevelArg::Auto => "auto",
+            LevelArg::Off => "off",
+        }
+    }
+
     /// The library's levelling options (`None`: off).
     pub fn options(self) -> Option<localize::level::LevelOptions> {
-        match self {
-            LevelArg::Auto => Some(localize::level::LevelOptions::default()),
-            LevelArg::Off => None,
-        }
+        // Both names are known to the library: no `Err` to lose.
+        localize::level::options_named(self.name()).ok().flatten()
     }
 }
 

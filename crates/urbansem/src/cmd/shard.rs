@@ -153,10 +153,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                         sensor,
                         yaw_step_deg,
                         minimum_caps_m,
-                        level: match level {
-                            super::localize::LevelArg::Auto => "auto".into(),
-                            super::localize::LevelArg::Off => "off".into(),
-                        },
+                        level: level.name().into(),
                     };
                     let known = geodata::sensors::SensorKind::ALL.map(|k| k.name());
                     if options.sensor != "auto" && !known.contains(&options.sensor.as_str()) {
@@ -181,14 +178,14 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                                 &results,
                                 "default-with-sidewalk-model.json",
                                 streets::model::WITH_SIDEWALK_MODEL_JSON,
-                                "with-sidewalk model",
+                                ("model", "with-sidewalk model"),
                             )?
                         }
                         None => shipped_street_model_file(
                             &results,
                             "default-street-model.json",
                             streets::model::DEFAULT_MODEL_JSON,
-                            "model",
+                            ("model", "model"),
                         )?,
                     };
                     let bytes = std::fs::read(&model)
@@ -209,7 +206,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                             &results,
                             "default-driving-model.json",
                             streets::model::DEFAULT_MODEL_JSON,
-                            "driving-area model",
+                            ("driving-model", "driving-area model"),
                         )?),
                         None => None,
                     };
@@ -334,25 +331,20 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
     }
 }
 
-/// Writes the shipped default street model into `results` (for a streets plan without
-/// `--model`) and returns its path.
+/// Writes a shipped street model (`json`) into `results` as `name`, for a streets plan
+/// without the option `--{flag}`, says so naming it `what`, and returns its path.
 fn shipped_street_model_file(
     results: &Path,
     name: &str,
     json: &[u8],
-    what: &str,
+    (flag, what): (&str, &str),
 ) -> anyhow::Result<PathBuf> {
     std::fs::create_dir_all(results).with_context(|| format!("creating {}", results.display()))?;
     let path = results.join(name);
     geodata::fsio::write_atomic(&path, json)
         .with_context(|| format!("writing {}", path.display()))?;
     eprintln!(
-        "shard plan: no --{}, the streets job uses the shipped default {what} ({})",
-        if what == "driving-area model" {
-            "driving-model"
-        } else {
-            "model"
-        },
+        "shard plan: no --{flag}, the streets job uses the shipped default {what} ({})",
         path.display()
     );
     Ok(path)
