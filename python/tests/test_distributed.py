@@ -120,6 +120,27 @@ def test_ray_run_equals_one_process_and_survives_failing_tasks_and_workers(
     assert plain(distributed.merge(flaky)["scans"]) == reference["scans"]
 
 
+def test_the_level_option_is_written_into_the_plan_as_the_cli_writes_it(
+    job: Dict[str, Path], cli: Any
+) -> None:
+    """plan_localize(level=...) writes the plan `shard plan --level` writes; a bad value is
+    refused before anything is written."""
+    by_cli = job["dir"] / "level-cli.json"
+    cli("shard", "plan", "--job", "localize", "--map", job["manifest"], "--inputs", job["scans"],
+        "--out", by_cli, "--batch", "2", "--level", "auto")
+    by_py = job["dir"] / "level-py.json"
+    p = distributed.plan_localize(job["manifest"], job["scans"], by_py, batch=2, level="auto",
+                                  results=str(by_cli.with_suffix(".d")))
+    assert p["options"]["level"] == "auto"
+    assert json.loads(by_py.read_text()) == json.loads(by_cli.read_text())
+    default = distributed.plan_localize(job["manifest"], job["scans"], job["dir"] / "off.json")
+    assert default["options"]["level"] == "off"
+    bad = job["dir"] / "bad-level.json"
+    with pytest.raises(ValueError, match="sideways"):
+        distributed.plan_localize(job["manifest"], job["scans"], bad, level="sideways")
+    assert not bad.exists()
+
+
 def test_shard_errors_are_fleet_errors(tmp_path: Path) -> None:
     not_a_plan = tmp_path / "plan.json"
     not_a_plan.write_text("[]")

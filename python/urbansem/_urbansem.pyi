@@ -445,6 +445,7 @@ def shard_plan(
     batch: int = ...,
     top: int = ...,
     cost: str = ...,
+    level: str = ...,
 ) -> Dict[str, Any]: ...
 def shard_run(
     plan: _Path,

@@ -33,11 +33,14 @@ def plan_localize(
     batch: int = 8,
     top: int = 5,
     cost: str = "reverse",
+    level: str = "off",
 ) -> Dict[str, Any]:
     """Plans a localization job over a tiled map (``localize index --tile-m``) and writes
-    the plan to ``out``; returns the plan."""
+    the plan to ``out``; returns the plan. ``level="auto"`` levels tilted scans by their
+    walls, as ``urbansem shard plan --job localize --level auto``."""
     return _urbansem.shard_plan(
-        str(map), str(inputs), str(out), results=results, batch=batch, top=top, cost=cost
+        str(map), str(inputs), str(out), results=results, batch=batch, top=top, cost=cost,
+        level=level,
     )
 
 

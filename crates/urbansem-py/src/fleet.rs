@@ -22,7 +22,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// Plans a localization job over a tiled map and writes the plan (`urbansem shard plan`).
 #[pyfunction]
-#[pyo3(signature = (map, inputs, out, *, results = None, batch = 8, top = 5, cost = "reverse"))]
+#[pyo3(signature = (map, inputs, out, *, results = None, batch = 8, top = 5, cost = "reverse", level = "off"))]
 #[allow(clippy::too_many_arguments)]
 fn shard_plan<'py>(
     py: Python<'py>,
@@ -33,16 +33,20 @@ fn shard_plan<'py>(
     batch: usize,
     top: usize,
     cost: &str,
+    level: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     if batch == 0 {
         return Err(PyValueError::new_err(
             "batch 0: expected at least 1 scan per shard",
         ));
     }
+    localize::level::options_named(level)
+        .map_err(|e| PyValueError::new_err(format!("level {level:?}: {e}")))?;
     let results = results.unwrap_or_else(|| out.with_extension("d"));
     let options = JobOptions {
         top,
         cost: cost.to_owned(),
+        level: level.to_owned(),
         ..JobOptions::default()
     };
     let plan = py
