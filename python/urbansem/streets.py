@@ -113,7 +113,8 @@ def transfer(
     ``urbansem streets transfer --json`` prints: ``train`` and ``test`` (per sequence
     ``name``, ``layout``, ``scans``, ``bins``, ``street_share``, ``sidewalk_share``),
     ``normalised``, ``driving_area`` and ``with_sidewalk`` (``precision``, ``recall``,
-    ``f1``, ``train_positives``, ``test_positives``) and ``seconds``.
+    ``f1``, ``train_positives``, ``test_positives``; ``None`` when the training bins hold
+    one class for that target) and ``seconds``.
     """
     if isinstance(train, (str, os.PathLike)):
         train = [train]

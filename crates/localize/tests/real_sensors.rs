@@ -1,7 +1,8 @@
 //! Sensor detection and wall-extraction quality on the real labelled scans of two sensors:
 //! KITTI-360 drive 0009 (Velodyne HDL-64E on a car roof, Karlsruhe) and MCD `kth_day_06`
-//! (handheld Ouster, KTH). Thresholds: the values measured on 2026-11-25 (README, issue 15)
-//! minus a margin of 0.05 (precision, recall) and 1 segment per scan.
+//! (handheld Ouster, KTH). Thresholds: the values measured on 2026-11-25 (KITTI-360) and
+//! 2026-11-29 (MCD, read with its corrected lidar extrinsic) (README, issue 15) minus a margin
+//! of 0.05 (precision, recall) and 1 segment per scan.
 
 use localize::extract_eval::{evaluate, labelled_scans, SequenceKind};
 use localize::sensor::{measure, resolve};
@@ -44,8 +45,9 @@ fn mcd_is_detected_as_a_handheld_ouster() {
     assert_eq!(kind, SequenceKind::Mcd);
     for s in &scans {
         let g = measure(&s.points);
-        // Ouster, ±21° in the sensor frame, 64 distinct beam elevations, carried ≈ 1.7 m up.
-        assert!((1.4..=2.0).contains(&g.mount_height_m), "{}: {g:?}", s.name);
+        // Ouster, ±21° in the sensor frame, 64 distinct beam elevations, carried ≈ 1.7–2 m up
+        // (measured 1.57–2.01 m over the 30 scans).
+        assert!((1.4..=2.2).contains(&g.mount_height_m), "{}: {g:?}", s.name);
         assert!(
             (-24.0..=-18.0).contains(&g.vfov_deg[0]),
             "{}: {g:?}",
@@ -68,10 +70,10 @@ fn extraction_precision_and_recall_on_real_labelled_scans() {
     assert!(k.segments_per_scan >= 7.0, "KITTI-360: {k:?}");
     let (kind, scans) = labelled_scans(&shared("lidar/mcd_kth_day_06"), 1).unwrap();
     let m = evaluate(kind, &scans, None, &none).unwrap();
-    // Measured: precision 0.999, recall 0.706, 14.1 segments per scan.
+    // Measured: precision 0.998, recall 0.646, 13.2 segments per scan.
     assert!(m.precision >= 0.94, "MCD: {m:?}");
-    assert!(m.recall >= 0.65, "MCD: {m:?}");
-    assert!(m.segments_per_scan >= 13.0, "MCD: {m:?}");
+    assert!(m.recall >= 0.59, "MCD: {m:?}");
+    assert!(m.segments_per_scan >= 12.2, "MCD: {m:?}");
 }
 
 #[test]
@@ -123,30 +125,30 @@ fn kitti360_truth_poses_lie_on_the_streets_of_their_map() {
     }
 }
 
-/// The level estimate from walls is steady on a real rig: the MCD scans (handheld Ouster,
-/// levelled by their dataset poses) lean by the same roll in the sensor frame in every scan
-/// (a fixed calibration offset; README *Tilted sensors*) while the labelled ground under them
-/// tilts from one street to the next; and `extract_eval_sequence` with levelling still scores.
+/// The MCD scans, levelled by their dataset poses through the lidar extrinsic, have vertical
+/// walls: the wall estimate of the up direction is within 2° of the scan's z axis in every
+/// scan, within 1° in most. (With the extrinsic inverted, as arpg/OSM-BKI applies it, every scan leaned
+/// 2.7–4.1° the same way; `geodata::datasets::mcd`.) And `extract_eval_sequence` with
+/// levelling still scores.
 #[test]
-fn the_wall_estimate_of_the_tilt_is_steady_on_a_real_rig() {
+fn the_walls_of_every_mcd_scan_stand_vertical() {
     use localize::level::{estimate_up, LevelOptions};
     let dir = shared("lidar/mcd_kth_day_06");
     let (_, scans) = labelled_scans(&dir, 3).unwrap();
-    let rolls: Vec<f64> = scans
+    let tilts: Vec<f64> = scans
         .iter()
         .map(|s| {
             let (up, walls) = estimate_up(&s.points, &LevelOptions::default());
             let up = up.unwrap_or_else(|| panic!("{}: no estimate ({walls} walls)", s.name));
-            (-up[1] / up[2]).atan().to_degrees()
+            up[2].clamp(-1.0, 1.0).acos().to_degrees()
         })
         .collect();
-    let (lo, hi) = rolls
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &r| {
-            (a.min(r), b.max(r))
-        });
-    // Measured 2.91–3.97° over these 10 scans.
-    assert!(hi - lo < 1.5, "{rolls:?}");
+    // Measured 0.09–1.48°, median 0.57°, over these 10 scans (2.9–4.0° with the inverted
+    // extrinsic; 0.11° median on exactly levelled simulated scans).
+    let mut sorted = tilts.clone();
+    sorted.sort_by(f64::total_cmp);
+    assert!(sorted[sorted.len() - 1] < 2.0, "{tilts:?}");
+    assert!(sorted[sorted.len() / 2] < 1.0, "{tilts:?}");
     let report = localize::jobs::extract_eval_sequence(
         &dir,
         3,

@@ -140,10 +140,10 @@ pub struct TransferReport {
     pub test: SourceSummary,
     /// Whether the features were standardised per scan.
     pub normalised: bool,
-    /// Driving area only.
-    pub driving_area: TransferScore,
-    /// Driving area and sidewalk.
-    pub with_sidewalk: TransferScore,
+    /// Driving area only; `None` (JSON `null`) when the sampled training bins hold one class.
+    pub driving_area: Option<TransferScore>,
+    /// Driving area and sidewalk; `None` when the sampled training bins hold one class.
+    pub with_sidewalk: Option<TransferScore>,
     /// Seconds spent training and testing (both targets).
     pub seconds: f64,
 }
@@ -206,9 +206,14 @@ pub fn transfer_eval(
             message: "no labelled ground bins to train or test on".into(),
         });
     }
-    let score = |target: Target| -> Result<TransferScore> {
+    // `None`: the classifier's training subset holds one class for this target (a campus
+    // sequence with no street); the other target is still scored.
+    let score = |target: Target| -> Result<Option<TransferScore>> {
         let y: Vec<bool> = truth.iter().map(|&c| target.positive(c)).collect();
-        let clf = BinClassifier::train(&x, &y, options)?;
+        let clf = match BinClassifier::train(&x, &y, options) {
+            Err(StreetsError::OneClass { .. }) => return Ok(None),
+            r => r?,
+        };
         let pred = clf.predict(&test.bins.x)?;
         let want: Vec<bool> = test
             .bins
@@ -221,20 +226,30 @@ pub fn transfer_eval(
             recall,
             f1,
         } = prf(&pred, &want);
-        Ok(TransferScore {
+        Ok(Some(TransferScore {
             precision,
             recall,
             f1,
             train_positives: y.iter().filter(|&&v| v).count(),
             test_positives: want.iter().filter(|&&v| v).count(),
-        })
+        }))
     };
+    let driving_area = score(Target::DrivingArea)?;
+    let with_sidewalk = score(Target::WithSidewalk)?;
+    if driving_area.is_none() && with_sidewalk.is_none() {
+        // Neither target can be learnt: say so for the driving area, as training would.
+        let y: Vec<bool> = truth
+            .iter()
+            .map(|&c| Target::DrivingArea.positive(c))
+            .collect();
+        BinClassifier::train(&x, &y, options)?;
+    }
     Ok(TransferReport {
         train: train.iter().map(SequenceBins::summary).collect(),
         test: test.summary(),
         normalised,
-        driving_area: score(Target::DrivingArea)?,
-        with_sidewalk: score(Target::WithSidewalk)?,
+        driving_area,
+        with_sidewalk,
         seconds: t.elapsed().as_secs_f64(),
     })
 }
@@ -265,6 +280,10 @@ impl TransferReport {
             ("driving_area", &self.driving_area),
             ("with_sidewalk", &self.with_sidewalk),
         ] {
+            let Some(s) = s else {
+                out += &format!("  {key:<14} not trained: the training bins hold one class only\n");
+                continue;
+            };
             let note = if s.test_positives == 0 {
                 "  (no positive test bins: the scores say nothing)"
             } else {
@@ -276,5 +295,59 @@ impl TransferReport {
             );
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+    use crate::features::FEATURE_DIMS;
+
+    /// Bins of the given classes; the first feature separates the classes.
+    fn bins(name: &str, classes: &[Class]) -> SequenceBins {
+        let mut x = Vec::new();
+        for (i, &c) in classes.iter().enumerate() {
+            let mut row = vec![0.0f32; FEATURE_DIMS];
+            row[0] = match c {
+                Class::Street => -1.0,
+                Class::Sidewalk => 0.0,
+                _ => 1.0,
+            } + (i % 7) as f32 * 0.01;
+            x.extend(row);
+        }
+        SequenceBins {
+            name: name.into(),
+            layout: "test".into(),
+            scans: 1,
+            bins: LabelledBins {
+                x,
+                truth: classes.to_vec(),
+            },
+        }
+    }
+
+    #[test]
+    fn a_target_the_training_bins_cannot_teach_is_reported_untrained() {
+        let options = ClassifierOptions {
+            calibration_bins: 0,
+            ..Default::default()
+        };
+        let mixed = [Class::Street, Class::Sidewalk, Class::Building].repeat(40);
+        let test = bins("test", &mixed);
+        // A campus: sidewalk and buildings, no street.
+        let campus = bins("campus", &[Class::Sidewalk, Class::Building].repeat(40));
+        let r = transfer_eval(&[campus], &test, true, &options).unwrap();
+        assert_eq!(r.driving_area, None);
+        let ws = r.with_sidewalk.unwrap();
+        assert!(ws.f1 > 0.9, "{ws:?}");
+        assert!(r.text().contains("not trained"), "{}", r.text());
+        // Both targets trained on mixed bins.
+        let r = transfer_eval(&[bins("mixed", &mixed)], &test, true, &options).unwrap();
+        assert!(r.driving_area.unwrap().f1 > 0.9 && r.with_sidewalk.is_some());
+        // Nothing to learn for either target: the one-class error.
+        let walls = bins("walls", &[Class::Building; 30]);
+        let err = transfer_eval(&[walls], &test, true, &options).unwrap_err();
+        assert!(matches!(err, StreetsError::OneClass { .. }), "{err}");
     }
 }
