@@ -1,5 +1,7 @@
-//! Extraction quality on labelled real scans (KITTI-360, MCD): how much of the extracted wall
-//! segment length lies on building points, and how much of the seen façades a segment covers.
+//! Extraction quality on labelled scans (real: KITTI-360, MCD; or a simulated `localization`
+//! dataset of any sensor and city, read as a [`LidarSequence`]): how much of the extracted
+//! wall segment length lies on building points, and how much of the seen façades a segment
+//! covers.
 //!
 //! Each scan is levelled with its dataset pose (roll and pitch removed, heading kept at zero:
 //! the frame the localizer sees) and its points keep their classes (`gt_labels`). Measures,
@@ -23,7 +25,7 @@ use crate::sensor::{extraction_options, resolve, SensorKind, SensorReport};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::{LocalizeError, Result, Segment};
 use geodata::classes::Class;
-use geodata::datasets::Scan;
+use geodata::datasets::{LidarSequence, Scan};
 use nalgebra::{Rotation3, Vector3};
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
@@ -71,8 +73,20 @@ pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<La
     if !seq.labelled() {
         return Err(not_labelled());
     }
+    Ok((kind, labelled_scans_of(seq.as_ref(), stride)?))
+}
+
+/// Every `stride`-th scan of a labelled sequence of any layout (a simulated `localization`
+/// dataset included), levelled, with classes.
+pub fn labelled_scans_of(seq: &dyn LidarSequence, stride: usize) -> Result<Vec<LabelledScan>> {
+    if !seq.labelled() {
+        return Err(LocalizeError::Dataset {
+            path: seq.dir().to_path_buf(),
+            message: format!("the {} sequence has no per-point labels", seq.name()),
+        });
+    }
     let frames: Vec<u64> = seq.frames()?.into_iter().step_by(stride.max(1)).collect();
-    let scans = frames
+    frames
         .par_iter()
         .map(|&f| {
             let scan = seq.load_scan(f)?;
@@ -83,8 +97,7 @@ pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<La
                 classes,
             })
         })
-        .collect::<Result<Vec<_>>>()?;
-    Ok((kind, scans))
+        .collect()
 }
 
 /// Extraction quality of one scan.
@@ -277,6 +290,16 @@ pub fn evaluate(
     sensor: Option<SensorKind>,
     adjust: &(dyn Fn(&mut SurfaceOptions, &mut SegmentOptions) + Sync),
 ) -> Result<ExtractEval> {
+    evaluate_layout(kind.name(), scans, sensor, adjust)
+}
+
+/// [`evaluate`] for scans of a sequence whose layout is named `layout` (reported as `kind`).
+pub fn evaluate_layout(
+    layout: &'static str,
+    scans: &[LabelledScan],
+    sensor: Option<SensorKind>,
+    adjust: &(dyn Fn(&mut SurfaceOptions, &mut SegmentOptions) + Sync),
+) -> Result<ExtractEval> {
     let per_scan = scans
         .par_iter()
         .map(|scan| {
@@ -322,7 +345,7 @@ pub fn evaluate(
         }
     }
     Ok(ExtractEval {
-        kind: kind.name(),
+        kind: layout,
         scans: per_scan.len(),
         precision: ratio(on, segment_m - unjudged),
         precision_all: ratio(on, segment_m),

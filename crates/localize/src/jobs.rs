@@ -3,7 +3,7 @@
 //! file, localize a folder of scans along a track, score wall extraction on a labelled
 //! sequence. `eval::run` is the dataset evaluation.
 
-use crate::extract_eval::{evaluate, labelled_scans, ExtractEval};
+use crate::extract_eval::{evaluate_layout, labelled_scans_of, ExtractEval, SequenceKind};
 use crate::figure::result_svg;
 use crate::index::{load_map_or_index, PreparedMap};
 use crate::pipeline::{LocalizeOptions, Localizer, ScanSegments};
@@ -11,6 +11,7 @@ use crate::report::{LocalizeReport, TrackReport, TrackRow, TrackSeconds};
 use crate::sensor::{ExtractOverrides, SensorKind};
 use crate::track::{read_odometry, TrackOptions};
 use crate::{LocalizeError, Result, WithContext};
+use geodata::datasets::LidarSequence;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -540,9 +541,30 @@ pub fn extract_eval_sequence(
     overrides: &ExtractOverrides,
     level: Option<&crate::level::LevelOptions>,
 ) -> Result<ExtractEvalReport> {
-    let t = Instant::now();
-    let (kind, mut scans) = labelled_scans(dataset, stride)
+    let kind = SequenceKind::of(dataset).ok_or_else(|| LocalizeError::Dataset {
+        path: dataset.to_path_buf(),
+        message: "neither a KITTI-360 sequence (velodyne_points/) nor an MCD one (pose_inW.csv)"
+            .into(),
+    })?;
+    let seq = kind
+        .open(dataset)
         .context_with(|| format!("reading {}", dataset.display()))?;
+    extract_eval_of(seq.as_ref(), stride, sensor, overrides, level)
+}
+
+/// [`extract_eval_sequence`] on an opened labelled sequence of any layout (a simulated
+/// `localization` dataset included: `geosim::sequence::open_sequence`).
+pub fn extract_eval_of(
+    seq: &dyn LidarSequence,
+    stride: usize,
+    sensor: Option<SensorKind>,
+    overrides: &ExtractOverrides,
+    level: Option<&crate::level::LevelOptions>,
+) -> Result<ExtractEvalReport> {
+    let t = Instant::now();
+    let dataset = seq.dir();
+    let mut scans =
+        labelled_scans_of(seq, stride).context_with(|| format!("reading {}", dataset.display()))?;
     if let Some(lo) = level {
         // Each point keeps its class: only the frame turns.
         scans.par_iter_mut().for_each(|s| {
@@ -557,7 +579,9 @@ pub fn extract_eval_sequence(
     }
     let read_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let eval = evaluate(kind, &scans, sensor, &|s, seg| overrides.apply(s, seg))?;
+    let eval = evaluate_layout(seq.name(), &scans, sensor, &|s, seg| {
+        overrides.apply(s, seg)
+    })?;
     Ok(ExtractEvalReport {
         eval,
         dataset: dataset.display().to_string(),

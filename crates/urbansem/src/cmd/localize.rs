@@ -19,7 +19,8 @@ use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
 use localize::index::is_index;
 use localize::jobs::{
-    build_index, extract_eval_sequence, track_bag, track_folder, BagTrackJob, ScanInput, TrackJob,
+    build_index, extract_eval_of, extract_eval_sequence, track_bag, track_folder, BagTrackJob,
+    ScanInput, TrackJob,
 };
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
@@ -44,7 +45,7 @@ pub struct LocalizeArgs {
 pub enum LocalizeCommand {
     /// Localize every scan of a dataset and print N_accurate, per-scan errors and timings.
     Eval(EvalArgs),
-    /// Wall-segment extraction quality on labelled real scans (KITTI-360, MCD): precision,
+    /// Wall-segment extraction quality on labelled scans (KITTI-360, MCD, simulated): precision,
     /// recall, segments per scan.
     ExtractEval(ExtractEvalArgs),
     /// Localize every scan of a track: a window of scans tied by odometry, searched as one.
@@ -317,7 +318,8 @@ impl ExtractArgs {
 /// Arguments of `urbansem localize extract-eval`.
 #[derive(Args)]
 pub struct ExtractEvalArgs {
-    /// A labelled real sequence folder (KITTI-360 or MCD layout).
+    /// A labelled sequence folder: real (KITTI-360 or MCD layout) or a simulated
+    /// `localization` dataset (`sim dataset --kind localization`).
     #[arg(long)]
     pub dataset: PathBuf,
     /// Use every N-th scan.
@@ -728,13 +730,27 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
         super::usage!("--stride 0: expected a stride of at least 1");
     }
     let overrides = args.extract.overrides()?;
-    let report = extract_eval_sequence(
-        &args.dataset,
-        args.stride,
-        args.extract.sensor.kind(),
-        &overrides,
-        args.extract.level.options().as_ref(),
-    )?;
+    let (sensor, level) = (args.extract.sensor.kind(), args.extract.level.options());
+    // A simulated `localization` dataset is a labelled sequence too.
+    let report = if geosim::sequence::SimLocalization::is_sim(&args.dataset) {
+        let seq = geosim::sequence::open_sequence(&args.dataset)
+            .with_context(|| format!("reading {}", args.dataset.display()))?;
+        extract_eval_of(
+            seq.as_ref(),
+            args.stride,
+            sensor,
+            &overrides,
+            level.as_ref(),
+        )?
+    } else {
+        extract_eval_sequence(
+            &args.dataset,
+            args.stride,
+            sensor,
+            &overrides,
+            level.as_ref(),
+        )?
+    };
     if args.json {
         return super::print_json(&report);
     }
