@@ -73,12 +73,17 @@ pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<La
     if !seq.labelled() {
         return Err(not_labelled());
     }
-    Ok((kind, labelled_scans_of(seq.as_ref(), stride)?))
+    Ok((kind, labelled_scans_of(seq.as_ref(), stride, false)?))
 }
 
 /// Every `stride`-th scan of a labelled sequence of any layout (a simulated `localization`
-/// dataset included), levelled, with classes.
-pub fn labelled_scans_of(seq: &dyn LidarSequence, stride: usize) -> Result<Vec<LabelledScan>> {
+/// dataset included), with classes: levelled by its pose, or `as_recorded` in the sensor's
+/// own frame (as a user's raw frames arrive).
+pub fn labelled_scans_of(
+    seq: &dyn LidarSequence,
+    stride: usize,
+    as_recorded: bool,
+) -> Result<Vec<LabelledScan>> {
     if !seq.labelled() {
         return Err(LocalizeError::Dataset {
             path: seq.dir().to_path_buf(),
@@ -93,7 +98,11 @@ pub fn labelled_scans_of(seq: &dyn LidarSequence, stride: usize) -> Result<Vec<L
             let classes = (0..scan.cloud.len()).map(|i| scan.cloud.class(i)).collect();
             Ok(LabelledScan {
                 name: format!("{f:010}"),
-                points: levelled(&scan),
+                points: if as_recorded {
+                    scan.cloud.positions.clone()
+                } else {
+                    levelled(&scan)
+                },
                 classes,
             })
         })

@@ -532,14 +532,16 @@ pub struct ExtractEvalReport {
     pub seconds: ExtractEvalSeconds,
 }
 
-/// Scores wall extraction on every `stride`-th scan of a labelled KITTI-360 or MCD sequence,
-/// each levelled by its walls first when `level` is given.
+/// Scores wall extraction on every `stride`-th scan of a labelled KITTI-360 or MCD sequence
+/// (levelled by its pose unless `as_recorded`), each levelled by its walls first when `level`
+/// is given.
 pub fn extract_eval_sequence(
     dataset: &Path,
     stride: usize,
     sensor: Option<SensorKind>,
     overrides: &ExtractOverrides,
     level: Option<&crate::level::LevelOptions>,
+    as_recorded: bool,
 ) -> Result<ExtractEvalReport> {
     let kind = SequenceKind::of(dataset).ok_or_else(|| LocalizeError::Dataset {
         path: dataset.to_path_buf(),
@@ -549,7 +551,7 @@ pub fn extract_eval_sequence(
     let seq = kind
         .open(dataset)
         .context_with(|| format!("reading {}", dataset.display()))?;
-    extract_eval_of(seq.as_ref(), stride, sensor, overrides, level)
+    extract_eval_of(seq.as_ref(), stride, sensor, overrides, level, as_recorded)
 }
 
 /// [`extract_eval_sequence`] on an opened labelled sequence of any layout (a simulated
@@ -560,11 +562,12 @@ pub fn extract_eval_of(
     sensor: Option<SensorKind>,
     overrides: &ExtractOverrides,
     level: Option<&crate::level::LevelOptions>,
+    as_recorded: bool,
 ) -> Result<ExtractEvalReport> {
     let t = Instant::now();
     let dataset = seq.dir();
-    let mut scans =
-        labelled_scans_of(seq, stride).context_with(|| format!("reading {}", dataset.display()))?;
+    let mut scans = labelled_scans_of(seq, stride, as_recorded)
+        .context_with(|| format!("reading {}", dataset.display()))?;
     if let Some(lo) = level {
         // Each point keeps its class: only the frame turns.
         scans.par_iter_mut().for_each(|s| {

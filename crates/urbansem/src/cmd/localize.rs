@@ -325,6 +325,10 @@ pub struct ExtractEvalArgs {
     /// Use every N-th scan.
     #[arg(long, default_value_t = 1)]
     pub stride: usize,
+    /// Score the scans in the sensor's own frame, as recorded (not levelled by the dataset
+    /// poses), as a user's raw frames arrive; with `--level auto` the walls level them.
+    #[arg(long)]
+    pub as_recorded: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -741,6 +745,7 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
             sensor,
             &overrides,
             level.as_ref(),
+            args.as_recorded,
         )?
     } else {
         extract_eval_sequence(
@@ -749,6 +754,7 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
             sensor,
             &overrides,
             level.as_ref(),
+            args.as_recorded,
         )?
     };
     if args.json {
