@@ -1754,4 +1754,18 @@ fn localize_extract_eval_scores_a_simulated_dataset() {
         terrestrial["recall"].as_f64().unwrap() < 0.7 * recall,
         "{terrestrial}"
     );
+    // A folder of no known layout names the three it could be.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = urbansem()
+        .args(["localize", "extract-eval", "--dataset"])
+        .arg(&empty)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("empty") && err.contains("MCD") && err.contains("dataset.json"),
+        "{err}"
+    );
 }

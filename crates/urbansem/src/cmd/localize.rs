@@ -736,7 +736,15 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
     let overrides = args.extract.overrides()?;
     let (sensor, level) = (args.extract.sensor.kind(), args.extract.level.options());
     // A simulated `localization` dataset is a labelled sequence too.
-    let report = if geosim::sequence::SimLocalization::is_sim(&args.dataset) {
+    let is_sim = geosim::sequence::SimLocalization::is_sim(&args.dataset);
+    if !is_sim && geodata::datasets::SequenceKind::of(&args.dataset).is_none() {
+        anyhow::bail!(
+            "{}: not a labelled sequence: expected a KITTI-360 sequence (velodyne_points/), an \
+             MCD one (pose_inW.csv) or a simulated localization dataset (dataset.json)",
+            args.dataset.display()
+        );
+    }
+    let report = if is_sim {
         let seq = geosim::sequence::open_sequence(&args.dataset)
             .with_context(|| format!("reading {}", args.dataset.display()))?;
         extract_eval_of(
