@@ -61,8 +61,8 @@ pub fn levelled(scan: &Scan) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Every `stride`-th scan of a labelled sequence (KITTI-360 or MCD), levelled, with classes.
-pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<LabelledScan>)> {
+/// A labelled real sequence folder (KITTI-360 or MCD), opened.
+pub fn open_labelled(dir: &Path) -> Result<(SequenceKind, Box<dyn LidarSequence>)> {
     let not_labelled = || LocalizeError::Dataset {
         path: dir.to_path_buf(),
         message: "neither a KITTI-360 sequence (velodyne_points/) nor an MCD one (pose_inW.csv)"
@@ -73,6 +73,12 @@ pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<La
     if !seq.labelled() {
         return Err(not_labelled());
     }
+    Ok((kind, seq))
+}
+
+/// Every `stride`-th scan of a labelled sequence (KITTI-360 or MCD), levelled, with classes.
+pub fn labelled_scans(dir: &Path, stride: usize) -> Result<(SequenceKind, Vec<LabelledScan>)> {
+    let (kind, seq) = open_labelled(dir)?;
     Ok((kind, labelled_scans_of(seq.as_ref(), stride, false)?))
 }
 

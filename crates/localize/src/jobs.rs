@@ -3,7 +3,7 @@
 //! file, localize a folder of scans along a track, score wall extraction on a labelled
 //! sequence. `eval::run` is the dataset evaluation.
 
-use crate::extract_eval::{evaluate_layout, labelled_scans_of, ExtractEval, SequenceKind};
+use crate::extract_eval::{evaluate_layout, labelled_scans_of, open_labelled, ExtractEval};
 use crate::figure::result_svg;
 use crate::index::{load_map_or_index, PreparedMap};
 use crate::pipeline::{LocalizeOptions, Localizer, ScanSegments};
@@ -543,14 +543,8 @@ pub fn extract_eval_sequence(
     level: Option<&crate::level::LevelOptions>,
     as_recorded: bool,
 ) -> Result<ExtractEvalReport> {
-    let kind = SequenceKind::of(dataset).ok_or_else(|| LocalizeError::Dataset {
-        path: dataset.to_path_buf(),
-        message: "neither a KITTI-360 sequence (velodyne_points/) nor an MCD one (pose_inW.csv)"
-            .into(),
-    })?;
-    let seq = kind
-        .open(dataset)
-        .context_with(|| format!("reading {}", dataset.display()))?;
+    let (_, seq) =
+        open_labelled(dataset).context_with(|| format!("reading {}", dataset.display()))?;
     extract_eval_of(seq.as_ref(), stride, sensor, overrides, level, as_recorded)
 }
 

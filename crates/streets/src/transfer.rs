@@ -206,14 +206,9 @@ pub fn transfer_eval(
             message: "no labelled ground bins to train or test on".into(),
         });
     }
-    // `None`: the classifier's training subset holds one class for this target (a campus
-    // sequence with no street); the other target is still scored.
-    let score = |target: Target| -> Result<Option<TransferScore>> {
+    let score = |target: Target| -> Result<TransferScore> {
         let y: Vec<bool> = truth.iter().map(|&c| target.positive(c)).collect();
-        let clf = match BinClassifier::train(&x, &y, options) {
-            Err(StreetsError::OneClass { .. }) => return Ok(None),
-            r => r?,
-        };
+        let clf = BinClassifier::train(&x, &y, options)?;
         let pred = clf.predict(&test.bins.x)?;
         let want: Vec<bool> = test
             .bins
@@ -226,24 +221,28 @@ pub fn transfer_eval(
             recall,
             f1,
         } = prf(&pred, &want);
-        Ok(Some(TransferScore {
+        Ok(TransferScore {
             precision,
             recall,
             f1,
             train_positives: y.iter().filter(|&&v| v).count(),
             test_positives: want.iter().filter(|&&v| v).count(),
-        }))
+        })
     };
-    let driving_area = score(Target::DrivingArea)?;
-    let with_sidewalk = score(Target::WithSidewalk)?;
-    if driving_area.is_none() && with_sidewalk.is_none() {
-        // Neither target can be learnt: say so for the driving area, as training would.
-        let y: Vec<bool> = truth
-            .iter()
-            .map(|&c| Target::DrivingArea.positive(c))
-            .collect();
-        BinClassifier::train(&x, &y, options)?;
-    }
+    // A target whose training subset holds one class (a campus sequence with no street) is
+    // `None` and the other is still scored; when neither can be learnt, the driving area's
+    // one-class error.
+    let untrained_as_none = |r: Result<TransferScore>| match r {
+        Err(StreetsError::OneClass { .. }) => Ok(None),
+        r => r.map(Some),
+    };
+    let (driving_area, with_sidewalk) =
+        match (score(Target::DrivingArea), score(Target::WithSidewalk)) {
+            (Err(e @ StreetsError::OneClass { .. }), Err(StreetsError::OneClass { .. })) => {
+                return Err(e)
+            }
+            (da, ws) => (untrained_as_none(da)?, untrained_as_none(ws)?),
+        };
     Ok(TransferReport {
         train: train.iter().map(SequenceBins::summary).collect(),
         test: test.summary(),

@@ -19,8 +19,7 @@ use localize::eval::report::{RankMethod, TrackSetup};
 use localize::eval::run::{run_eval, EvalJob};
 use localize::index::is_index;
 use localize::jobs::{
-    build_index, extract_eval_of, extract_eval_sequence, track_bag, track_folder, BagTrackJob,
-    ScanInput, TrackJob,
+    build_index, extract_eval_of, track_bag, track_folder, BagTrackJob, ScanInput, TrackJob,
 };
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
@@ -744,27 +743,16 @@ fn extract_eval(args: ExtractEvalArgs) -> anyhow::Result<()> {
             args.dataset.display()
         );
     }
-    let report = if is_sim {
-        let seq = geosim::sequence::open_sequence(&args.dataset)
-            .with_context(|| format!("reading {}", args.dataset.display()))?;
-        extract_eval_of(
-            seq.as_ref(),
-            args.stride,
-            sensor,
-            &overrides,
-            level.as_ref(),
-            args.as_recorded,
-        )?
-    } else {
-        extract_eval_sequence(
-            &args.dataset,
-            args.stride,
-            sensor,
-            &overrides,
-            level.as_ref(),
-            args.as_recorded,
-        )?
-    };
+    let seq = geosim::sequence::open_sequence(&args.dataset)
+        .with_context(|| format!("reading {}", args.dataset.display()))?;
+    let report = extract_eval_of(
+        seq.as_ref(),
+        args.stride,
+        sensor,
+        &overrides,
+        level.as_ref(),
+        args.as_recorded,
+    )?;
     if args.json {
         return super::print_json(&report);
     }
