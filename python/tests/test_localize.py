@@ -93,7 +93,7 @@ def test_candidates_equal_the_cli_json(cli, map_path, scans, results):
     assert [c.to_dict() for c in got.candidates] == expected["candidates"]
     assert got.sensor is not None and got.sensor.profile == expected["sensor"]["profile"]
     assert got.segments == expected["segments"] > 0
-    assert got.cost == "reverse" and got.best.cost == got.best.reverse
+    assert got.cost == "symmetric" and got.best.cost == got.best.symmetric
 
 
 def test_level_auto_equals_the_cli_and_reports_the_tilt(cli, map_path, scans, results, tmp_path):

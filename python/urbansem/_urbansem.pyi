@@ -347,7 +347,7 @@ class _Localizer:
         map: Union[OsmMap, str],
         *,
         sensor: str = "auto",
-        cost: str = "reverse",
+        cost: str = "symmetric",
         grid_m: float = 0.5,
         yaw_step_deg: float = 0.5,
         clearance_m: Optional[float] = None,

@@ -32,7 +32,7 @@ def plan_localize(
     results: Optional[str] = None,
     batch: int = 8,
     top: int = 5,
-    cost: str = "reverse",
+    cost: str = "symmetric",
     level: str = "off",
 ) -> Dict[str, Any]:
     """Plans a localization job over a tiled map (``localize index --tile-m``) and writes

@@ -275,7 +275,7 @@ class Localizer:
         map: Union[OsmMap, PathLike],
         *,
         sensor: str = "auto",
-        cost: str = "reverse",
+        cost: str = "symmetric",
         grid_m: float = 0.5,
         yaw_step_deg: float = 0.5,
         clearance_m: Optional[float] = None,

@@ -88,7 +88,7 @@ impl Default for LocalizeOptions {
             visibility: VisibilityOptions::default(),
             cost: CostOptions::default(),
             refine: RefineOptions::default(),
-            rank_by: CostKind::Reverse,
+            rank_by: CostKind::Symmetric,
             refine_top: 5,
             distinct_m: 4.0,
             distinct_rad: 0.2,

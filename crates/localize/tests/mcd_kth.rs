@@ -62,3 +62,48 @@ fn mcd_scans_localize_on_the_whole_kth_map() {
     }
     assert!(ok >= 4, "{ok}/5 scans within 2 m and 3°");
 }
+
+/// All 30 scans (README: 30/30 top-1 by the default cost d_s, 29/30 by d_r): the default
+/// ranking is d_s, it finds at least 29 (one scan of margin), and never fewer than d_r ranking
+/// the same candidates.
+#[test]
+fn every_mcd_scan_localizes_by_the_default_cost_at_least_as_well_as_by_the_reverse_one() {
+    use localize::rank::CostKind;
+    let map = OsmMap::load(data_file("osm/kth_campus_stockholm.osm")).unwrap();
+    let options = LocalizeOptions::default();
+    assert_eq!(options.rank_by, CostKind::Symmetric);
+    let localizer = Localizer::new(&map, options).unwrap();
+    let scans = mcd_scans(&data_file("lidar/mcd_kth_day_06"), &map, 1).unwrap();
+    assert_eq!(scans.len(), 30);
+    let strict = Accuracy {
+        max_m: 2.0,
+        max_rad: 3f64.to_radians(),
+    };
+    let (mut by_default, mut by_reverse) = (0, 0);
+    for s in &scans {
+        let r = localizer.localize_points(&s.points).unwrap();
+        let top = |kind: CostKind| {
+            r.candidates
+                .iter()
+                .min_by(|a, b| a.costs.get(kind).total_cmp(&b.costs.get(kind)))
+                .is_some_and(|c| strict.accepts(&c.pose, &s.truth))
+        };
+        // The default's first candidate is its cheapest by d_s.
+        assert_eq!(
+            r.candidates
+                .first()
+                .is_some_and(|c| strict.accepts(&c.pose, &s.truth)),
+            top(CostKind::Symmetric),
+            "{}",
+            s.name
+        );
+        by_default += usize::from(top(CostKind::Symmetric));
+        by_reverse += usize::from(top(CostKind::Reverse));
+    }
+    println!("top-1 within 2 m and 3°: d_s {by_default}/30, d_r {by_reverse}/30");
+    assert!(by_default >= 29, "d_s {by_default}/30");
+    assert!(
+        by_default >= by_reverse,
+        "d_s {by_default} < d_r {by_reverse}"
+    );
+}

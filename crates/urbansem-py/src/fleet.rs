@@ -22,7 +22,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// Plans a localization job over a tiled map and writes the plan (`urbansem shard plan`).
 #[pyfunction]
-#[pyo3(signature = (map, inputs, out, *, results = None, batch = 8, top = 5, cost = "reverse", level = "off"))]
+#[pyo3(signature = (map, inputs, out, *, results = None, batch = 8, top = 5, cost = "symmetric", level = "off"))]
 #[allow(clippy::too_many_arguments)]
 fn shard_plan<'py>(
     py: Python<'py>,

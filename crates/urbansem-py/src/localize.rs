@@ -181,7 +181,7 @@ impl PyLocalizer {
     /// Prepares a map for localization: an `OsmMap`, an `.osm`/`.osm.pbf` path or a `.uloc`
     /// index path, with the command line's options.
     #[new]
-    #[pyo3(signature = (map, *, sensor = "auto", cost = "reverse", grid_m = 0.5,
+    #[pyo3(signature = (map, *, sensor = "auto", cost = "symmetric", grid_m = 0.5,
         yaw_step_deg = 0.5, clearance_m = None, voxel_m = None, max_range_m = None,
         min_range_m = None, min_z_m = None, max_z_m = None, ground_cell_m = None,
         column_radius_m = None, max_flatness = None, min_columns = None,

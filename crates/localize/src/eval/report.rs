@@ -248,6 +248,8 @@ pub struct TrackCounts {
     pub top1_within_2m_3deg: usize,
     /// Of them, with one of the top 10 within 2 m and 3°.
     pub top10_within_2m_3deg: usize,
+    /// The cost whose chains rank the candidates (`reverse`, `symmetric`, …).
+    pub cost: &'static str,
 }
 
 /// A count per chamfer cost.
@@ -424,6 +426,8 @@ pub struct EvalReport {
     pub top1_within_2m_3deg: PerCost,
     /// Scans with one of the top 10 by d_r within 2 m and 3°.
     pub top10_within_2m_3deg_reverse: usize,
+    /// Scans with one of the top 10 by d_s (the default ranking) within 2 m and 3°.
+    pub top10_within_2m_3deg_symmetric: usize,
     /// Track-mode counts.
     pub track: Option<TrackCounts>,
     /// On a tiled map: scans for which the tiled search equals the whole map's
@@ -435,6 +439,8 @@ pub struct EvalReport {
     pub sensors: Vec<(String, usize)>,
     /// Median position error of accurate top-1 poses (reverse), metres.
     pub median_error_accurate_top1_reverse_m: f64,
+    /// Median position error of accurate top-1 poses (symmetric), metres.
+    pub median_error_accurate_top1_symmetric_m: f64,
     /// Seconds preparing the map.
     pub map_seconds: MapPrepSeconds,
     /// The distance-transform tensor.
@@ -614,15 +620,17 @@ impl EvalReport {
                 })
                 .count()
         };
-        let top10_within_2m_3deg_reverse = records
-            .iter()
-            .filter(|r| {
-                r.ranked_by(RankMethod::Reverse)
-                    .iter()
-                    .take(10)
-                    .any(|p| strict.accepts(p, &r.truth))
-            })
-            .count();
+        let top10_within = |m: RankMethod| {
+            records
+                .iter()
+                .filter(|r| {
+                    r.ranked_by(m)
+                        .iter()
+                        .take(10)
+                        .any(|p| strict.accepts(p, &r.truth))
+                })
+                .count()
+        };
         // Track mode ranks by the chains of its window: judged in the localizer's own order.
         let track = setup.track.map(|t| {
             let after: Vec<&ScanOutcome> =
@@ -642,6 +650,9 @@ impl EvalReport {
                 scans_after_first_window: after.len(),
                 top1_within_2m_3deg: after.iter().filter(|r| within(r, 1)).count(),
                 top10_within_2m_3deg: after.iter().filter(|r| within(r, 10)).count(),
+                cost: records
+                    .first()
+                    .map_or(CostKind::Symmetric.name(), |r| r.result.rank_by.name()),
             }
         });
         let mut sensors: Vec<(String, usize)> = Vec::new();
@@ -652,15 +663,17 @@ impl EvalReport {
                 None => sensors.push((name.to_owned(), 1)),
             }
         }
-        let accurate_top1_err: Vec<f64> = records
-            .iter()
-            .filter_map(|r| {
-                r.ranked_by(RankMethod::Reverse)
-                    .first()
-                    .filter(|p| Accuracy::THESIS.accepts(p, &r.truth))
-                    .map(|p| p.distance_to(&r.truth))
-            })
-            .collect();
+        let accurate_top1_err = |m: RankMethod| -> Vec<f64> {
+            records
+                .iter()
+                .filter_map(|r| {
+                    r.ranked_by(m)
+                        .first()
+                        .filter(|p| Accuracy::THESIS.accepts(p, &r.truth))
+                        .map(|p| p.distance_to(&r.truth))
+                })
+                .collect()
+        };
         type StageFn = fn(&ScanOutcome) -> f64;
         let stages: [(&str, StageFn); 9] = [
             ("surfaces", |r| r.result.seconds.surfaces),
@@ -711,11 +724,15 @@ impl EvalReport {
                 reverse: strict_top1(RankMethod::Reverse),
                 symmetric: strict_top1(RankMethod::Symmetric),
             },
-            top10_within_2m_3deg_reverse,
+            top10_within_2m_3deg_reverse: top10_within(RankMethod::Reverse),
+            top10_within_2m_3deg_symmetric: top10_within(RankMethod::Symmetric),
             track,
             tiled_exact_scans: None,
             sensors,
-            median_error_accurate_top1_reverse_m: median(accurate_top1_err),
+            median_error_accurate_top1_reverse_m: median(accurate_top1_err(RankMethod::Reverse)),
+            median_error_accurate_top1_symmetric_m: median(accurate_top1_err(
+                RankMethod::Symmetric,
+            )),
             map_seconds: MapPrepSeconds {
                 load_map: setup.load_map_seconds,
                 map_edges: facts.seconds.edges,
@@ -934,14 +951,16 @@ impl EvalReport {
         let t1 = &r.top1_within_2m_3deg;
         let _ = writeln!(
                 out,
-        "accurate candidate in the candidate set: {}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; top 10 (reverse) within 2 m and 3°: {}/{n}; median error of accurate top-1 (reverse, refined) {:.2} m",
+        "accurate candidate in the candidate set: {}/{n}; top-1 within 2 m and 3°: dcm {}, forward {}, reverse {}, symmetric {} of {n}; top 10 (reverse) within 2 m and 3°: {}/{n}; median error of accurate top-1 (reverse, refined) {:.2} m; by symmetric (the default ranking) top 10 {}/{n}, median error {:.2} m",
         r.accurate_in_candidate_set,
         t1.dcm,
         t1.forward,
         t1.reverse,
         t1.symmetric,
         r.top10_within_2m_3deg_reverse,
-        r.median_error_accurate_top1_reverse_m
+        r.median_error_accurate_top1_reverse_m,
+        r.top10_within_2m_3deg_symmetric,
+        r.median_error_accurate_top1_symmetric_m
     );
         let sensor_counts: Vec<String> =
             r.sensors.iter().map(|(p, c)| format!("{p} ×{c}")).collect();
@@ -956,10 +975,11 @@ impl EvalReport {
         if let Some(t) = &r.track {
             let _ = writeln!(
                 out,
-            "track mode (window {}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 (reverse) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
+            "track mode (window {}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 ({}) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
             t.window,
             100.0 * t.odometry_drift,
             t.odometry_yaw_drift_deg_per_50m,
+            t.cost,
             t.top1_within_2m_3deg,
             t.scans_after_first_window,
             t.top10_within_2m_3deg,

@@ -124,7 +124,7 @@ pub struct TrackArgs {
     #[arg(long, default_value_t = 5)]
     pub top: usize,
     /// Cost that ranks the candidates.
-    #[arg(long, value_enum, default_value = "reverse")]
+    #[arg(long, value_enum, default_value = "symmetric")]
     pub cost: CostArg,
     /// Print one JSON object.
     #[arg(long)]
@@ -383,7 +383,7 @@ pub struct RunArgs {
     #[command(flatten)]
     pub bag: super::BagPickArgs,
     /// Cost that ranks the candidates.
-    #[arg(long, value_enum, default_value = "reverse")]
+    #[arg(long, value_enum, default_value = "symmetric")]
     pub cost: CostArg,
     /// Number of candidates printed.
     #[arg(long, default_value_t = 10)]
@@ -807,8 +807,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         dataset: args.dataset.clone(),
         map: args.map.clone(),
         methods,
+        // The default ranking, as `localize` and `localize track` rank (track mode follows it).
         options: options(
-            CostKind::Reverse,
+            LocalizeOptions::default().rank_by,
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
