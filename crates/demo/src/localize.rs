@@ -327,7 +327,10 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         odometry: "drifted truth".into(),
         window: WINDOW,
         history_m: localize::track::TRACK_HISTORY_M,
-        cost: results.first().map_or("symmetric", |r| r.rank_by.name()),
+        cost: results
+            .first()
+            .map_or(LocalizeOptions::default().rank_by, |r| r.rank_by)
+            .name(),
         scans: results
             .iter()
             .zip(&extracted)

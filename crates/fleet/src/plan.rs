@@ -59,7 +59,7 @@ impl Default for JobOptions {
     fn default() -> Self {
         JobOptions {
             top: 5,
-            cost: "symmetric".into(),
+            cost: LocalizeOptions::default().rank_by.name().into(),
             sensor: "auto".into(),
             yaw_step_deg: LocalizeOptions::default().search.yaw_step_deg,
             minimum_caps_m: default_caps(),

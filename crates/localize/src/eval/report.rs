@@ -8,7 +8,7 @@ use super::{accurate_within, Accuracy};
 use crate::candidates::SearchStats;
 use crate::distractors::{DistractorOptions, DistractorSummary};
 use crate::index::MapSeconds;
-use crate::pipeline::{Localization, Localizer, StageSeconds};
+use crate::pipeline::{Localization, LocalizeOptions, Localizer, StageSeconds};
 use crate::rank::{rank_order, CostKind, Costs};
 use crate::sensor::SensorReport;
 use crate::tiles::Manifest;
@@ -652,7 +652,8 @@ impl EvalReport {
                 top10_within_2m_3deg: after.iter().filter(|r| within(r, 10)).count(),
                 cost: records
                     .first()
-                    .map_or(CostKind::Symmetric.name(), |r| r.result.rank_by.name()),
+                    .map_or(LocalizeOptions::default().rank_by, |r| r.result.rank_by)
+                    .name(),
             }
         });
         let mut sensors: Vec<(String, usize)> = Vec::new();

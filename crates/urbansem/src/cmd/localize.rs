@@ -124,7 +124,7 @@ pub struct TrackArgs {
     #[arg(long, default_value_t = 5)]
     pub top: usize,
     /// Cost that ranks the candidates.
-    #[arg(long, value_enum, default_value = "symmetric")]
+    #[arg(long, value_enum, default_value_t = CostArg::default_rank())]
     pub cost: CostArg,
     /// Print one JSON object.
     #[arg(long)]
@@ -359,6 +359,16 @@ impl CostArg {
             CostArg::Symmetric => CostKind::Symmetric,
         }
     }
+
+    /// The library's default ranking ([`LocalizeOptions::default`]), as the CLI's default.
+    pub fn default_rank() -> CostArg {
+        match LocalizeOptions::default().rank_by {
+            CostKind::Dcm => CostArg::Dcm,
+            CostKind::Forward => CostArg::Forward,
+            CostKind::Reverse => CostArg::Reverse,
+            CostKind::Symmetric => CostArg::Symmetric,
+        }
+    }
 }
 
 /// Arguments of one localization.
@@ -383,7 +393,7 @@ pub struct RunArgs {
     #[command(flatten)]
     pub bag: super::BagPickArgs,
     /// Cost that ranks the candidates.
-    #[arg(long, value_enum, default_value = "symmetric")]
+    #[arg(long, value_enum, default_value_t = CostArg::default_rank())]
     pub cost: CostArg,
     /// Number of candidates printed.
     #[arg(long, default_value_t = 10)]

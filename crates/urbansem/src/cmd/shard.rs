@@ -73,7 +73,7 @@ pub enum ShardCommand {
         #[arg(long, default_value_t = 5)]
         top: usize,
         /// Cost that ranks the candidates.
-        #[arg(long, value_enum, default_value = "symmetric")]
+        #[arg(long, value_enum, default_value_t = super::localize::CostArg::default_rank())]
         cost: super::localize::CostArg,
         /// Localization: sensor profile (`auto`, `terrestrial`, `hdl64`, `vlp16`, `os1-64`,
         /// `os1-128`).
