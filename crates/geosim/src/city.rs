@@ -22,6 +22,7 @@
 use geodata::osm::geometry::{
     point_in_ring, point_segment_distance, rings_overlap, segments_intersect, signed_area,
 };
+use geodata::osm::write::xml_tag;
 use geodata::osm::{OsmError, OsmMap};
 use geodata::projection::{LocalFrame, ProjectionError};
 use rand::{Rng, SeedableRng};
@@ -589,39 +590,6 @@ fn acceptable(
     !placed.iter().any(|other| rings_overlap(ring, other))
 }
 
-/// A tag key or value as XML attribute text: `& < > " '` escaped by quick-xml; tab, line
-/// feed and carriage return as character references (a reader's attribute-value
-/// normalisation would turn them into spaces); characters XML 1.0 cannot hold at all (the
-/// other C0 controls, U+FFFE, U+FFFF) replaced by U+FFFD. Plain text is returned borrowed.
-fn xml_attribute(value: &str) -> std::borrow::Cow<'_, str> {
-    let escaped = quick_xml::escape::escape(value);
-    let needs_reference = |c: char| c < ' ' || c == '\u{FFFE}' || c == '\u{FFFF}';
-    if !escaped.contains(needs_reference) {
-        return escaped;
-    }
-    let mut out = String::with_capacity(escaped.len() + 16);
-    for c in escaped.chars() {
-        match c {
-            '\t' => out.push_str("&#9;"),
-            '\n' => out.push_str("&#10;"),
-            '\r' => out.push_str("&#13;"),
-            c if needs_reference(c) => out.push('\u{FFFD}'),
-            c => out.push(c),
-        }
-    }
-    std::borrow::Cow::Owned(out)
-}
-
-/// One `<tag k=".." v=".."/>` line, key and value escaped.
-fn write_tag(xml: &mut String, key: &str, value: &str) {
-    let _ = writeln!(
-        xml,
-        "    <tag k=\"{}\" v=\"{}\"/>",
-        xml_attribute(key),
-        xml_attribute(value)
-    );
-}
-
 fn write_xml(b: &Builder, frame: &LocalFrame, half: f64) -> String {
     let mut xml = String::with_capacity(64 * b.points.len() + 4096);
     let (min_lat, min_lon) = frame.to_wgs84([-half - 20.0, -half - 20.0]);
@@ -642,7 +610,7 @@ fn write_xml(b: &Builder, frame: &LocalFrame, half: f64) -> String {
             let _ = writeln!(xml, "    <nd ref=\"{}\"/>", node + 1);
         }
         for (key, value) in &w.tags {
-            write_tag(&mut xml, key, value);
+            xml_tag(&mut xml, key, value);
         }
         xml.push_str("  </way>\n");
     }
@@ -659,7 +627,7 @@ fn write_xml(b: &Builder, frame: &LocalFrame, half: f64) -> String {
             inner + 1
         );
         for (key, value) in tags {
-            write_tag(&mut xml, key, value);
+            xml_tag(&mut xml, key, value);
         }
         xml.push_str("  </relation>\n");
     }
@@ -677,6 +645,7 @@ pub fn default_city_map() -> Result<OsmMap, CityError> {
 mod tests {
     use super::*;
     use geodata::osm::geometry::segments_intersect;
+    use geodata::osm::write::xml_attribute;
 
     #[test]
     fn same_seed_same_bytes_other_seed_other_city() {

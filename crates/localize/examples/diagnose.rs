@@ -1,4 +1,4 @@
-//! Why a scan of a simulated `localization` dataset has no accurate candidate (4 m / 0.2 rad):
+//! Why a scan of a simulated `localization` dataset (or of a real sequence, map in `MAP`) has no accurate candidate (4 m / 0.2 rad):
 //! per scan, the cost of the best pose near the truth relative to the search's minimum (cut
 //! by the factor?), and how many poses near the truth survive suppression and the filters,
 //! with the per-segment costs at the best near-truth pose and at the minimum.
@@ -25,8 +25,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let dir = args.next().ok_or("usage: diagnose DATASET [SCAN_INDEX…]")?;
     let only: Vec<usize> = args.map(|a| a.parse()).collect::<Result<_, _>>()?;
-    let ds = SimDataset::open(&dir)?;
-    let map = OsmMap::load(&ds.map_path)?;
+    // A real sequence (KITTI-360, MCD) with its map in `MAP`, or a simulated dataset.
+    let real = localize::eval::real_sequence(std::path::Path::new(&dir));
+    let ds = match real {
+        None => Some(SimDataset::open(&dir)?),
+        Some(_) => None,
+    };
+    let map = match &ds {
+        Some(d) => OsmMap::load(&d.map_path)?,
+        None => {
+            OsmMap::load(std::env::var("MAP").map_err(|_| "a real sequence needs MAP=map.osm")?)?
+        }
+    };
+    let real_scans = match real {
+        Some(kind) => localize::eval::real_scans(std::path::Path::new(&dir), kind, &map, 1)?,
+        None => Vec::new(),
+    };
+    let n_scans = ds.as_ref().map_or(real_scans.len(), |d| d.truth.len());
+    let load = |i: usize| -> Result<localize::eval::EvalScan, Box<dyn std::error::Error>> {
+        match &ds {
+            Some(d) => Ok(d.load(i)?),
+            None => Ok(real_scans[i].clone()),
+        }
+    };
     // The sensor profile is measured per scan (as `localize` does) unless `SENSOR=manual`,
     // where the environment variables below set the extraction options themselves.
     let manual = std::env::var("SENSOR").is_ok_and(|v| v == "manual");
@@ -79,7 +100,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let acc = Accuracy::THESIS;
     let failing_only = only.is_empty();
     let scans: Vec<usize> = if only.is_empty() {
-        (0..ds.truth.len()).collect()
+        (0..n_scans).collect()
     } else {
         only
     };
@@ -87,7 +108,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Search effort only: boxes and leaves bounded (load-independent) and seconds.
         let (mut boxes, mut leaves, mut search_s, mut total_s) = (0u64, 0u64, 0.0, 0.0);
         for &i in &scans {
-            let scan = ds.load(i)?;
+            let scan = load(i)?;
             let r = localizer.localize_points(&scan.points)?;
             boxes += r.search.boxes;
             leaves += r.search.leaves;
@@ -106,7 +127,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Ok(());
     }
     for i in scans {
-        let scan = ds.load(i)?;
+        let scan = load(i)?;
         let truth = scan.truth;
         let r = localizer.localize_points(&scan.points)?;
         let in_set = r.candidates.iter().any(|c| acc.accepts(&c.pose, &truth));

@@ -24,7 +24,8 @@
 //!   confidence.
 //! - [`refine`]: continuous 2-D alignment of the best candidates.
 //! - [`hashing`]: the geometric-hashing baseline of Cham et al. (2010).
-//! - [`distractors`]: a map embedded among distractor buildings of another real map.
+//! - [`distractors`]: a map embedded among distractor buildings of another real map;
+//!   [`facade_map`]: a building map drawn from the labelled scans of a real sequence.
 //! - [`track`]: a window of scans tied by odometry, searched as one (localization along a
 //!   track), odometry files and simulated drift.
 //! - [`pipeline`]: the whole chain on one scan; [`eval`]: datasets and accuracy tables;
@@ -44,6 +45,7 @@ pub mod crop;
 pub mod distractors;
 pub mod eval;
 pub mod extract_eval;
+pub mod facade_map;
 pub mod feasible;
 pub mod figure;
 pub mod geojson;

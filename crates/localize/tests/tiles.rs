@@ -119,6 +119,7 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
         options: options.clone(),
         distractors: None,
         limit: Some(2),
+        select: None,
         track: None,
         figures: None,
     };

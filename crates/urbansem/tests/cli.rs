@@ -1769,3 +1769,96 @@ fn localize_extract_eval_scores_a_simulated_dataset() {
         "{err}"
     );
 }
+
+/// Runs `urbansem ARGS…`, checks that it fails as a usage error (exit code 2) and returns
+/// its standard error.
+fn usage_error(args: &[&str]) -> String {
+    let out = urbansem().args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+    err
+}
+
+/// `localize facade-map` draws a map from a real labelled sequence that `localize eval`
+/// then localizes the held-out scans on; bad selections and gates are usage errors.
+#[test]
+fn facade_map_and_scan_selection_from_the_command_line() {
+    let kitti = "../../../shared/data/lidar/kitti360_2013_05_28_drive_0009";
+    let roads = "../../../shared/data/osm/karlsruhe_west_kitti360_0009_roads.osm";
+    let tmp = tempfile::tempdir().unwrap();
+    let map = tmp.path().join("facades.osm");
+    let map_s = map.to_str().unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&stdout_of(urbansem().args([
+        "localize",
+        "facade-map",
+        "--dataset",
+        kitti,
+        "--roads",
+        roads,
+        "--out",
+        map_s,
+        "--hold-out-every",
+        "5",
+        "--depth-m",
+        "8",
+        "--json",
+    ])))
+    .unwrap();
+    let held: Vec<u64> = json["frames_held_out"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert_eq!(held, vec![2000, 2200, 2400, 2600, 2800]);
+    assert_eq!(json["frames_used"].as_array().unwrap().len(), 20);
+    assert_eq!(json["buildings_read_back"], json["buildings"]);
+    assert!(json["buildings"].as_u64().unwrap() > 10, "{json}");
+    // The held-out scans only (the first of them: a quick one), with the gate open.
+    let report: serde_json::Value = serde_json::from_slice(&stdout_of(urbansem().args([
+        "localize",
+        "eval",
+        "--dataset",
+        kitti,
+        "--map",
+        map_s,
+        "--scan-every",
+        "5",
+        "--scan-offset",
+        "0",
+        "--limit",
+        "1",
+        "--method",
+        "dcm",
+        "--max-accept-cost-m",
+        "inf",
+        "--json",
+    ])))
+    .unwrap();
+    let names: Vec<&str> = report["per_scan"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["scan"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, vec!["0000002000"], "{report}");
+    let fm = ["localize", "facade-map", "--dataset", kitti, "--out", map_s];
+    let ev = ["localize", "eval", "--dataset", kitti, "--map", map_s];
+    for (base, extra, needle) in [
+        (
+            fm,
+            &["--hold-out-every", "2", "--hold-out-offset", "2"][..],
+            "--hold-out-offset",
+        ),
+        (fm, &["--depth-m=-1"][..], "depth_m"),
+        (ev, &["--scan-every", "0"][..], "--scan-every"),
+        (ev, &["--scan-offset", "1"][..], "--scan-every"),
+        (ev, &["--max-accept-dcm-m", "NaN"][..], "--max-accept-dcm-m"),
+    ] {
+        let args = [&base[..], extra].concat();
+        let err = usage_error(&args);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    let err = usage_error(&["localize", "facade-map", "--dataset", "..", "--out", map_s]);
+    assert!(err.contains("not a real labelled sequence"), "{err}");
+}

@@ -48,6 +48,7 @@ pub mod network;
 mod pbf;
 mod rings;
 pub mod tags;
+pub mod write;
 mod xml;
 
 pub use error::OsmError;

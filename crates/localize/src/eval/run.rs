@@ -33,8 +33,11 @@ pub struct EvalJob {
     pub options: LocalizeOptions,
     /// Embed the map among distractor buildings of this other map.
     pub distractors: Option<(PathBuf, DistractorOptions)>,
-    /// Evaluate only the first scans.
+    /// Evaluate only the first scans (of those `select` keeps).
     pub limit: Option<usize>,
+    /// Evaluate only the scans whose position in file-name order is `offset` modulo `every`
+    /// (`(every, offset)`; e.g. the scans a `localize facade-map --hold-out-every` left out).
+    pub select: Option<(usize, usize)>,
     /// Track mode: windows of scans tied by drifted odometry.
     pub track: Option<TrackSetup>,
     /// Write one SVG per scan and `curves.svg` here.
@@ -114,8 +117,8 @@ pub fn run_eval(
     let hashing_index = CornerIndex::new(&map, &HashingOptions::default());
     let hashing_index_s = t.elapsed().as_secs_f64();
     let mcd = real_eval_scans(job, real, &map, &map_path, map_bounds(&map))?;
-    let count = sim.as_ref().map_or(mcd.len(), |d| d.truth.len());
-    let count = job.limit.map_or(count, |l| l.min(count));
+    let picked = picked_scans(job, sim.as_ref().map_or(mcd.len(), |d| d.truth.len()))?;
+    let count = picked.len();
     if let Some(dir) = &job.figures {
         std::fs::create_dir_all(dir).map_err(|source| LocalizeError::Io {
             action: "creating",
@@ -123,7 +126,7 @@ pub fn run_eval(
             source,
         })?;
     }
-    let load = |i: usize| load_scan(job, sim.as_ref(), &mcd, i);
+    let load = |k: usize| load_scan(job, sim.as_ref(), &mcd, picked[k]);
     let track_results = match &job.track {
         Some(setup) => Some(track_results(&localizer, setup, count, &load)?),
         None => None,
@@ -231,6 +234,31 @@ fn real_eval_scans(
     Ok(scans)
 }
 
+/// The indices of the scans the job evaluates among `total`: those `select` keeps, at most
+/// `limit` of them.
+fn picked_scans(job: &EvalJob, total: usize) -> Result<Vec<usize>> {
+    if let Some((every, offset)) = job.select {
+        if every == 0 || offset >= every {
+            return Err(LocalizeError::InvalidOption {
+                name: "scan selection (every, offset)",
+                value: every as f64,
+                expected: "every ≥ 1 and an offset below it",
+            });
+        }
+    }
+    let picked: Vec<usize> = (0..total)
+        .filter(|&i| job.select.is_none_or(|(every, offset)| i % every == offset))
+        .take(job.limit.unwrap_or(usize::MAX))
+        .collect();
+    if picked.is_empty() && total > 0 {
+        return Err(LocalizeError::Dataset {
+            path: job.dataset.clone(),
+            message: format!("the scan selection keeps none of its {total} scans"),
+        });
+    }
+    Ok(picked)
+}
+
 /// Scan `i` of the job: from the simulated dataset, or of the real scans read up front.
 fn load_scan(
     job: &EvalJob,
@@ -321,11 +349,11 @@ pub fn run_eval_tiled(
     });
     let real = sim.is_none().then(|| real_sequence(&job.dataset)).flatten();
     let mcd = real_eval_scans(job, real, &frame, map_path, cores)?;
-    let count = sim.map_or(mcd.len(), |d| d.truth.len());
-    let count = job.limit.map_or(count, |l| l.min(count));
+    let picked = picked_scans(job, sim.map_or(mcd.len(), |d| d.truth.len()))?;
+    let count = picked.len();
     let mut scans = Vec::with_capacity(count);
     let mut extracted = Vec::with_capacity(count);
-    for i in 0..count {
+    for &i in &picked {
         let scan = load_scan(job, sim, &mcd, i)?;
         let e = crate::pipeline::scan_segments(&job.options, &scan.points)
             .context_with(|| format!("extracting walls from {}", scan.name))?;

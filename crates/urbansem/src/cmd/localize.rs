@@ -52,6 +52,52 @@ pub enum LocalizeCommand {
     /// Prepare a map once and save it as an index (`.uloc`) that every `localize` command
     /// accepts as `--map`.
     Index(IndexArgs),
+    /// Draw a building map (OSM XML) from the building-labelled points of a real labelled
+    /// sequence (KITTI-360, MCD), beside the streets of an OSM map: a map to localize that
+    /// sequence's held-out scans on where the place's OSM buildings are not at hand.
+    FacadeMap(FacadeMapArgs),
+}
+
+/// Arguments of `urbansem localize facade-map`.
+#[derive(Args)]
+pub struct FacadeMapArgs {
+    /// A real labelled sequence folder (KITTI-360 or MCD layout).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// The OSM map (.osm or .osm.pbf) whose streets (highway ways) the map keeps, in its frame.
+    #[arg(long)]
+    pub roads: Option<PathBuf>,
+    /// The OSM XML file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Leave every N-th scan (file-name order) out of the map, from --hold-out-offset.
+    #[arg(long)]
+    pub hold_out_every: Option<usize>,
+    /// With --hold-out-every: the position of the first scan left out (0-based).
+    #[arg(long, default_value_t = 0)]
+    pub hold_out_offset: usize,
+    /// Cell side of the building raster, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub cell_m: f64,
+    /// Building points a cell needs.
+    #[arg(long, default_value_t = 2)]
+    pub min_points: u32,
+    /// Use building points within this range of their scan's sensor, metres.
+    #[arg(long, default_value_t = 50.0)]
+    pub max_range_m: f64,
+    /// Cells a building needs.
+    #[arg(long, default_value_t = 8)]
+    pub min_cells: usize,
+    /// Douglas–Peucker tolerance of the outlines, metres.
+    #[arg(long, default_value_t = 0.25)]
+    pub simplify_m: f64,
+    /// Depth given to the buildings behind the walls seen (away from the sensors that saw
+    /// them), metres; 0: the walls as seen, one to a few cells thick.
+    #[arg(long, default_value_t = 0.0)]
+    pub depth_m: f64,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `urbansem localize index`.
@@ -150,6 +196,9 @@ pub struct TrackArgs {
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
+    /// When no pose explains the scan.
+    #[command(flatten)]
+    pub gate: GateArgs,
 }
 
 /// Sensor names accepted by `--sensor`.
@@ -212,6 +261,30 @@ impl LevelArg {
     pub fn options(self) -> Option<localize::level::LevelOptions> {
         // Both names are known to the library: no `Err` to lose.
         localize::level::options_named(self.name()).ok().flatten()
+    }
+}
+
+/// When the answer is "no pose explains the scan" (an empty candidate list): the best
+/// candidate's symmetric cost and its d_DCM both above their limits.
+#[derive(Args, Clone)]
+pub struct GateArgs {
+    /// Largest symmetric cost of an answer, metres (unless its d_DCM is below
+    /// --max-accept-dcm-m); `inf` never refuses.
+    #[arg(long, default_value_t = LocalizeOptions::default().max_accept_cost_m)]
+    pub max_accept_cost_m: f64,
+    /// Largest d_DCM of an answer, metres (unless its symmetric cost is below
+    /// --max-accept-cost-m); `inf` never refuses.
+    #[arg(long, default_value_t = LocalizeOptions::default().max_accept_dcm_m)]
+    pub max_accept_dcm_m: f64,
+}
+
+impl Default for GateArgs {
+    fn default() -> Self {
+        let o = LocalizeOptions::default();
+        GateArgs {
+            max_accept_cost_m: o.max_accept_cost_m,
+            max_accept_dcm_m: o.max_accept_dcm_m,
+        }
     }
 }
 
@@ -418,6 +491,9 @@ pub struct RunArgs {
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
+    /// When no pose explains the scan.
+    #[command(flatten)]
+    pub gate: GateArgs,
 }
 
 /// Methods of `localize eval`.
@@ -461,6 +537,13 @@ pub struct EvalArgs {
     /// Evaluate at most this many scans.
     #[arg(long)]
     pub limit: Option<usize>,
+    /// Evaluate only every N-th scan (file-name order), from --scan-offset: e.g. the scans a
+    /// `localize facade-map --hold-out-every N --hold-out-offset K` left out of its map.
+    #[arg(long)]
+    pub scan_every: Option<usize>,
+    /// With --scan-every: the position of the first scan evaluated (0-based).
+    #[arg(long, default_value_t = 0)]
+    pub scan_offset: usize,
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
@@ -495,6 +578,9 @@ pub struct EvalArgs {
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
+    /// When no pose explains the scan.
+    #[command(flatten)]
+    pub gate: GateArgs,
 }
 
 /// Runs `urbansem localize`.
@@ -504,6 +590,7 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
         Some(LocalizeCommand::ExtractEval(e)) => extract_eval(e),
         Some(LocalizeCommand::Track(t)) => track(t),
         Some(LocalizeCommand::Index(i)) => index(i),
+        Some(LocalizeCommand::FacadeMap(f)) => facade_map(f),
         None => run_one(args.run),
     }
 }
@@ -513,15 +600,26 @@ fn options(
     grid_m: f64,
     yaw_step_deg: f64,
     extract: &ExtractArgs,
+    gate: &GateArgs,
 ) -> anyhow::Result<LocalizeOptions> {
     if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
         super::usage!("--yaw-step-deg {yaw_step_deg}: expected a step in (0, 90] degrees");
+    }
+    for (name, v) in [
+        ("--max-accept-cost-m", gate.max_accept_cost_m),
+        ("--max-accept-dcm-m", gate.max_accept_dcm_m),
+    ] {
+        if v.is_nan() || v < 0.0 {
+            super::usage!("{name} {v}: expected a length of 0 or more metres (inf: never refuse)");
+        }
     }
     let mut o = LocalizeOptions {
         rank_by: cost,
         sensor: extract.sensor.choice(),
         overrides: extract.overrides()?,
         level: extract.level.options(),
+        max_accept_cost_m: gate.max_accept_cost_m,
+        max_accept_dcm_m: gate.max_accept_dcm_m,
         ..LocalizeOptions::default()
     };
     o.chamfer.grid_m = grid_m;
@@ -579,6 +677,7 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
         args.grid_m,
         args.yaw_step_deg,
         &args.extract,
+        &args.gate,
     )?;
     let tiled = localize::tiles::is_manifest(map_path);
     if tiled && args.svg.is_some() {
@@ -670,6 +769,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
         args.grid_m,
         args.yaw_step_deg,
         &args.extract,
+        &args.gate,
     )?;
     let report = match (&args.bag, &args.scans, &args.odometry) {
         (Some(bag), _, _) => {
@@ -735,6 +835,69 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
         return super::print_json(&report);
     }
     print!("{}", report.text());
+    Ok(())
+}
+
+/// Checks a selection of every N-th scan from an offset (`(flag, value)` of each).
+fn every_nth(
+    (every_flag, every): (&str, Option<usize>),
+    (offset_flag, offset): (&str, usize),
+) -> anyhow::Result<()> {
+    match every {
+        Some(0) => super::usage!("{every_flag} 0: expected every N-th scan, N ≥ 1"),
+        Some(n) if offset >= n => {
+            super::usage!("{offset_flag} {offset}: expected an offset below {every_flag} {n}")
+        }
+        None if offset != 0 => super::usage!("{offset_flag} needs {every_flag}"),
+        _ => Ok(()),
+    }
+}
+
+fn facade_map(args: FacadeMapArgs) -> anyhow::Result<()> {
+    every_nth(
+        ("--hold-out-every", args.hold_out_every),
+        ("--hold-out-offset", args.hold_out_offset),
+    )?;
+    if real_sequence(&args.dataset).is_none() {
+        super::usage!(
+            "{}: not a real labelled sequence (expected the KITTI-360 or MCD layout)",
+            args.dataset.display()
+        );
+    }
+    let options = localize::facade_map::FacadeMapOptions {
+        cell_m: args.cell_m,
+        min_points: args.min_points,
+        max_range_m: args.max_range_m,
+        min_cells: args.min_cells,
+        simplify_m: args.simplify_m,
+        depth_m: args.depth_m,
+        hold_out: args
+            .hold_out_every
+            .map(|every| (every, args.hold_out_offset)),
+    };
+    let summary = match localize::facade_map::write_facade_map(
+        &args.dataset,
+        args.roads.as_deref(),
+        &args.out,
+        &options,
+    ) {
+        Err(e @ LocalizeError::InvalidOption { .. }) => super::usage!("{e}"),
+        r => r?,
+    };
+    if args.json {
+        return super::print_json(&summary);
+    }
+    println!(
+        "{}: {} buildings ({} vertices, {} read back) from {} building points of {} scans ({} held out), {} street segments",
+        args.out.display(),
+        summary.buildings,
+        summary.vertices,
+        summary.buildings_read_back,
+        summary.building_points,
+        summary.frames_used.len(),
+        summary.frames_held_out.len(),
+        summary.street_segments
+    );
     Ok(())
 }
 
@@ -810,6 +973,10 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if args.track == Some(0) {
         super::usage!("--track 0: expected a window of at least 1 scan");
     }
+    every_nth(
+        ("--scan-every", args.scan_every),
+        ("--scan-offset", args.scan_offset),
+    )?;
     if args.history_m.is_nan() || args.history_m < 0.0 {
         super::usage!("--history-m {}: expected 0 or more metres", args.history_m);
     }
@@ -823,6 +990,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             args.grid_m,
             args.yaw_step_deg,
             &args.extract,
+            &args.gate,
         )?,
         distractors: args.distractors.clone().map(|path| {
             let options = DistractorOptions {
@@ -833,6 +1001,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             (path, options)
         }),
         limit: args.limit,
+        select: args.scan_every.map(|every| (every, args.scan_offset)),
         track: args.track.map(|window| TrackSetup {
             window,
             history_m: args.history_m,
@@ -894,6 +1063,7 @@ mod tests {
             grid_m: 0.5,
             yaw_step_deg: 0.5,
             extract: ExtractArgs::default(),
+            gate: GateArgs::default(),
         })
         .unwrap_err();
         assert!(err.to_string().contains("--map"), "{err}");
