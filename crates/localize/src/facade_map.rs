@@ -116,21 +116,26 @@ fn check(options: &FacadeMapOptions) -> Result<()> {
     if !(options.simplify_m.is_finite() && options.simplify_m >= 0.0) {
         return Err(invalid("simplify_m", options.simplify_m, "≥ 0 m"));
     }
-    if let Some((every, offset)) = options.hold_out {
-        if every == 0 || offset >= every {
-            return Err(invalid(
-                "hold_out",
-                every as f64,
-                "every ≥ 1 and an offset below it",
-            ));
-        }
-    }
-    Ok(())
+    check_every_nth("hold_out", options.hold_out)
 }
 
-/// Whether scan `i` (position in frame order) is held out.
-pub fn held_out(hold_out: Option<(usize, usize)>, i: usize) -> bool {
-    hold_out.is_some_and(|(every, offset)| every > 0 && i % every == offset)
+/// An error unless a selection of every n-th scan (`(every, offset)`, `name` in the error)
+/// has every ≥ 1 and an offset below it.
+pub fn check_every_nth(name: &'static str, select: Option<(usize, usize)>) -> Result<()> {
+    match select {
+        Some((every, offset)) if every == 0 || offset >= every => Err(invalid(
+            name,
+            every as f64,
+            "every ≥ 1 and an offset below it",
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Whether scan `i` (position in frame order) is one of every n-th from an offset
+/// (`(every, offset)`; none without a selection): held out of a façade map, or evaluated.
+pub fn held_out(select: Option<(usize, usize)>, i: usize) -> bool {
+    select.is_some_and(|(every, offset)| every > 0 && i % every == offset)
 }
 
 /// The façade map of a labelled sequence, beside the streets of `roads` and in its frame
@@ -151,8 +156,7 @@ pub fn facade_map(
     let frames = seq.frames()?;
     let mut summary = FacadeMapSummary::default();
     let mut frame: Option<LocalFrame> = roads.map(|r| r.frame);
-    // Per cell: building points, and the sum of the sensor positions that saw them.
-    let mut counts: rustc_hash::FxHashMap<(i64, i64), (u32, f64, f64)> = Default::default();
+    let mut counts: rustc_hash::FxHashMap<(i64, i64), CellViews> = Default::default();
     let inv = 1.0 / options.cell_m;
     for (i, &f) in frames.iter().enumerate() {
         if held_out(options.hold_out, i) {
@@ -204,18 +208,16 @@ pub fn facade_map(
                 .into(),
         });
     };
-    let mut seen: Vec<(i64, i64)> = counts
-        .iter()
+    let mut seen: Vec<((i64, i64), CellViews)> = counts
+        .into_iter()
         .filter(|(_, c)| c.0 >= options.min_points)
-        .map(|(&k, _)| k)
         .collect();
-    seen.sort_unstable();
-    let mut occupied = seen.clone();
+    seen.sort_unstable_by_key(|&(k, _)| k);
+    let mut occupied: Vec<(i64, i64)> = seen.iter().map(|&(k, _)| k).collect();
     if options.depth_m > 0.0 {
         // Each cell extended away from its mean viewpoint, in half-cell steps.
         let steps = (2.0 * options.depth_m / options.cell_m).ceil() as usize;
-        for &(x, y) in &seen {
-            let (n, sx, sy) = counts[&(x, y)];
+        for &((x, y), (n, sx, sy)) in &seen {
             let centre = [
                 (x as f64 + 0.5) * options.cell_m,
                 (y as f64 + 0.5) * options.cell_m,
@@ -289,6 +291,9 @@ pub fn facade_map(
     map.bbox_lonlat = lonlat_box(&map).unwrap_or([0.0; 4]);
     Ok((map, summary))
 }
+
+/// Per cell: building points, and the sums of the x and y of the sensors that saw them.
+type CellViews = (u32, f64, f64);
 
 /// Draws the façade map of the real sequence in `dataset` beside the streets of the OSM map
 /// `roads` (in its frame), writes it to `out` as OSM XML, and reads it back to check that
@@ -427,8 +432,8 @@ impl Grid {
     /// The outer boundary of a 4-connected group as a counter-clockwise ring of cell corners
     /// (grid coordinates), collinear corners dropped.
     fn outer_ring(&self, comp: &[(i64, i64)]) -> Option<Vec<(i64, i64)>> {
-        let member: rustc_hash::FxHashSet<(i64, i64)> = comp.iter().copied().collect();
-        let inside = |x: i64, y: i64| member.contains(&(x, y));
+        // An occupied 4-neighbour of a group's cell is in the group.
+        let inside = |x: i64, y: i64| self.at(x, y);
         // Directed boundary edges with the group on the left, keyed by their start corner.
         let mut out: rustc_hash::FxHashMap<(i64, i64), Vec<(i64, i64)>> = Default::default();
         for &(x, y) in comp {

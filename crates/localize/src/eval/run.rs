@@ -237,17 +237,9 @@ fn real_eval_scans(
 /// The indices of the scans the job evaluates among `total`: those `select` keeps, at most
 /// `limit` of them.
 fn picked_scans(job: &EvalJob, total: usize) -> Result<Vec<usize>> {
-    if let Some((every, offset)) = job.select {
-        if every == 0 || offset >= every {
-            return Err(LocalizeError::InvalidOption {
-                name: "scan selection (every, offset)",
-                value: every as f64,
-                expected: "every ≥ 1 and an offset below it",
-            });
-        }
-    }
+    crate::facade_map::check_every_nth("scan selection (every, offset)", job.select)?;
     let picked: Vec<usize> = (0..total)
-        .filter(|&i| job.select.is_none_or(|(every, offset)| i % every == offset))
+        .filter(|&i| job.select.is_none() || crate::facade_map::held_out(job.select, i))
         .take(job.limit.unwrap_or(usize::MAX))
         .collect();
     if picked.is_empty() && total > 0 {
