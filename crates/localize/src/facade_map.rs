@@ -20,7 +20,8 @@
 //! localization (walls from a roof-mounted scanner against a map of the right walls), not
 //! OSM's mapping error.
 //!
-//! Cost: linear in the points read, plus the cells of the occupied bounding box.
+//! Cost: linear in the points read and in the occupied cells (held in a hash set, not a
+//! dense grid over their bounding box, so a drive of any length fits in memory).
 
 use crate::{LocalizeError, Result, WithContext};
 use geodata::classes::Class;
@@ -28,6 +29,7 @@ use geodata::datasets::LidarSequence;
 use geodata::osm::geometry::segments_intersect;
 use geodata::osm::model::{Building, ElementKind, OsmMap, OsmStats, StreetNetwork};
 use geodata::projection::LocalFrame;
+use rustc_hash::{FxHashMap, FxHashSet};
 use serde::Serialize;
 use std::path::Path;
 
@@ -156,7 +158,7 @@ pub fn facade_map(
     let frames = seq.frames()?;
     let mut summary = FacadeMapSummary::default();
     let mut frame: Option<LocalFrame> = roads.map(|r| r.frame);
-    let mut counts: rustc_hash::FxHashMap<(i64, i64), CellViews> = Default::default();
+    let mut counts: FxHashMap<(i64, i64), CellViews> = Default::default();
     let inv = 1.0 / options.cell_m;
     for (i, &f) in frames.iter().enumerate() {
         if held_out(options.hold_out, i) {
@@ -242,7 +244,7 @@ pub fn facade_map(
     let mut buildings = Vec::new();
     if !occupied.is_empty() {
         let grid = Grid::closed(&occupied);
-        summary.cells = grid.cells.iter().filter(|&&c| c).count();
+        summary.cells = grid.order.len();
         for component in grid.components() {
             if component.len() < options.min_cells {
                 summary.dropped_small += 1;
@@ -253,12 +255,7 @@ pub fn facade_map(
             };
             let ring: Vec<[f64; 2]> = ring
                 .iter()
-                .map(|&(x, y)| {
-                    [
-                        (x + grid.x0) as f64 * options.cell_m,
-                        (y + grid.y0) as f64 * options.cell_m,
-                    ]
-                })
+                .map(|&(x, y)| [x as f64 * options.cell_m, y as f64 * options.cell_m])
                 .collect();
             let ring = simplify_ring(&ring, options.simplify_m);
             summary.vertices += ring.len();
@@ -339,88 +336,71 @@ fn lonlat_box(map: &OsmMap) -> Option<[f64; 4]> {
     out
 }
 
-/// Occupied cells on a dense grid with a one-cell empty border.
+/// Occupied cells, held sparsely: memory and time grow with the occupied cells, not with
+/// their bounding box (a long drive's box would not fit in memory).
 struct Grid {
-    x0: i64,
-    y0: i64,
-    w: usize,
-    h: usize,
-    cells: Vec<bool>,
+    cells: FxHashSet<(i64, i64)>,
+    /// The occupied cells in scan order (row by row, then by column).
+    order: Vec<(i64, i64)>,
 }
 
 impl Grid {
     /// The cells, closed (dilated, then eroded, by one cell in the 8-neighbourhood).
     fn closed(occupied: &[(i64, i64)]) -> Grid {
-        let (mut lo, mut hi) = (occupied[0], occupied[0]);
+        const AROUND: [(i64, i64); 9] = [
+            (-1, -1),
+            (0, -1),
+            (1, -1),
+            (-1, 0),
+            (0, 0),
+            (1, 0),
+            (-1, 1),
+            (0, 1),
+            (1, 1),
+        ];
+        let mut dilated: FxHashSet<(i64, i64)> = FxHashSet::default();
+        dilated.reserve(occupied.len() * 3);
         for &(x, y) in occupied {
-            lo = (lo.0.min(x), lo.1.min(y));
-            hi = (hi.0.max(x), hi.1.max(y));
-        }
-        // Border of 2: one for the dilation, one so every boundary has an empty outside.
-        let (x0, y0) = (lo.0 - 2, lo.1 - 2);
-        let w = (hi.0 - lo.0 + 5) as usize;
-        let h = (hi.1 - lo.1 + 5) as usize;
-        let mut cells = vec![false; w * h];
-        for &(x, y) in occupied {
-            cells[(y - y0) as usize * w + (x - x0) as usize] = true;
-        }
-        let morph = |src: &[bool], dilate: bool| -> Vec<bool> {
-            let mut out = vec![false; w * h];
-            for y in 1..h - 1 {
-                for x in 1..w - 1 {
-                    let mut any = false;
-                    let mut all = true;
-                    for dy in [-1i64, 0, 1] {
-                        for dx in [-1i64, 0, 1] {
-                            let v = src[(y as i64 + dy) as usize * w + (x as i64 + dx) as usize];
-                            any |= v;
-                            all &= v;
-                        }
-                    }
-                    out[y * w + x] = if dilate { any } else { all };
-                }
+            for (dx, dy) in AROUND {
+                dilated.insert((x + dx, y + dy));
             }
-            out
-        };
-        let cells = morph(&morph(&cells, true), false);
+        }
+        let mut order: Vec<(i64, i64)> = dilated
+            .iter()
+            .copied()
+            .filter(|&(x, y)| {
+                AROUND
+                    .iter()
+                    .all(|&(dx, dy)| dilated.contains(&(x + dx, y + dy)))
+            })
+            .collect();
+        order.sort_unstable_by_key(|&(x, y)| (y, x));
         Grid {
-            x0,
-            y0,
-            w,
-            h,
-            cells,
+            cells: order.iter().copied().collect(),
+            order,
         }
     }
 
     fn at(&self, x: i64, y: i64) -> bool {
-        x >= 0
-            && y >= 0
-            && (x as usize) < self.w
-            && (y as usize) < self.h
-            && self.cells[y as usize * self.w + x as usize]
+        self.cells.contains(&(x, y))
     }
 
-    /// 4-connected groups of occupied cells (grid coordinates), in scan order.
+    /// 4-connected groups of occupied cells, in scan order of their first cell.
     fn components(&self) -> Vec<Vec<(i64, i64)>> {
-        let mut seen = vec![false; self.cells.len()];
+        let mut seen: FxHashSet<(i64, i64)> = FxHashSet::default();
         let mut out = Vec::new();
-        for start in 0..self.cells.len() {
-            if !self.cells[start] || seen[start] {
+        for &start in &self.order {
+            if !seen.insert(start) {
                 continue;
             }
-            seen[start] = true;
             let mut stack = vec![start];
             let mut comp = Vec::new();
-            while let Some(i) = stack.pop() {
-                let (x, y) = ((i % self.w) as i64, (i / self.w) as i64);
+            while let Some((x, y)) = stack.pop() {
                 comp.push((x, y));
                 for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
-                    if self.at(x + dx, y + dy) {
-                        let j = (y + dy) as usize * self.w + (x + dx) as usize;
-                        if !seen[j] {
-                            seen[j] = true;
-                            stack.push(j);
-                        }
+                    let n = (x + dx, y + dy);
+                    if self.at(n.0, n.1) && seen.insert(n) {
+                        stack.push(n);
                     }
                 }
             }
@@ -435,7 +415,7 @@ impl Grid {
         // An occupied 4-neighbour of a group's cell is in the group.
         let inside = |x: i64, y: i64| self.at(x, y);
         // Directed boundary edges with the group on the left, keyed by their start corner.
-        let mut out: rustc_hash::FxHashMap<(i64, i64), Vec<(i64, i64)>> = Default::default();
+        let mut out: FxHashMap<(i64, i64), Vec<(i64, i64)>> = Default::default();
         for &(x, y) in comp {
             if !inside(x, y - 1) {
                 out.entry((x, y)).or_default().push((x + 1, y));
@@ -497,7 +477,7 @@ impl Grid {
 /// the one turning right of the incoming direction `dir`, which keeps the touching cells'
 /// boundaries apart (4-connectivity).
 fn take(
-    out: &mut rustc_hash::FxHashMap<(i64, i64), Vec<(i64, i64)>>,
+    out: &mut FxHashMap<(i64, i64), Vec<(i64, i64)>>,
     at: (i64, i64),
     dir: Option<(i64, i64)>,
 ) -> Option<(i64, i64)> {
@@ -635,6 +615,36 @@ mod tests {
         assert_eq!(ring.len(), 6, "{ring:?}");
         let ring: Vec<[f64; 2]> = ring.iter().map(|&(x, y)| [x as f64, y as f64]).collect();
         assert!((signed_area(&ring) - cells.len() as f64).abs() < 1e-9);
+    }
+
+    #[test]
+    fn cells_far_apart_cost_their_own_size_not_their_bounding_box() {
+        // Two 3 × 3 blocks 500 km apart in 0.5 m cells: a dense grid over their box would
+        // need 10^12 cells.
+        let far = 1_000_000_000i64;
+        let mut cells = Vec::new();
+        for (ox, oy) in [(0, 0), (far, far)] {
+            for y in 0..3 {
+                for x in 0..3 {
+                    cells.push((ox + x, oy + y));
+                }
+            }
+        }
+        let grid = Grid::closed(&cells);
+        assert_eq!(grid.order.len(), 18);
+        let comps = grid.components();
+        assert_eq!(comps.len(), 2);
+        assert_eq!(comps[1][0], (far, far));
+        let ring = grid.outer_ring(&comps[1]).unwrap();
+        assert_eq!(
+            ring,
+            vec![
+                (far, far),
+                (far + 3, far),
+                (far + 3, far + 3),
+                (far, far + 3)
+            ]
+        );
     }
 
     #[test]
