@@ -117,6 +117,18 @@ def test_level_auto_equals_the_cli_and_reports_the_tilt(cli, map_path, scans, re
     assert math.hypot(levelled.best.x - results[0].best.x, levelled.best.y - results[0].best.y) < 1.0
 
 
+def test_vehicle_free_equals_the_cli(cli, map_path, scans, results):
+    s, ply = scans[0]
+    free = urbansem.Localizer(map_path, vehicle="free").localize(s.points, name=str(ply))
+    expected = run_json(cli, "localize", "--map", map_path, "--scan", ply, "--vehicle", "free", "--json")
+    assert without_seconds(free.report) == without_seconds(expected)
+    assert free.report["filtered"]["across_streets"] == 0
+    # The default (auto) takes the detected OS1-64 for a car's sensor.
+    assert results[0].report["sensor"]["profile"] == "os1-64"
+    with pytest.raises(ValueError, match="vehicle"):
+        urbansem.Localizer(map_path, vehicle="bicycle")
+
+
 def test_top_candidate_is_within_the_thesis_threshold(scans, results):
     for (s, _), r in zip(scans, results):
         assert r.best is not None, (s.name, r.message)

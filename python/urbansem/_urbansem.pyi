@@ -363,6 +363,8 @@ class _Localizer:
         max_see_through: Optional[float] = None,
         min_cell_count: Optional[int] = None,
         min_segment_m: Optional[float] = None,
+        level: str = "off",
+        vehicle: str = "auto",
     ) -> None:
         """Prepares an OsmMap, an .osm/.osm.pbf map or a .uloc index with the CLI's options."""
     def localize(self, points: np.ndarray, *, top: int = 10, name: str = "<array>") -> Dict[str, Any]:
@@ -446,6 +448,7 @@ def shard_plan(
     top: int = ...,
     cost: str = ...,
     level: str = ...,
+    vehicle: str = ...,
 ) -> Dict[str, Any]: ...
 def shard_run(
     plan: _Path,

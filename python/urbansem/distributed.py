@@ -34,13 +34,15 @@ def plan_localize(
     top: int = 5,
     cost: str = "symmetric",
     level: str = "off",
+    vehicle: str = "auto",
 ) -> Dict[str, Any]:
     """Plans a localization job over a tiled map (``localize index --tile-m``) and writes
     the plan to ``out``; returns the plan. ``level="auto"`` levels tilted scans by their
-    walls, as ``urbansem shard plan --job localize --level auto``."""
+    walls, as ``urbansem shard plan --job localize --level auto``; ``vehicle`` is
+    ``localize --vehicle`` (``auto``, ``car``, ``free``)."""
     return _urbansem.shard_plan(
         str(map), str(inputs), str(out), results=results, batch=batch, top=top, cost=cost,
-        level=level,
+        level=level, vehicle=vehicle,
     )
 
 

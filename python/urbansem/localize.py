@@ -266,8 +266,9 @@ class Localizer:
     ``map`` is an :class:`urbansem.OsmMap`, the path of an ``.osm``/``.osm.pbf`` map or of a
     ``.uloc`` index (``urbansem localize index``). The options are the CLI's: ``sensor``
     (``auto``, ``terrestrial``, ``hdl64``, ``vlp16``, ``os1-64``, ``os1-128``), ``cost`` (the
-    ranking cost), ``grid_m``, ``yaw_step_deg`` and the extraction knobs (``None``: the sensor
-    profile's value).
+    ranking cost), ``grid_m``, ``yaw_step_deg``, the extraction knobs (``None``: the sensor
+    profile's value), ``level`` and ``vehicle`` (``auto``, ``car``: poses head along a street
+    near them, ``free``).
     """
 
     def __init__(
@@ -292,6 +293,7 @@ class Localizer:
         min_cell_count: Optional[int] = None,
         min_segment_m: Optional[float] = None,
         level: str = "off",
+        vehicle: str = "auto",
     ) -> None:
         """Prepares the map (the expensive part, done once)."""
         if not isinstance(map, OsmMap):
@@ -316,6 +318,7 @@ class Localizer:
             min_cell_count=min_cell_count,
             min_segment_m=min_segment_m,
             level=level,
+            vehicle=vehicle,
         )
 
     def localize(self, points: Any, *, top: int = 10, name: str = "<array>") -> LocalizeResult:

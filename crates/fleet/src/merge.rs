@@ -110,8 +110,9 @@ pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
     for e in &extracted {
         let searches = by_scan.get(&e.scan).unwrap_or(&empty);
         let segments = e.segments();
-        let mut result = finish_tiled(&manifest, searches, &segments, &options, &place_of);
         let ex = e.scan_segments();
+        let along = options.vehicle.along_streets(ex.sensor.as_ref());
+        let mut result = finish_tiled(&manifest, searches, &segments, along, &options, &place_of);
         result.record_scan(&ex, e.points);
         scans.push(TrackRow::new(
             frame_map,

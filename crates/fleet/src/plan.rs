@@ -4,7 +4,7 @@
 use crate::{invalid, io_err, Result};
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
-use localize::sensor::SensorChoice;
+use localize::sensor::{SensorChoice, Vehicle};
 use localize::tiles::{FileRef, Manifest};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -45,6 +45,10 @@ pub struct JobOptions {
     /// Levelling of tilted scans by their walls (`off` or `auto`, as `localize --level`).
     #[serde(default = "default_level")]
     pub level: String,
+    /// What carries the sensor (`auto`, `car`, `free`, as `localize --vehicle`); plans
+    /// written before the option read as `free`, the behaviour they were made with.
+    #[serde(default = "vehicle_of_older_plans")]
+    pub vehicle: String,
 }
 
 fn default_caps() -> Vec<f64> {
@@ -53,6 +57,10 @@ fn default_caps() -> Vec<f64> {
 
 fn default_level() -> String {
     "off".into()
+}
+
+fn vehicle_of_older_plans() -> String {
+    Vehicle::Free.name().into()
 }
 
 impl Default for JobOptions {
@@ -64,6 +72,7 @@ impl Default for JobOptions {
             yaw_step_deg: LocalizeOptions::default().search.yaw_step_deg,
             minimum_caps_m: default_caps(),
             level: default_level(),
+            vehicle: Vehicle::Auto.name().into(),
         }
     }
 }
@@ -90,6 +99,15 @@ impl JobOptions {
         };
         o.level = localize::level::options_named(&self.level)
             .map_err(|e| invalid(plan, format!("unknown level {:?}: {e}", self.level)))?;
+        o.vehicle = Vehicle::from_name(&self.vehicle).ok_or_else(|| {
+            invalid(
+                plan,
+                format!(
+                    "unknown vehicle {:?}: expected auto, car or free",
+                    self.vehicle
+                ),
+            )
+        })?;
         Ok(o)
     }
 }
@@ -441,5 +459,33 @@ mod tests {
         v.as_object_mut().unwrap().remove("level");
         let back: JobOptions = serde_json::from_value(v).unwrap();
         assert_eq!(back.level, "off");
+    }
+
+    #[test]
+    fn the_vehicle_option_reaches_the_localizer_and_older_plans_stay_free() {
+        let plan = Path::new("plan.json");
+        let o = JobOptions::default().localize_options(0.5, plan).unwrap();
+        assert_eq!(o.vehicle, Vehicle::Auto);
+        let car = JobOptions {
+            vehicle: "car".into(),
+            ..JobOptions::default()
+        };
+        assert_eq!(
+            car.localize_options(0.5, plan).unwrap().vehicle,
+            Vehicle::Car
+        );
+        let bad = JobOptions {
+            vehicle: "bicycle".into(),
+            ..JobOptions::default()
+        };
+        let err = bad.localize_options(0.5, plan).unwrap_err().to_string();
+        assert!(
+            err.contains("plan.json") && err.contains("bicycle"),
+            "{err}"
+        );
+        let mut v = serde_json::to_value(JobOptions::default()).unwrap();
+        v.as_object_mut().unwrap().remove("vehicle");
+        let back: JobOptions = serde_json::from_value(v).unwrap();
+        assert_eq!(back.vehicle, "free");
     }
 }

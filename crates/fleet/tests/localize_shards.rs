@@ -32,7 +32,7 @@ fn single_process(manifest: &Path, inputs: &[PathBuf], options: &JobOptions) -> 
         .map(|p| {
             let cloud = read_cloud(p).unwrap();
             let e = scan_segments(&o, &cloud.positions).unwrap();
-            let mut t = localize_tiled(manifest, &e.segments, &o, None).unwrap();
+            let mut t = localize_tiled(manifest, &e, &o, None).unwrap();
             t.result.record_extraction(&e);
             let frame = read_crop(&resolve(manifest, &m.tiles[0].crop)).unwrap();
             let name = p.file_name().unwrap().to_string_lossy().into_owned();

@@ -14,7 +14,7 @@
 
 use geodata::osm::index::MapIndex;
 use geodata::osm::OsmMap;
-use localize::candidates::{build_template, filter, pose_cost, search, suppress, Template};
+use localize::candidates::{build_template, filter, pose_cost, suppress, StreetFilter, Template};
 use localize::eval::{Accuracy, SimDataset};
 use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::segments::extract_segments;
@@ -150,14 +150,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 build_template(&segments, yaw, &localizer.dt, localizer.pyramid.top())
             })
             .collect();
-        let (raw, _) = search(
-            &localizer.dt,
-            &localizer.pyramid,
-            &templates,
-            localizer.domain,
-            localizer.feasible.as_ref(),
-            o.search.keep_factor,
-        );
+        let (raw, _) = localizer.search_raw(&templates);
         let min = raw.first().map_or(0, |p| p.cost);
         // Best pose near the truth (exhaustive within 4 m and 0.2 rad).
         let (ti, tj) = localizer.dt.cell_of([truth.x, truth.y]);
@@ -227,7 +220,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (kept, counts) = filter(
             sup.clone(),
             |_| (&index, has_streets),
-            o.search.street_distance_m,
+            StreetFilter {
+                distance_m: o.search.street_distance_m,
+                along_rad: o
+                    .vehicle
+                    .along_streets(r.sensor.as_ref())
+                    .then(|| o.search.along_street_deg.to_radians()),
+            },
         );
         let kept_near = kept.iter().filter(|c| acc.accepts(&c.pose, &truth)).count();
         let truth_in_building = index.building_at([truth.x, truth.y]).is_some();

@@ -34,14 +34,14 @@ fn main() {
     for s in &scans {
         let e = whole.scan_segments(&s.points).unwrap();
         let t = Instant::now();
-        let a = whole.localize_segments(&e.segments);
+        let a = whole.localize_scan(&e);
         eprintln!(
             "whole {:.2}s raw {}",
             t.elapsed().as_secs_f64(),
             a.raw_poses
         );
         let t = Instant::now();
-        let b = localize_tiled(&manifest_path, &e.segments, &options, None).unwrap();
+        let b = localize_tiled(&manifest_path, &e, &options, None).unwrap();
         eprintln!(
             "tiled {:.2}s raw {} same {} exact {}",
             t.elapsed().as_secs_f64(),

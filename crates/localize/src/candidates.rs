@@ -17,6 +17,7 @@ pub use crate::chamfer::Domain;
 use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
 use crate::feasible::FeasibleMask;
 use crate::{angle_diff, Pose2, Segment};
+use geodata::osm::geometry::point_segment_distance;
 use geodata::osm::index::MapIndex;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -39,6 +40,10 @@ pub struct SearchOptions {
     pub nms_yaw_rad: f64,
     /// Candidates farther than this from every street segment are dropped, metres.
     pub street_distance_m: f64,
+    /// For a scan from a car ([`crate::sensor::Vehicle`]): candidates heading more than this
+    /// from the direction (either way) of every street segment within `street_distance_m`
+    /// are dropped, degrees.
+    pub along_street_deg: f64,
     /// Most raw poses kept (the cheapest); 0: no limit.
     pub max_raw_poses: usize,
     /// Search only feasible poses (outside buildings, near streets; see
@@ -57,6 +62,7 @@ impl Default for SearchOptions {
             nms_radius_m: 2.0,
             nms_yaw_rad: 10f64.to_radians(),
             street_distance_m: 12.0,
+            along_street_deg: 20.0,
             max_raw_poses: 2_000_000,
             feasible_only: true,
         }
@@ -684,15 +690,85 @@ pub struct FilterCounts {
     pub inside_building: usize,
     /// Too far from every street segment.
     pub far_from_street: usize,
+    /// Heading across every street near it (scans from a car only).
+    pub across_streets: usize,
 }
 
-/// Drops candidates inside a building or farther than `street_distance_m` from every street
-/// segment (skipped when the map has no streets); `place` gives the spatial index of the
-/// map around a position and whether that map has streets.
+/// Whether a pose at `p` heading `yaw_rad` runs along (either way, within `max_rad`) a
+/// street segment within `radius_m` of it, or lies within `radius_m` of a turn of the
+/// network (a node where two street segments meet at more than `max_rad`: a car turning
+/// there heads anywhere between them).
+pub fn along_a_street(
+    index: &MapIndex<'_>,
+    p: [f64; 2],
+    yaw_rad: f64,
+    radius_m: f64,
+    max_rad: f64,
+) -> bool {
+    let segments = &index.map().streets.segments;
+    let near: Vec<&geodata::osm::model::StreetSegment> = index
+        .segments_in_box(
+            [p[0] - radius_m, p[1] - radius_m],
+            [p[0] + radius_m, p[1] + radius_m],
+        )
+        .into_iter()
+        .filter_map(|i| segments.get(i))
+        .collect();
+    let along = near.iter().any(|s| {
+        axis_angle(yaw_rad, direction_of(s)) <= max_rad
+            && point_segment_distance(p, s.a, s.b) <= radius_m
+    });
+    along
+        || near.iter().enumerate().any(|(k, s)| {
+            near[k + 1..].iter().any(|t| {
+                turn_between(s, t).is_some_and(|node| {
+                    (node[0] - p[0]).hypot(node[1] - p[1]) <= radius_m
+                        && axis_angle(direction_of(s), direction_of(t)) > max_rad
+                })
+            })
+        })
+}
+
+/// Direction of a street segment, radians.
+fn direction_of(s: &geodata::osm::model::StreetSegment) -> f64 {
+    (s.b[1] - s.a[1]).atan2(s.b[0] - s.a[0])
+}
+
+/// Angle between two directions taken either way, in [0, π/2].
+fn axis_angle(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::PI);
+    d.min(std::f64::consts::PI - d)
+}
+
+/// The node two street segments share (by OSM node id), if any.
+fn turn_between(
+    s: &geodata::osm::model::StreetSegment,
+    t: &geodata::osm::model::StreetSegment,
+) -> Option<[f64; 2]> {
+    [(s.from_node, s.a), (s.to_node, s.b)]
+        .into_iter()
+        .find(|&(id, _)| id == t.from_node || id == t.to_node)
+        .map(|(_, at)| at)
+}
+
+/// The street filters of [`filter`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreetFilter {
+    /// Candidates farther than this from every street segment are dropped, metres.
+    pub distance_m: f64,
+    /// When set, candidates heading more than this (radians, either way) from every street
+    /// segment within `distance_m` are dropped too (a car drives along a street).
+    pub along_rad: Option<f64>,
+}
+
+/// Drops candidates inside a building, farther than the street distance from every street
+/// segment, or (when asked) heading across every street near them; the street filters are
+/// skipped when the map has no streets. `place` gives the spatial index of the map around a
+/// position and whether that map has streets.
 pub fn filter<'i>(
     candidates: Vec<SearchCandidate>,
     place: impl Fn([f64; 2]) -> (&'i MapIndex<'i>, bool),
-    street_distance_m: f64,
+    streets: StreetFilter,
 ) -> (Vec<SearchCandidate>, FilterCounts) {
     let mut counts = FilterCounts::default();
     let kept = candidates
@@ -704,13 +780,21 @@ pub fn filter<'i>(
                 counts.inside_building += 1;
                 return false;
             }
-            if has_streets
-                && index
-                    .nearest_segment(p)
-                    .is_none_or(|(_, d)| d > street_distance_m)
+            if !has_streets {
+                return true;
+            }
+            if index
+                .nearest_segment(p)
+                .is_none_or(|(_, d)| d > streets.distance_m)
             {
                 counts.far_from_street += 1;
                 return false;
+            }
+            if let Some(max_rad) = streets.along_rad {
+                if !along_a_street(index, p, c.pose.yaw_rad, streets.distance_m, max_rad) {
+                    counts.across_streets += 1;
+                    return false;
+                }
             }
             true
         })
@@ -735,6 +819,56 @@ mod tests {
                 Segment::new(a, [a[0] + l * ang.cos(), a[1] + l * ang.sin()])
             })
             .collect()
+    }
+
+    #[test]
+    fn a_pose_runs_along_a_street_near_it_either_way() {
+        use geodata::osm::model::{OsmMap, StreetNetwork, StreetSegment};
+        let seg = |from: i64, a: [f64; 2], b: [f64; 2]| StreetSegment {
+            way_index: 0,
+            index_in_way: 0,
+            from_node: from,
+            to_node: from + 1,
+            a,
+            b,
+            length_m: (b[0] - a[0]).hypot(b[1] - a[1]),
+            highway: "residential".into(),
+        };
+        // An L: a street along x, one along y from its end.
+        let map = OsmMap {
+            frame: geodata::projection::LocalFrame::new(48.15, 11.57).unwrap(),
+            bbox_lonlat: [0.0; 4],
+            buildings: Vec::new(),
+            highways: Vec::new(),
+            streets: StreetNetwork {
+                segments: vec![
+                    seg(1, [0.0, 0.0], [100.0, 0.0]),
+                    seg(2, [100.0, 0.0], [100.0, 80.0]),
+                ],
+                ..StreetNetwork::default()
+            },
+            stats: Default::default(),
+        };
+        let index = MapIndex::new(&map);
+        let max = 20f64.to_radians();
+        let along = |x: f64, y: f64, yaw_deg: f64| {
+            along_a_street(&index, [x, y], yaw_deg.to_radians(), 12.0, max)
+        };
+        assert!(along(50.0, 5.0, 10.0));
+        assert!(along(50.0, 5.0, 190.0));
+        assert!(along(50.0, -5.0, -170.0));
+        assert!(!along(50.0, 5.0, 30.0));
+        assert!(!along(50.0, 5.0, 90.0));
+        // Near the corner both directions are streets near the pose, and a car turning
+        // there heads anywhere between them.
+        assert!(along(95.0, 5.0, 90.0));
+        assert!(along(95.0, 5.0, 0.0));
+        assert!(along(95.0, 5.0, 45.0));
+        // Beyond the turn's radius the headings are the street's again.
+        assert!(along(100.0 - 13.0, 5.0, 0.0));
+        assert!(!along(100.0 - 13.0, 5.0, 45.0));
+        // Beyond the radius of every street: nothing to run along.
+        assert!(!along(50.0, 13.0, 0.0));
     }
 
     fn check_equal_to_exhaustive(seed: u64, levels: u32, factor: (u64, u64)) {

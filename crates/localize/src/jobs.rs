@@ -242,12 +242,7 @@ fn localize_scan_tiled(
     let t0 = Instant::now();
     let extracted = crate::pipeline::scan_segments(&options, &cloud.positions)
         .context_with(|| format!("localizing {name}"))?;
-    let tiled = crate::tiles::localize_tiled(
-        manifest_path,
-        &extracted.segments,
-        &options,
-        only.as_deref(),
-    )?;
+    let tiled = crate::tiles::localize_tiled(manifest_path, &extracted, &options, only.as_deref())?;
     let mut result = tiled.result;
     result.record_scan(&extracted, cloud.len());
     result.seconds.total = t0.elapsed().as_secs_f64() - tiled.load_seconds;

@@ -13,7 +13,7 @@
 
 use crate::candidates::{
     build_template, filter, search, suppress, Domain, FilterCounts, RawPose, SearchOptions,
-    SearchStats, Template,
+    SearchStats, StreetFilter, Template,
 };
 use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
@@ -22,7 +22,7 @@ use crate::level::{level, LevelOptions, Levelling};
 use crate::rank::{confidence, costs, rank_order, CostKind, CostOptions, Costs};
 use crate::refine::{refine_pose, RefineOptions};
 use crate::segments::{extract_segments, SegmentOptions};
-use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport};
+use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport, Vehicle};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::visibility::{visible_segments, EdgeGrid, VisibilityOptions};
 use crate::{LocalizeError, Pose2, Result, Segment, WithContext};
@@ -39,6 +39,8 @@ pub struct LocalizeOptions {
     pub sensor: SensorChoice,
     /// User values over the sensor's extraction options.
     pub overrides: ExtractOverrides,
+    /// What carries the sensor: a car's poses head along a street.
+    pub vehicle: Vehicle,
     /// Levelling of a tilted scan by its walls before the extraction (`None`, the default:
     /// the scan is taken as levelled).
     pub level: Option<LevelOptions>,
@@ -80,6 +82,7 @@ impl Default for LocalizeOptions {
         LocalizeOptions {
             sensor: SensorChoice::Auto,
             overrides: ExtractOverrides::default(),
+            vehicle: Vehicle::Auto,
             level: None,
             surfaces: SurfaceOptions::default(),
             segments: SegmentOptions::default(),
@@ -324,15 +327,29 @@ impl<'m> Localizer<'m> {
     pub fn localize_points(&self, points: &[[f64; 3]]) -> Result<Localization> {
         let t0 = Instant::now();
         let extracted = self.scan_segments(points)?;
-        let mut out = self.localize_segments(&extracted.segments);
+        let mut out = self.localize_scan(&extracted);
         out.record_scan(&extracted, points.len());
         out.seconds.total = t0.elapsed().as_secs_f64();
         Ok(out)
     }
 
-    /// Localizes scan segments given in the sensor frame.
+    /// Localizes scan segments given in the sensor frame (no sensor known: the pose prior
+    /// of [`Vehicle::Auto`] is off).
     pub fn localize_segments(&self, segments: &[Segment]) -> Localization {
         self.localize_segments_seen_from(segments, &[[0.0, 0.0]])
+    }
+
+    /// Localizes scan segments at any heading, whatever the vehicle (track mode's own search
+    /// of each scan).
+    pub(crate) fn localize_free(&self, segments: &[Segment]) -> Localization {
+        self.localize_inner(segments, &[[0.0, 0.0]], false)
+    }
+
+    /// Localizes the segments of an extracted scan, with the pose prior of the sensor it was
+    /// processed as (the extraction itself is not recorded in the result).
+    pub fn localize_scan(&self, scan: &ScanSegments) -> Localization {
+        let along = self.options.vehicle.along_streets(scan.sensor.as_ref());
+        self.localize_inner(&scan.segments, &[[0.0, 0.0]], along)
     }
 
     /// Localizes segments gathered from several sensor positions (`views`, in the segments'
@@ -341,6 +358,17 @@ impl<'m> Localizer<'m> {
         &self,
         segments: &[Segment],
         views: &[[f64; 2]],
+    ) -> Localization {
+        let along = self.options.vehicle.along_streets(None);
+        self.localize_inner(segments, views, along)
+    }
+
+    /// The search and finishing stages; `along_streets`: poses must head along a street.
+    fn localize_inner(
+        &self,
+        segments: &[Segment],
+        views: &[[f64; 2]],
+        along_streets: bool,
     ) -> Localization {
         let t0 = Instant::now();
         let mut out = Localization::empty(self.options.rank_by);
@@ -368,6 +396,7 @@ impl<'m> Localizer<'m> {
                 segments,
                 views,
                 templates: &templates,
+                along_streets,
             },
             raw,
             &self.dt,
@@ -560,6 +589,8 @@ pub(crate) struct Scan<'a> {
     pub views: &'a [[f64; 2]],
     /// Its templates, one per yaw.
     pub templates: &'a [Template],
+    /// Whether its poses must head along a street (a car's scan).
+    pub along_streets: bool,
 }
 
 /// The stages after the search: raw poses (sorted, in the cells of `lattice`, within the
@@ -577,6 +608,7 @@ pub(crate) fn finish<'p>(
         segments,
         views,
         templates,
+        along_streets,
     } = scan;
     if o.search.max_raw_poses > 0 {
         raw.truncate(o.search.max_raw_poses);
@@ -597,7 +629,10 @@ pub(crate) fn finish<'p>(
             let pl = place(p);
             (pl.map_index(), pl.has_streets())
         },
-        o.search.street_distance_m,
+        StreetFilter {
+            distance_m: o.search.street_distance_m,
+            along_rad: along_streets.then(|| o.search.along_street_deg.to_radians()),
+        },
     );
     out.filtered = counts;
     out.seconds.filter = t.elapsed().as_secs_f64();
@@ -647,12 +682,13 @@ pub(crate) fn finish<'p>(
         }
     } else {
         out.message = Some(format!(
-            "no candidate pose survived ({} raw poses, {} after suppression, {} inside buildings, {} farther than {} m from streets); the scan is probably outside the map",
+            "no candidate pose survived ({} raw poses, {} after suppression, {} inside buildings, {} farther than {} m from streets, {} heading across the streets near them); the scan is probably outside the map",
             out.raw_poses,
             out.after_suppression,
             counts.inside_building,
             counts.far_from_street,
-            o.search.street_distance_m
+            o.search.street_distance_m,
+            counts.across_streets
         ));
     }
     out.candidates = cands;
@@ -661,7 +697,7 @@ pub(crate) fn finish<'p>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use geodata::osm::model::{Building, ElementKind, OsmStats, StreetNetwork};
+    use geodata::osm::model::{Building, ElementKind, OsmStats, StreetNetwork, StreetSegment};
     use geodata::projection::LocalFrame;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -765,6 +801,82 @@ mod tests {
         assert!(best.pose.distance_to(&truth) < 0.3, "{best:?}");
         assert!(best.pose.yaw_error_to(&truth) < 0.01, "{best:?}");
         assert!(r.message.is_none());
+    }
+
+    /// Streets along x through the gaps between the rows of [`random_city`].
+    fn with_streets_along_x(mut map: OsmMap) -> OsmMap {
+        map.streets.segments = (0..5)
+            .map(|k| {
+                let y = 20.0 + 40.0 * k as f64;
+                StreetSegment {
+                    way_index: k,
+                    index_in_way: 0,
+                    from_node: 2 * k as i64,
+                    to_node: 2 * k as i64 + 1,
+                    a: [-40.0, y],
+                    b: [200.0, y],
+                    length_m: 240.0,
+                    highway: "residential".into(),
+                }
+            })
+            .collect();
+        map
+    }
+
+    #[test]
+    fn a_car_heads_along_the_street_it_is_on() {
+        let map = with_streets_along_x(random_city(4));
+        let truth = Pose2 {
+            x: 61.0,
+            y: 21.0,
+            yaw_rad: 0.05,
+        };
+        let run = |vehicle: Vehicle, one_wall: bool| {
+            let o = LocalizeOptions {
+                vehicle,
+                max_accept_cost_m: f64::INFINITY,
+                ..LocalizeOptions::default()
+            };
+            let localizer = Localizer::new(&map, o).unwrap();
+            assert!(localizer.index.building_at([truth.x, truth.y]).is_none());
+            let scan = if one_wall {
+                // An 8 m wall and a fence no map edge explains: the wall fits many places
+                // and headings about as well.
+                wall_points(&[
+                    Segment::new([4.0, 6.0], [-4.0, 6.0]),
+                    Segment::new([2.0, -3.0], [2.0, -7.0]),
+                ])
+            } else {
+                scan_from(&localizer, truth)
+            };
+            localizer.localize_points(&scan).unwrap()
+        };
+        // The synthetic walls are detected as a terrestrial scanner: `auto` is free.
+        assert_eq!(
+            run(Vehicle::Auto, true).candidates,
+            run(Vehicle::Free, true).candidates
+        );
+        let free = run(Vehicle::Free, true);
+        let car = run(Vehicle::Car, true);
+        assert_eq!(free.filtered.across_streets, 0);
+        assert!(car.filtered.across_streets > 0, "{:?}", car.filtered);
+        let along = |yaw: f64| {
+            let t = yaw.rem_euclid(std::f64::consts::PI);
+            t.min(std::f64::consts::PI - t) <= 20f64.to_radians() + 1e-9
+        };
+        // Before refinement every candidate of the car heads along a street (all run along
+        // x); the free search keeps others.
+        assert!(car
+            .candidates
+            .iter()
+            .filter(|c| !c.refined)
+            .all(|c| along(c.pose.yaw_rad)));
+        assert!(free.candidates.iter().any(|c| !along(c.pose.yaw_rad)));
+        // With the whole scene the car finds its pose.
+        let car = run(Vehicle::Car, false);
+        let best = car.candidates.first().expect("a candidate");
+        assert!(best.pose.distance_to(&truth) < 0.3, "{best:?}");
+        assert!(best.pose.yaw_error_to(&truth) < 0.01, "{best:?}");
     }
 
     #[test]

@@ -215,6 +215,50 @@ pub fn extraction_options(g: &SensorGeometry) -> (SurfaceOptions, SegmentOptions
     (surfaces, segments)
 }
 
+/// What carries the sensor, for the pose prior of the search.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Vehicle {
+    /// A car when the scan's sensor profile (named or detected) is a car-mounted one
+    /// ([`SensorKind::on_car`]), else free.
+    #[default]
+    Auto,
+    /// A car: it stands on a street and heads along it.
+    Car,
+    /// Anything else (a person, a tripod, a robot on the sidewalk): any heading.
+    Free,
+}
+
+impl Vehicle {
+    /// Every choice, in CLI order.
+    pub const ALL: [Vehicle; 3] = [Vehicle::Auto, Vehicle::Car, Vehicle::Free];
+
+    /// The CLI name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Vehicle::Auto => "auto",
+            Vehicle::Car => "car",
+            Vehicle::Free => "free",
+        }
+    }
+
+    /// The choice of a CLI name.
+    pub fn from_name(name: &str) -> Option<Vehicle> {
+        Vehicle::ALL.into_iter().find(|v| v.name() == name)
+    }
+
+    /// Whether poses must head along a street, for a scan processed as `sensor` (`None`:
+    /// segments given directly, no sensor known).
+    pub fn along_streets(self, sensor: Option<&SensorReport>) -> bool {
+        match self {
+            Vehicle::Car => true,
+            Vehicle::Free => false,
+            Vehicle::Auto => sensor
+                .and_then(|s| SensorKind::from_name(s.profile))
+                .is_some_and(SensorKind::on_car),
+        }
+    }
+}
+
 /// How the extraction options of a scan are chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SensorChoice {
@@ -314,6 +358,26 @@ pub fn options_for_scan(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn auto_takes_a_car_mounted_profile_for_a_car() {
+        let report = |kind| Some(report_of(kind));
+        for kind in SensorKind::ALL {
+            assert_eq!(
+                Vehicle::Auto.along_streets(report(kind).as_ref()),
+                kind != SensorKind::Terrestrial,
+                "{kind:?}"
+            );
+            assert!(Vehicle::Car.along_streets(report(kind).as_ref()));
+            assert!(!Vehicle::Free.along_streets(report(kind).as_ref()));
+        }
+        assert!(!Vehicle::Auto.along_streets(None));
+        assert!(Vehicle::Car.along_streets(None));
+        for v in Vehicle::ALL {
+            assert_eq!(Vehicle::from_name(v.name()), Some(v));
+        }
+        assert_eq!(Vehicle::from_name("bicycle"), None);
+    }
 
     /// A spinning sensor `h` m above flat ground with `beams` rows spread over `vfov`, and a
     /// ring of walls 20 m away (60 m high, so that every upward beam hits).

@@ -34,7 +34,9 @@ use crate::chamfer::{bounding_box, map_edges, DtTensor};
 use crate::codec::index_err;
 pub use crate::crop::{read_crop, read_crop_from, write_crop};
 use crate::index::{PrepOptions, PreparedMap};
-use crate::pipeline::{finish, templates_on, Localization, LocalizeOptions, Place, Scan};
+use crate::pipeline::{
+    finish, templates_on, Localization, LocalizeOptions, Place, Scan, ScanSegments,
+};
 use crate::visibility::EdgeGrid;
 use crate::{LocalizeError, Result, Segment, WithContext};
 use geodata::osm::geometry::ring_bounds;
@@ -687,6 +689,7 @@ pub fn finish_tiled<'p>(
     manifest: &Manifest,
     searches: &[TileSearch],
     segments: &[Segment],
+    along_streets: bool,
     options: &LocalizeOptions,
     place_of: &(dyn Sync + Fn(usize) -> &'p dyn Place),
 ) -> Localization {
@@ -712,6 +715,7 @@ pub fn finish_tiled<'p>(
             segments,
             views: &[[0.0, 0.0]],
             templates: &templates,
+            along_streets,
         },
         raw,
         &lattice,
@@ -866,6 +870,7 @@ pub struct TiledBatch {
 pub fn localize_tiled_batch(
     manifest_path: &Path,
     scans: &[Vec<Segment>],
+    along_streets: &[bool],
     options: &LocalizeOptions,
     caps_m: &[f64],
     only: Option<&[usize]>,
@@ -880,6 +885,13 @@ pub fn localize_tiled_batch(
             name: "minimum caps",
             value,
             expected: "increasing positive d_DCM values in metres",
+        });
+    }
+    if along_streets.len() != scans.len() {
+        return Err(LocalizeError::InvalidOption {
+            name: "along streets",
+            value: along_streets.len() as f64,
+            expected: "one flag per scan",
         });
     }
     let manifest = Manifest::read(manifest_path)?;
@@ -1002,7 +1014,14 @@ pub fn localize_tiled_batch(
     let place_of = |k: usize| place_in(&places, k);
     let mut results = Vec::with_capacity(n);
     for s in 0..n {
-        let mut r = finish_tiled(&manifest, &searches[s], &scans[s], options, &place_of);
+        let mut r = finish_tiled(
+            &manifest,
+            &searches[s],
+            &scans[s],
+            along_streets[s],
+            options,
+            &place_of,
+        );
         // The poses round's statistics are in `r.search`; add the minimum rounds'.
         r.search.boxes += stats[s].boxes;
         r.search.leaves += stats[s].leaves;
@@ -1027,13 +1046,14 @@ pub fn localize_tiled_batch(
 /// `only`), [`localize_tiled_batch`] for one scan with the default caps.
 pub fn localize_tiled(
     manifest_path: &Path,
-    segments: &[Segment],
+    scan: &ScanSegments,
     options: &LocalizeOptions,
     only: Option<&[usize]>,
 ) -> Result<TiledLocalization> {
     let batch = localize_tiled_batch(
         manifest_path,
-        &[segments.to_vec()],
+        std::slice::from_ref(&scan.segments),
+        &[options.vehicle.along_streets(scan.sensor.as_ref())],
         options,
         &MINIMUM_CAPS_M,
         only,

@@ -60,6 +60,7 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
     let batch = localize_tiled_batch(
         &manifest_path,
         &segments,
+        &vec![false; segments.len()],
         &options,
         &MINIMUM_CAPS_M,
         None,
@@ -73,6 +74,7 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
     let other = localize_tiled_batch(
         &manifest_path,
         &segments[..2],
+        &[false, false],
         &options,
         &caps,
         None,
@@ -85,10 +87,18 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
     }
     // Caps must increase and be positive.
     for caps in [&[0.5, 0.4][..], &[0.0], &[f64::NAN]] {
-        let e = localize_tiled_batch(&manifest_path, &segments, &options, caps, None, &mut |_| {})
-            .err()
-            .unwrap()
-            .to_string();
+        let e = localize_tiled_batch(
+            &manifest_path,
+            &segments,
+            &vec![false; segments.len()],
+            &options,
+            caps,
+            None,
+            &mut |_| {},
+        )
+        .err()
+        .unwrap()
+        .to_string();
         assert!(e.contains("minimum caps"), "{e}");
     }
     let mut compared = 0;

@@ -22,7 +22,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// Plans a localization job over a tiled map and writes the plan (`urbansem shard plan`).
 #[pyfunction]
-#[pyo3(signature = (map, inputs, out, *, results = None, batch = 8, top = 5, cost = "symmetric", level = "off"))]
+#[pyo3(signature = (map, inputs, out, *, results = None, batch = 8, top = 5, cost = "symmetric", level = "off", vehicle = "auto"))]
 #[allow(clippy::too_many_arguments)]
 fn shard_plan<'py>(
     py: Python<'py>,
@@ -34,6 +34,7 @@ fn shard_plan<'py>(
     top: usize,
     cost: &str,
     level: &str,
+    vehicle: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     if batch == 0 {
         return Err(PyValueError::new_err(
@@ -42,11 +43,17 @@ fn shard_plan<'py>(
     }
     localize::level::options_named(level)
         .map_err(|e| PyValueError::new_err(format!("level {level:?}: {e}")))?;
+    if localize::sensor::Vehicle::from_name(vehicle).is_none() {
+        return Err(PyValueError::new_err(format!(
+            "vehicle {vehicle:?}: use auto, car or free"
+        )));
+    }
     let results = results.unwrap_or_else(|| out.with_extension("d"));
     let options = JobOptions {
         top,
         cost: cost.to_owned(),
         level: level.to_owned(),
+        vehicle: vehicle.to_owned(),
         ..JobOptions::default()
     };
     let plan = py

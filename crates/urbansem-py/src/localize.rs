@@ -185,7 +185,8 @@ impl PyLocalizer {
         yaw_step_deg = 0.5, clearance_m = None, voxel_m = None, max_range_m = None,
         min_range_m = None, min_z_m = None, max_z_m = None, ground_cell_m = None,
         column_radius_m = None, max_flatness = None, min_columns = None,
-        max_see_through = None, min_cell_count = None, min_segment_m = None, level = "off"))]
+        max_see_through = None, min_cell_count = None, min_segment_m = None, level = "off",
+        vehicle = "auto"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -208,7 +209,11 @@ impl PyLocalizer {
         min_cell_count: Option<u32>,
         min_segment_m: Option<f64>,
         level: &str,
+        vehicle: &str,
     ) -> PyResult<Self> {
+        let vehicle = localize::sensor::Vehicle::from_name(vehicle).ok_or_else(|| {
+            PyValueError::new_err(format!("vehicle = {vehicle:?}: use auto, car or free"))
+        })?;
         let level = localize::level::options_named(level)
             .map_err(|_| PyValueError::new_err(format!("level = {level:?}: use auto or off")))?;
         if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
@@ -240,6 +245,7 @@ impl PyLocalizer {
                 min_segment_m,
             )?,
             level,
+            vehicle,
             ..LocalizeOptions::default()
         };
         options.chamfer.grid_m = grid_m;

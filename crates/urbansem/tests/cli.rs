@@ -1842,6 +1842,31 @@ fn facade_map_and_scan_selection_from_the_command_line() {
         .map(|s| s["scan"].as_str().unwrap())
         .collect();
     assert_eq!(names, vec!["0000002000"], "{report}");
+    // The same scan alone: detected as an HDL-64, it is a car's (`--vehicle auto`), and
+    // candidates heading across every street near them are dropped; `free` keeps them.
+    let scan = format!("{kitti}/velodyne_points/0000002000.bin");
+    let one = |vehicle: &str| -> serde_json::Value {
+        serde_json::from_slice(&stdout_of(urbansem().args([
+            "localize",
+            "--map",
+            map_s,
+            "--scan",
+            &scan,
+            "--max-accept-cost-m",
+            "inf",
+            "--vehicle",
+            vehicle,
+            "--json",
+        ])))
+        .unwrap()
+    };
+    let (car, free) = (one("auto"), one("free"));
+    assert_eq!(car["sensor"]["profile"], "hdl64", "{car}");
+    assert!(
+        car["filtered"]["across_streets"].as_u64().unwrap() > 0,
+        "{car}"
+    );
+    assert_eq!(free["filtered"]["across_streets"], 0, "{free}");
     let fm = ["localize", "facade-map", "--dataset", kitti, "--out", map_s];
     let ev = ["localize", "eval", "--dataset", kitti, "--map", map_s];
     for (base, extra, needle) in [
@@ -1854,6 +1879,8 @@ fn facade_map_and_scan_selection_from_the_command_line() {
         (ev, &["--scan-every", "0"][..], "--scan-every"),
         (ev, &["--scan-offset", "1"][..], "--scan-every"),
         (ev, &["--max-accept-dcm-m", "NaN"][..], "--max-accept-dcm-m"),
+        (ev, &["--along-street-deg", "95"][..], "--along-street-deg"),
+        (ev, &["--vehicle", "bicycle"][..], "--vehicle"),
     ] {
         let args = [&base[..], extra].concat();
         let err = usage_error(&args);

@@ -77,6 +77,11 @@ impl<'m> MapIndex<'m> {
         self.buildings_containing(p).first().copied()
     }
 
+    /// The map the index covers.
+    pub fn map(&self) -> &'m OsmMap {
+        self.map
+    }
+
     /// The street segment nearest to the point and its distance in metres.
     pub fn nearest_segment(&self, p: [f64; 2]) -> Option<(usize, f64)> {
         self.segments

@@ -5,7 +5,7 @@
 //! draws Figs. 5.5/5.6.
 
 use super::{accurate_within, Accuracy};
-use crate::candidates::SearchStats;
+use crate::candidates::{FilterCounts, SearchStats};
 use crate::distractors::{DistractorOptions, DistractorSummary};
 use crate::index::MapSeconds;
 use crate::pipeline::{Localization, LocalizeOptions, Localizer, StageSeconds};
@@ -338,6 +338,8 @@ pub struct ScanRow {
     pub raw_poses: usize,
     /// Search statistics.
     pub search: SearchStats,
+    /// Candidates dropped by the filters, by reason.
+    pub filtered: FilterCounts,
     /// Candidates after filtering.
     pub candidates: usize,
     /// Confidence of the top candidate.
@@ -388,6 +390,7 @@ impl ScanRow {
             level: r.result.levelling,
             raw_poses: r.result.raw_poses,
             search: r.result.search,
+            filtered: r.result.filtered,
             candidates: r.result.candidates.len(),
             confidence: r.result.confidence,
             top1,

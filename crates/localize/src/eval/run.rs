@@ -354,9 +354,14 @@ pub fn run_eval_tiled(
     }
     let segments: Vec<Vec<crate::Segment>> =
         extracted.iter().map(|(e, _)| e.segments.clone()).collect();
+    let along: Vec<bool> = extracted
+        .iter()
+        .map(|(e, _)| job.options.vehicle.along_streets(e.sensor.as_ref()))
+        .collect();
     let batch = localize_tiled_batch(
         map_path,
         &segments,
+        &along,
         &job.options,
         &MINIMUM_CAPS_M,
         None,

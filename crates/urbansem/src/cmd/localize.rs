@@ -23,7 +23,7 @@ use localize::jobs::{
 };
 use localize::pipeline::LocalizeOptions;
 use localize::rank::CostKind;
-use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
+use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind, Vehicle};
 use localize::LocalizeError;
 use std::path::PathBuf;
 
@@ -238,6 +238,29 @@ impl SensorArg {
     }
 }
 
+/// What carries the sensor (`--vehicle`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum VehicleArg {
+    /// A car when the sensor profile is a car-mounted one.
+    #[default]
+    Auto,
+    /// A car: poses head along a street.
+    Car,
+    /// Any heading.
+    Free,
+}
+
+impl VehicleArg {
+    /// The library's choice.
+    pub fn vehicle(self) -> Vehicle {
+        match self {
+            VehicleArg::Auto => Vehicle::Auto,
+            VehicleArg::Car => Vehicle::Car,
+            VehicleArg::Free => Vehicle::Free,
+        }
+    }
+}
+
 /// How a scan is levelled before the extraction.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
 pub enum LevelArg {
@@ -298,6 +321,15 @@ pub struct ExtractArgs {
     /// and levels it when it leans 1–30° (`localize::level`); `off` takes it as levelled.
     #[arg(long, value_enum, default_value = "off")]
     pub level: LevelArg,
+    /// What carries the sensor: `car` keeps only poses heading along a street near them,
+    /// `free` any heading, `auto` a car when the scan's sensor profile (given or detected)
+    /// is a car-mounted one (every profile but `terrestrial`).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub vehicle: VehicleArg,
+    /// Largest angle between a car's heading and a street near it (either way), degrees
+    /// (default 20).
+    #[arg(long)]
+    pub along_street_deg: Option<f64>,
     /// Wall points must be this high above the local ground, metres (cars, people below).
     #[arg(long)]
     pub clearance_m: Option<f64>,
@@ -613,9 +645,15 @@ fn options(
             super::usage!("{name} {v}: expected a length of 0 or more metres (inf: never refuse)");
         }
     }
+    if let Some(d) = extract.along_street_deg {
+        if !(0.0..=90.0).contains(&d) {
+            super::usage!("--along-street-deg {d}: expected an angle in [0, 90] degrees");
+        }
+    }
     let mut o = LocalizeOptions {
         rank_by: cost,
         sensor: extract.sensor.choice(),
+        vehicle: extract.vehicle.vehicle(),
         overrides: extract.overrides()?,
         level: extract.level.options(),
         max_accept_cost_m: gate.max_accept_cost_m,
@@ -624,6 +662,9 @@ fn options(
     };
     o.chamfer.grid_m = grid_m;
     o.search.yaw_step_deg = yaw_step_deg;
+    if let Some(d) = extract.along_street_deg {
+        o.search.along_street_deg = d;
+    }
     Ok(o)
 }
 

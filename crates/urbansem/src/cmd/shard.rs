@@ -82,6 +82,9 @@ pub enum ShardCommand {
         /// Localization: levelling of tilted scans by their walls, as `localize --level`.
         #[arg(long, value_enum, default_value = "off")]
         level: super::localize::LevelArg,
+        /// Localization: what carries the sensor, as `localize --vehicle`.
+        #[arg(long, value_enum, default_value = "auto")]
+        vehicle: super::localize::VehicleArg,
         /// Localization: yaw step of the search, degrees.
         #[arg(long, default_value_t = 0.5)]
         yaw_step_deg: f64,
@@ -134,6 +137,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
             cost,
             sensor,
             level,
+            vehicle,
             yaw_step_deg,
             minimum_caps_m,
             json,
@@ -154,6 +158,7 @@ pub fn run(command: ShardCommand) -> anyhow::Result<()> {
                         yaw_step_deg,
                         minimum_caps_m,
                         level: level.name().into(),
+                        vehicle: vehicle.vehicle().name().into(),
                     };
                     let known = geodata::sensors::SensorKind::ALL.map(|k| k.name());
                     if options.sensor != "auto" && !known.contains(&options.sensor.as_str()) {
