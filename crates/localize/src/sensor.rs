@@ -215,11 +215,18 @@ pub fn extraction_options(g: &SensorGeometry) -> (SurfaceOptions, SegmentOptions
     (surfaces, segments)
 }
 
+/// The lowest beam of a car-mounted profile is above this (HDL-64E −24.8°, OS1-128 −22.5°,
+/// OS1-64 −16.6°, VLP-16 −15°), degrees: a scan seeing further down comes from a scanner
+/// that is not one of them (a terrestrial scanner in a street canyon can look like an HDL-64
+/// from above).
+pub const CAR_LOWEST_BEAM_DEG: f64 = -30.0;
+
 /// What carries the sensor, for the pose prior of the search.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Vehicle {
     /// A car when the scan's sensor profile (named or detected) is a car-mounted one
-    /// ([`SensorKind::on_car`]), else free.
+    /// ([`SensorKind::on_car`]) and, when detected, the scan sees no lower than such a sensor
+    /// does ([`CAR_LOWEST_BEAM_DEG`]), else free.
     #[default]
     Auto,
     /// A car: it stands on a street and heads along it.
@@ -252,9 +259,10 @@ impl Vehicle {
         match self {
             Vehicle::Car => true,
             Vehicle::Free => false,
-            Vehicle::Auto => sensor
-                .and_then(|s| SensorKind::from_name(s.profile))
-                .is_some_and(SensorKind::on_car),
+            Vehicle::Auto => sensor.is_some_and(|s| {
+                SensorKind::from_name(s.profile).is_some_and(SensorKind::on_car)
+                    && (!s.detected || s.geometry.vfov_deg[0] >= CAR_LOWEST_BEAM_DEG)
+            }),
         }
     }
 }
@@ -371,6 +379,26 @@ mod tests {
             assert!(Vehicle::Car.along_streets(report(kind).as_ref()));
             assert!(!Vehicle::Free.along_streets(report(kind).as_ref()));
         }
+        // A detected car profile whose scan sees down to −40° is a terrestrial scanner in a
+        // street canyon (the demo's first scan): free.
+        let canyon = SensorReport {
+            profile: "hdl64",
+            detected: true,
+            geometry: SensorGeometry {
+                mount_height_m: 1.8,
+                vfov_deg: [-40.0, 6.0],
+                beams: 67,
+            },
+        };
+        assert!(!Vehicle::Auto.along_streets(Some(&canyon)));
+        let kitti = SensorReport {
+            geometry: SensorGeometry {
+                vfov_deg: [-24.8, 2.0],
+                ..canyon.geometry
+            },
+            ..canyon
+        };
+        assert!(Vehicle::Auto.along_streets(Some(&kitti)));
         assert!(!Vehicle::Auto.along_streets(None));
         assert!(Vehicle::Car.along_streets(None));
         for v in Vehicle::ALL {
