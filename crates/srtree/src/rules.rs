@@ -199,6 +199,14 @@ impl Rule {
         self.tests.iter().all(|t| t.passes(raw))
     }
 
+    /// Whether every test but the `skip`-th passes.
+    fn fires_without(&self, skip: usize, raw: &[f64]) -> bool {
+        self.tests
+            .iter()
+            .enumerate()
+            .all(|(j, t)| j == skip || t.passes(raw))
+    }
+
     /// Grows a rule for the labels `y`, each of which was flipped with probability
     /// `noise_rate` (clamped to [0, 0.45]).
     pub fn learn(
@@ -260,12 +268,7 @@ fn prune(
             // [kept, removed] × [pairs, annotated positives]
             let mut counts = [[0usize; 2]; 2];
             for &p in pool {
-                let others = rule
-                    .tests
-                    .iter()
-                    .enumerate()
-                    .all(|(j, t)| j == i || t.passes(&raw[p]));
-                if others {
+                if rule.fires_without(i, &raw[p]) {
                     let side = usize::from(!rule.tests[i].passes(&raw[p]));
                     counts[side][0] += 1;
                     counts[side][1] += usize::from(y[p]);
@@ -292,7 +295,9 @@ fn prune(
     }
 }
 
-/// ln m! for m = 0..=n.
+/// ln m! for m = 0..=n, summed term by term: [`crate::dirichlet::ln_gamma`] (relative
+/// error < 1e-13) would be off by up to 4e-9 at ln 5 540! ≈ 4e4, the size of a city's
+/// training pairs, and the table is built once per rule.
 fn ln_factorials(n: usize) -> Vec<f64> {
     std::iter::once(0.0)
         .chain((1..=n).scan(0.0, |acc, k| {
@@ -484,12 +489,7 @@ fn grow(
             let others: Vec<usize> = pool
                 .iter()
                 .copied()
-                .filter(|&p| {
-                    rule.tests
-                        .iter()
-                        .enumerate()
-                        .all(|(j, t)| j == i || t.passes(&raw[p]))
-                })
+                .filter(|&p| rule.fires_without(i, &raw[p]))
                 .collect();
             let t = rule.tests[i];
             let candidate =
