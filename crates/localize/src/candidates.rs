@@ -16,7 +16,7 @@
 pub use crate::chamfer::Domain;
 use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
 use crate::feasible::FeasibleMask;
-use crate::{angle_diff, Pose2, Segment};
+use crate::{angle_diff, orientation_diff, Pose2, Segment};
 use geodata::osm::geometry::point_segment_distance;
 use geodata::osm::index::MapIndex;
 use rayon::prelude::*;
@@ -715,7 +715,7 @@ pub fn along_a_street(
         .filter_map(|i| segments.get(i))
         .collect();
     let along = near.iter().any(|s| {
-        axis_angle(yaw_rad, direction_of(s)) <= max_rad
+        orientation_diff(yaw_rad, direction_of(s)) <= max_rad
             && point_segment_distance(p, s.a, s.b) <= radius_m
     });
     along
@@ -723,7 +723,7 @@ pub fn along_a_street(
             near[k + 1..].iter().any(|t| {
                 turn_between(s, t).is_some_and(|node| {
                     (node[0] - p[0]).hypot(node[1] - p[1]) <= radius_m
-                        && axis_angle(direction_of(s), direction_of(t)) > max_rad
+                        && orientation_diff(direction_of(s), direction_of(t)) > max_rad
                 })
             })
         })
@@ -732,12 +732,6 @@ pub fn along_a_street(
 /// Direction of a street segment, radians.
 fn direction_of(s: &geodata::osm::model::StreetSegment) -> f64 {
     (s.b[1] - s.a[1]).atan2(s.b[0] - s.a[0])
-}
-
-/// Angle between two directions taken either way, in [0, π/2].
-fn axis_angle(a: f64, b: f64) -> f64 {
-    let d = (a - b).rem_euclid(std::f64::consts::PI);
-    d.min(std::f64::consts::PI - d)
 }
 
 /// The node two street segments share (by OSM node id), if any.
