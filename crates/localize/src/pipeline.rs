@@ -12,8 +12,8 @@
 //! ```
 
 use crate::candidates::{
-    build_template, filter, search, suppress, Domain, FilterCounts, RawPose, SearchOptions,
-    SearchStats, StreetFilter, Template,
+    build_template, filter, search_capped, suppress, Cap, Domain, FilterCounts, RawPose,
+    SearchOptions, SearchStats, StreetFilter, Template,
 };
 use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
@@ -408,16 +408,22 @@ impl<'m> Localizer<'m> {
 
     /// Every pose of this map's domain (feasible ones only when the search is restricted)
     /// whose cost is within the factor of the minimum over them, sorted, in this tensor's
-    /// cells ([`search`]).
+    /// cells, the first `max_raw_poses` of them ([`search_capped`]).
     pub fn search_raw(&self, templates: &[Template]) -> (Vec<RawPose>, SearchStats) {
-        search(
+        let cap = Cap {
+            count: self.options.search.max_raw_poses,
+            ..Cap::NONE
+        };
+        let (raw, stats, _) = search_capped(
             &self.dt,
             &self.pyramid,
             templates,
             self.domain,
             self.feasible.as_ref(),
             self.options.search.keep_factor,
-        )
+            cap,
+        );
+        (raw, stats)
     }
 
     /// Forward, reverse and symmetric costs of the scan segments at a pose.

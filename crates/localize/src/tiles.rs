@@ -588,6 +588,10 @@ pub fn search_tile(
         });
     }
     let templates = templates_on(segments, &p.dt, p.pyramid.top(), options);
+    let cap = Cap {
+        count: options.search.max_raw_poses,
+        ..cap
+    };
     let (raw, stats, minimum) = search_capped(
         &p.dt,
         &p.pyramid,
@@ -597,10 +601,6 @@ pub fn search_tile(
         options.search.keep_factor,
         cap,
     );
-    let mut raw = raw;
-    if options.search.max_raw_poses > 0 {
-        raw.truncate(options.search.max_raw_poses);
-    }
     let [oi, oj] = p.dt.offset;
     Ok(TileSearch {
         tile: index,
@@ -942,6 +942,7 @@ pub fn localize_tiled_batch(
                     let cap = Cap {
                         cost: f.map_or(c, |f| f.min(c)),
                         minimum_only: true,
+                        count: 0,
                     };
                     search_tile(&tile, k, &scans[s], options, cap)
                 })
@@ -974,6 +975,7 @@ pub fn localize_tiled_batch(
                 let cap = Cap {
                     cost: limit_of(b, options.search.keep_factor),
                     minimum_only: false,
+                    count: 0,
                 };
                 (s, cap)
             })

@@ -402,7 +402,7 @@ fn localize_index_gives_the_same_results_as_the_map() {
     );
     let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     assert!(v["bytes"].as_u64().unwrap() > 1_000_000, "{v}");
-    let eval = |m: &std::path::Path| {
+    let eval_with = |m: &std::path::Path, extra: &[&str]| {
         let stdout = stdout_of(
             urbansem()
                 .args([
@@ -413,16 +413,29 @@ fn localize_index_gives_the_same_results_as_the_map() {
                     "--limit",
                     "2",
                     "--json",
-                    "--map",
                 ])
+                .args(extra)
+                .arg("--map")
                 .arg(m),
         );
         let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
         v["per_scan"].clone()
     };
+    let eval = |m: &std::path::Path| eval_with(m, &[]);
     let a = eval(std::path::Path::new(&map));
     let b = eval(&index);
     assert!(a.as_array().is_some_and(|s| s.len() == 2), "{a}");
+    // `--max-raw-poses` keeps that many poses from the search.
+    let raw = |v: &serde_json::Value| -> Vec<u64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["raw_poses"].as_u64().unwrap())
+            .collect()
+    };
+    assert!(raw(&a).iter().all(|&n| n > 3), "{a}");
+    let capped = eval_with(&index, &["--max-raw-poses", "3"]);
+    assert_eq!(raw(&capped), [3, 3], "{capped}");
     let strip = |v: &serde_json::Value| {
         v.as_array()
             .unwrap()

@@ -299,6 +299,10 @@ pub struct GateArgs {
     /// --max-accept-cost-m); `inf` never refuses.
     #[arg(long, default_value_t = LocalizeOptions::default().max_accept_dcm_m)]
     pub max_accept_dcm_m: f64,
+    /// Most poses kept from the search, the cheapest (0: every pose within the keep factor
+    /// of the minimum).
+    #[arg(long, default_value_t = LocalizeOptions::default().search.max_raw_poses)]
+    pub max_raw_poses: usize,
 }
 
 impl Default for GateArgs {
@@ -307,6 +311,7 @@ impl Default for GateArgs {
         GateArgs {
             max_accept_cost_m: o.max_accept_cost_m,
             max_accept_dcm_m: o.max_accept_dcm_m,
+            max_raw_poses: o.search.max_raw_poses,
         }
     }
 }
@@ -662,6 +667,7 @@ fn options(
     };
     o.chamfer.grid_m = grid_m;
     o.search.yaw_step_deg = yaw_step_deg;
+    o.search.max_raw_poses = gate.max_raw_poses;
     if let Some(d) = extract.along_street_deg {
         o.search.along_street_deg = d;
     }
