@@ -96,6 +96,16 @@ def test_candidates_equal_the_cli_json(cli, map_path, scans, results):
     assert got.cost == "symmetric" and got.best.cost == got.best.symmetric
 
 
+def test_max_raw_poses_equals_the_cli(cli, map_path, scans, results):
+    s, ply = scans[0]
+    capped = urbansem.Localizer(map_path, max_raw_poses=3).localize(s.points, name=str(ply))
+    expected = run_json(
+        cli, "localize", "--map", map_path, "--scan", ply, "--max-raw-poses", "3", "--json"
+    )
+    assert without_seconds(capped.report) == without_seconds(expected)
+    assert capped.report["raw_poses"] == 3 < results[0].report["raw_poses"]
+
+
 def test_level_auto_equals_the_cli_and_reports_the_tilt(cli, map_path, scans, results, tmp_path):
     s, _ = scans[0]
     # The MCD scans stand within about a degree of level; roll this one by 4 degrees.

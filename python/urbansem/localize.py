@@ -267,8 +267,9 @@ class Localizer:
     ``.uloc`` index (``urbansem localize index``). The options are the CLI's: ``sensor``
     (``auto``, ``terrestrial``, ``hdl64``, ``vlp16``, ``os1-64``, ``os1-128``), ``cost`` (the
     ranking cost), ``grid_m``, ``yaw_step_deg``, the extraction knobs (``None``: the sensor
-    profile's value), ``level`` and ``vehicle`` (``auto``, ``car``: poses head along a street
-    near them, ``free``).
+    profile's value), ``level``, ``vehicle`` (``auto``, ``car``: poses head along a street
+    near them, ``free``) and ``max_raw_poses`` (the cheapest poses the search keeps; 0: every
+    pose within the keep factor).
     """
 
     def __init__(
@@ -294,6 +295,7 @@ class Localizer:
         min_segment_m: Optional[float] = None,
         level: str = "off",
         vehicle: str = "auto",
+        max_raw_poses: int = 5000,
     ) -> None:
         """Prepares the map (the expensive part, done once)."""
         if not isinstance(map, OsmMap):
@@ -319,6 +321,7 @@ class Localizer:
             min_segment_m=min_segment_m,
             level=level,
             vehicle=vehicle,
+            max_raw_poses=max_raw_poses,
         )
 
     def localize(self, points: Any, *, top: int = 10, name: str = "<array>") -> LocalizeResult:

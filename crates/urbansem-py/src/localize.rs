@@ -186,7 +186,7 @@ impl PyLocalizer {
         min_range_m = None, min_z_m = None, max_z_m = None, ground_cell_m = None,
         column_radius_m = None, max_flatness = None, min_columns = None,
         max_see_through = None, min_cell_count = None, min_segment_m = None, level = "off",
-        vehicle = "auto"))]
+        vehicle = "auto", max_raw_poses = localize::candidates::MAX_RAW_POSES))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -210,6 +210,7 @@ impl PyLocalizer {
         min_segment_m: Option<f64>,
         level: &str,
         vehicle: &str,
+        max_raw_poses: usize,
     ) -> PyResult<Self> {
         let vehicle = localize::sensor::Vehicle::from_name(vehicle).ok_or_else(|| {
             PyValueError::new_err(format!("vehicle = {vehicle:?}: use auto, car or free"))
@@ -250,6 +251,7 @@ impl PyLocalizer {
         };
         options.chamfer.grid_m = grid_m;
         options.search.yaw_step_deg = yaw_step_deg;
+        options.search.max_raw_poses = max_raw_poses;
         if let Ok(osm) = map.cast::<PyOsmMap>() {
             let osm = osm.get();
             let (shared, path) = (osm.map.clone(), osm.path.clone());
