@@ -322,13 +322,13 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                         Some(Cap {
                             cost,
                             minimum_only: true,
-                            count: 0,
+                            ..Cap::NONE
                         })
                     } else {
                         best(e.scan).map(|b| Cap {
                             cost: limit_of(b, options.search.keep_factor),
                             minimum_only: false,
-                            count: 0,
+                            ..Cap::NONE
                         })
                     }
                 })

@@ -570,7 +570,8 @@ pub struct TileSearch {
 
 /// Searches one loaded tile for the scan `segments` under `cap`: with
 /// `cap.minimum_only` the tile's minimum (if ≤ `cap.cost`), else every pose of its core within
-/// min(factor × its minimum, `cap.cost`).
+/// min(factor × its minimum, `cap.cost`), the first `max_raw_poses` of them (the options set
+/// `cap.count`).
 pub fn search_tile(
     tile: &LoadedTile,
     index: usize,
@@ -942,7 +943,7 @@ pub fn localize_tiled_batch(
                     let cap = Cap {
                         cost: f.map_or(c, |f| f.min(c)),
                         minimum_only: true,
-                        count: 0,
+                        ..Cap::NONE
                     };
                     search_tile(&tile, k, &scans[s], options, cap)
                 })
@@ -975,7 +976,7 @@ pub fn localize_tiled_batch(
                 let cap = Cap {
                     cost: limit_of(b, options.search.keep_factor),
                     minimum_only: false,
-                    count: 0,
+                    ..Cap::NONE
                 };
                 (s, cap)
             })

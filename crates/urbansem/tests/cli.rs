@@ -394,9 +394,8 @@ fn closed_stdout_pipe_is_not_an_internal_error() {
 /// same results as the map; a corrupt index exits 1 naming the file.
 #[test]
 fn localize_index_gives_the_same_results_as_the_map() {
-    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
-    let map = format!("{shared}/osm/kth_campus_stockholm.osm");
-    let dataset = format!("{shared}/lidar/mcd_kth_day_06");
+    let map = shared_data("osm/kth_campus_stockholm.osm");
+    let dataset = shared_data("lidar/mcd_kth_day_06");
     let dir = tempfile::tempdir().unwrap();
     let index = dir.path().join("kth.uloc");
     let stdout = stdout_of(
@@ -790,8 +789,7 @@ fn cloud_info_and_convert_read_ros2_bags() {
 /// tiles around a coarse prior and still finds the pose there.
 #[test]
 fn tiled_map_localizes_as_the_whole_map() {
-    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
-    let map = format!("{shared}/osm/kth_campus_stockholm.osm");
+    let map = shared_data("osm/kth_campus_stockholm.osm");
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("sim");
     sim_dataset(
@@ -1403,7 +1401,6 @@ fn simulated_streets_hold_the_readme_numbers() {
 /// can be rebuilt and audited), and `streets estimate` without `--model` uses it.
 #[test]
 fn the_shipped_default_street_model_is_what_its_documented_command_builds() {
-    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
     let shipped = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../streets/models/default.json"
@@ -1411,7 +1408,7 @@ fn the_shipped_default_street_model_is_what_its_documented_command_builds() {
     let dir = tempfile::tempdir().unwrap();
     let emb = dir.path().join("streets-emb-s1");
     let hel = dir.path().join("streets-hel-s1");
-    let helsinki = format!("{shared}/osm/helsinki_centre.osm.pbf");
+    let helsinki = shared_data("osm/helsinki_centre.osm.pbf");
     for (out, map) in [(&emb, None), (&hel, Some(helsinki.as_str()))] {
         let mut cmd = urbansem();
         cmd.args([
@@ -1556,8 +1553,7 @@ fn shard_streets_plan_without_a_model_uses_the_shipped_default() {
 /// clear errors.
 #[test]
 fn localize_eval_takes_a_kitti360_sequence() {
-    let shared = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
-    let kitti = format!("{shared}/lidar/kitti360_2013_05_28_drive_0009");
+    let kitti = shared_data("lidar/kitti360_2013_05_28_drive_0009");
     let eval = |map: Option<&str>| {
         let mut c = urbansem();
         c.args([
@@ -1579,7 +1575,7 @@ fn localize_eval_takes_a_kitti360_sequence() {
             String::from_utf8_lossy(&out.stderr).into_owned(),
         )
     };
-    let roads = format!("{shared}/osm/karlsruhe_west_kitti360_0009_roads.osm");
+    let roads = shared_data("osm/karlsruhe_west_kitti360_0009_roads.osm");
     let (code, err) = eval(Some(&roads));
     assert_eq!(code, Some(1), "{err}");
     assert!(
@@ -1587,7 +1583,7 @@ fn localize_eval_takes_a_kitti360_sequence() {
             && err.contains("no building outlines"),
         "{err}"
     );
-    let kth = format!("{shared}/osm/kth_campus_stockholm.osm");
+    let kth = shared_data("osm/kth_campus_stockholm.osm");
     let (code, err) = eval(Some(&kth));
     assert_eq!(code, Some(1), "{err}");
     assert!(
