@@ -354,7 +354,10 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                     let Some(cap) = cap.filter(|_| !segments.is_empty()) else {
                         return Ok(None);
                     };
-                    let search = search_tile(&tile, tile_index, &segments, &options, cap)?;
+                    let along = options
+                        .vehicle
+                        .along_streets(e.scan_segments().sensor.as_ref());
+                    let search = search_tile(&tile, tile_index, &segments, along, &options, cap)?;
                     let line = if minimum_stage {
                         serde_json::to_string(&MinimumRecord {
                             scan: e.scan,

@@ -12,7 +12,7 @@
 #![allow(missing_docs, clippy::expect_used)]
 use criterion::{criterion_group, Criterion};
 use geodata::osm::OsmMap;
-use localize::candidates::{build_template, exhaustive_search, search, Domain, Template};
+use localize::candidates::{build_template, exhaustive_search, search, Domain, Masks, Template};
 use localize::hashing::{CornerIndex, HashingOptions};
 use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::{Pose2, Segment};
@@ -90,7 +90,7 @@ impl Fixture<'_> {
             &l.pyramid,
             &self.templates,
             domain,
-            l.feasible.as_ref(),
+            Masks::feasible(l.feasible.as_ref()),
             l.options.search.keep_factor,
         );
         raw.len()
@@ -102,7 +102,7 @@ impl Fixture<'_> {
             &l.dt,
             &self.templates,
             domain,
-            l.feasible.as_ref(),
+            Masks::feasible(l.feasible.as_ref()),
             l.options.search.keep_factor,
         )
         .len()
@@ -173,14 +173,14 @@ fn print_ratios() {
         &l.pyramid,
         &f.templates,
         f.window,
-        l.feasible.as_ref(),
+        Masks::feasible(l.feasible.as_ref()),
         l.options.search.keep_factor,
     )
     .0 == exhaustive_search(
         &l.dt,
         &f.templates,
         f.window,
-        l.feasible.as_ref(),
+        Masks::feasible(l.feasible.as_ref()),
         l.options.search.keep_factor,
     );
     let grid = l.dt.grid_m;

@@ -58,6 +58,7 @@ fn main() {
                 &tile,
                 k,
                 &e.segments,
+                options.vehicle.along_streets(e.sensor.as_ref()),
                 &options,
                 localize::candidates::Cap::NONE,
             )

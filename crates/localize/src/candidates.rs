@@ -19,6 +19,7 @@
 pub use crate::chamfer::Domain;
 use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
 use crate::feasible::FeasibleMask;
+use crate::heading::HeadingMask;
 use crate::{angle_diff, orientation_diff, Pose2, Segment};
 use geodata::osm::geometry::point_segment_distance;
 use geodata::osm::index::MapIndex;
@@ -313,6 +314,39 @@ fn within(cost: u64, best: u64, factor: (u64, u64)) -> bool {
     (cost as u128) * (factor.1 as u128) <= (best as u128) * (factor.0 as u128)
 }
 
+/// The poses a search may visit: the feasible ones ([`FeasibleMask`]) and, for a car's scan,
+/// those with a heading a car can have there ([`HeadingMask`]); no mask: every pose.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Masks<'a> {
+    /// Feasible positions.
+    pub feasible: Option<&'a FeasibleMask>,
+    /// Allowed headings per position.
+    pub heading: Option<&'a HeadingMask>,
+}
+
+impl<'a> Masks<'a> {
+    /// The feasible positions only.
+    pub fn feasible(mask: Option<&'a FeasibleMask>) -> Masks<'a> {
+        Masks {
+            feasible: mask,
+            heading: None,
+        }
+    }
+
+    /// Whether box (bx, by) at level h may hold an allowed pose at yaw template k.
+    #[inline]
+    pub fn any(&self, k: u32, h: u32, bx: i64, by: i64) -> bool {
+        self.feasible.is_none_or(|m| m.any(h, bx, by))
+            && self.heading.is_none_or(|m| m.any(k as usize, h, bx, by))
+    }
+
+    /// Whether the pose at cell (i, j) and yaw template k is allowed.
+    pub fn allows(&self, k: usize, i: i64, j: i64) -> bool {
+        self.feasible.is_none_or(|m| m.is_feasible(i, j))
+            && self.heading.is_none_or(|m| m.allows(k, i, j))
+    }
+}
+
 /// Statistics of one search.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct SearchStats {
@@ -344,7 +378,7 @@ fn expand(
     templates: &[Template],
     plans: &Plans<'_>,
     domain: Domain,
-    mask: Option<&FeasibleMask>,
+    mask: Masks<'_>,
     &(parent, h, k, x, y): &Node,
     limit: u64,
     out: &mut Vec<Node>,
@@ -362,7 +396,7 @@ fn expand(
             continue;
         }
         let (bx, by) = (cx >> ch, cy >> ch);
-        if mask.is_some_and(|m| !m.any(ch, bx, by)) {
+        if !mask.any(k, ch, bx, by) {
             continue;
         }
         evaluated += 1;
@@ -406,7 +440,7 @@ pub fn search(
     pyr: &BoundPyramid,
     templates: &[Template],
     domain: Domain,
-    mask: Option<&FeasibleMask>,
+    mask: Masks<'_>,
     factor: (u64, u64),
 ) -> (Vec<RawPose>, SearchStats) {
     let (found, stats, _) = search_capped(dt, pyr, templates, domain, mask, factor, Cap::NONE);
@@ -449,7 +483,7 @@ pub fn search_capped(
     pyr: &BoundPyramid,
     templates: &[Template],
     domain: Domain,
-    mask: Option<&FeasibleMask>,
+    mask: Masks<'_>,
     factor: (u64, u64),
     cap: Cap,
 ) -> (Vec<RawPose>, SearchStats, Option<u64>) {
@@ -472,7 +506,7 @@ pub fn search_capped(
             let plans = &plans;
             (bj0..=bj1).flat_map(move |bj| {
                 (bi0..=bi1)
-                    .filter(move |&bi| mask.is_none_or(|m| m.any(top, bi, bj)))
+                    .filter(move |&bi| mask.any(k as u32, top, bi, bj))
                     .map(move |bi| {
                         let b = plans
                             .bound(k, top, bi, bj, u64::MAX)
@@ -720,14 +754,14 @@ pub fn exhaustive_search(
     dt: &DtTensor,
     templates: &[Template],
     domain: Domain,
-    mask: Option<&FeasibleMask>,
+    mask: Masks<'_>,
     factor: (u64, u64),
 ) -> Vec<RawPose> {
     let mut all = Vec::new();
     for (k, t) in templates.iter().enumerate() {
         for j in domain.j0..domain.j1 {
             for i in domain.i0..domain.i1 {
-                if mask.is_some_and(|m| !m.is_feasible(i, j)) {
+                if !mask.allows(k, i, j) {
                     continue;
                 }
                 all.push(RawPose {
@@ -939,9 +973,24 @@ mod tests {
             .collect()
     }
 
+    /// A map of streets only.
+    fn street_map(segments: Vec<geodata::osm::model::StreetSegment>) -> geodata::osm::OsmMap {
+        geodata::osm::OsmMap {
+            frame: geodata::projection::LocalFrame::new(48.15, 11.57).unwrap(),
+            bbox_lonlat: [0.0; 4],
+            buildings: Vec::new(),
+            highways: Vec::new(),
+            streets: geodata::osm::model::StreetNetwork {
+                segments,
+                ..Default::default()
+            },
+            stats: Default::default(),
+        }
+    }
+
     #[test]
     fn a_pose_runs_along_a_street_near_it_either_way() {
-        use geodata::osm::model::{OsmMap, StreetNetwork, StreetSegment};
+        use geodata::osm::model::StreetSegment;
         let seg = |from: i64, a: [f64; 2], b: [f64; 2]| StreetSegment {
             way_index: 0,
             index_in_way: 0,
@@ -953,20 +1002,10 @@ mod tests {
             highway: "residential".into(),
         };
         // An L: a street along x, one along y from its end.
-        let map = OsmMap {
-            frame: geodata::projection::LocalFrame::new(48.15, 11.57).unwrap(),
-            bbox_lonlat: [0.0; 4],
-            buildings: Vec::new(),
-            highways: Vec::new(),
-            streets: StreetNetwork {
-                segments: vec![
-                    seg(1, [0.0, 0.0], [100.0, 0.0]),
-                    seg(2, [100.0, 0.0], [100.0, 80.0]),
-                ],
-                ..StreetNetwork::default()
-            },
-            stats: Default::default(),
-        };
+        let map = street_map(vec![
+            seg(1, [0.0, 0.0], [100.0, 0.0]),
+            seg(2, [100.0, 0.0], [100.0, 80.0]),
+        ]);
         let index = MapIndex::new(&map);
         let max = 20f64.to_radians();
         let along = |x: f64, y: f64, yaw_deg: f64| {
@@ -1019,8 +1058,8 @@ mod tests {
             .map(|k| build_template(&scan, k as f64 * 0.8, &dt, levels))
             .collect();
         let domain = Domain::from_box(&dt, [-10.0, -9.0], [9.0, 10.5]);
-        let (fast, stats) = search(&dt, &pyr, &templates, domain, None, factor);
-        let slow = exhaustive_search(&dt, &templates, domain, None, factor);
+        let (fast, stats) = search(&dt, &pyr, &templates, domain, Masks::default(), factor);
+        let slow = exhaustive_search(&dt, &templates, domain, Masks::default(), factor);
         assert_eq!(fast, slow, "seed {seed}");
         assert!(stats.leaves <= stats.space + 4 * stats.space / 3);
         // With a count: the first `count` poses of the uncounted search, with no more leaves.
@@ -1030,7 +1069,7 @@ mod tests {
                 ..Cap::NONE
             };
             let (counted, counted_stats, minimum) =
-                search_capped(&dt, &pyr, &templates, domain, None, factor, cap);
+                search_capped(&dt, &pyr, &templates, domain, Masks::default(), factor, cap);
             let mut expected = slow.clone();
             expected.truncate(count.max(1));
             assert_eq!(counted, expected, "seed {seed}, count {count}");
@@ -1056,8 +1095,9 @@ mod tests {
             }
         }
         let mask = FeasibleMask::from_cells(domain, flags, levels);
-        let (fast, _) = search(&dt, &pyr, &templates, domain, Some(&mask), factor);
-        let slow = exhaustive_search(&dt, &templates, domain, Some(&mask), factor);
+        let feasible = Masks::feasible(Some(&mask));
+        let (fast, _) = search(&dt, &pyr, &templates, domain, feasible, factor);
+        let slow = exhaustive_search(&dt, &templates, domain, feasible, factor);
         assert_eq!(fast, slow, "seed {seed}, masked");
         let count = (slow.len() / 2).max(1);
         let cap = Cap {
@@ -1065,14 +1105,140 @@ mod tests {
             cost: slow.last().map_or(u64::MAX, |p| p.cost),
             minimum_only: false,
         };
-        let (counted, _, _) =
-            search_capped(&dt, &pyr, &templates, domain, Some(&mask), factor, cap);
+        let (counted, _, _) = search_capped(&dt, &pyr, &templates, domain, feasible, factor, cap);
         assert_eq!(
             counted,
             slow[..count.min(slow.len())],
             "seed {seed}, masked, count"
         );
         assert!(fast.iter().all(|p| mask.is_feasible(p.i, p.j)));
+        // With a heading mask from a random street network too (a car's search).
+        let streets = random_streets(&mut rng, 5, 12.0);
+        let yaws: Vec<f64> = templates.iter().map(|t| t.yaw_rad).collect();
+        let heading = HeadingMask::build(
+            &streets,
+            &dt,
+            domain,
+            &yaws,
+            rng.gen_range(1.0..6.0),
+            rng.gen_range(0.1..0.6),
+            levels,
+        );
+        for feasible in [None, Some(&mask)] {
+            let masks = Masks {
+                feasible,
+                heading: Some(&heading),
+            };
+            let (fast, _) = search(&dt, &pyr, &templates, domain, masks, factor);
+            let slow = exhaustive_search(&dt, &templates, domain, masks, factor);
+            assert_eq!(fast, slow, "seed {seed}, heading mask");
+            let count = (slow.len() / 2).max(1);
+            let cap = Cap { count, ..Cap::NONE };
+            let (counted, _, _) = search_capped(&dt, &pyr, &templates, domain, masks, factor, cap);
+            assert_eq!(
+                counted,
+                slow[..count.min(slow.len())],
+                "seed {seed}, heading, count"
+            );
+            assert!(fast.iter().all(|p| heading.allows(p.yaw_index, p.i, p.j)));
+        }
+    }
+
+    /// A random street network: `n` ways of two or three segments around the origin, some
+    /// sharing a node with the way before (a turn or a straight continuation).
+    fn random_streets(
+        rng: &mut ChaCha8Rng,
+        n: usize,
+        span: f64,
+    ) -> Vec<geodata::osm::model::StreetSegment> {
+        let mut out: Vec<geodata::osm::model::StreetSegment> = Vec::new();
+        let mut node = 1i64;
+        for w in 0..n {
+            let (mut id, mut a) = match out.last() {
+                Some(last) if rng.gen_bool(0.5) => (last.to_node, last.b),
+                _ => {
+                    node += 1;
+                    (
+                        node,
+                        [rng.gen_range(-span..span), rng.gen_range(-span..span)],
+                    )
+                }
+            };
+            for k in 0..rng.gen_range(2..4) {
+                let ang: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
+                let l = rng.gen_range(2.0..10.0);
+                let b = [a[0] + l * ang.cos(), a[1] + l * ang.sin()];
+                node += 1;
+                out.push(geodata::osm::model::StreetSegment {
+                    way_index: w,
+                    index_in_way: k,
+                    from_node: id,
+                    to_node: node,
+                    a,
+                    b,
+                    length_m: l,
+                    highway: "residential".into(),
+                });
+                (id, a) = (node, b);
+            }
+        }
+        out
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// The heading mask keeps every pose the street filter keeps, on the whole lattice and
+        /// on a window of it (a map tile's) alike.
+        #[test]
+        fn heading_mask_keeps_every_pose_along_a_street(
+            seed in 0u64..100_000,
+            radius in 1.0f64..14.0,
+            max_deg in 2.0f64..45.0,
+            window in (0i64..13, 0i64..13),
+        ) {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let streets = random_streets(&mut rng, 4, 15.0);
+            let map = street_map(streets.clone());
+            let index = MapIndex::new(&map);
+            let walls = random_segments(&mut rng, 6, 15.0);
+            let options = ChamferOptions { grid_m: 0.5, ..ChamferOptions::default() };
+            let dt = DtTensor::build(&walls, &options).unwrap();
+            let yaws: Vec<f64> = (0..48).map(|k| k as f64 * std::f64::consts::TAU / 48.0).collect();
+            let max = max_deg.to_radians();
+            let domain = Domain::from_box(&dt, [-20.0, -20.0], [20.0, 20.0]);
+            let whole = HeadingMask::build(&streets, &dt, domain, &yaws, radius, max, 5);
+            // A window starting `window` cells into the lattice, as a tile's tensor.
+            let size = [(dt.width as i64 - window.0) as usize, (dt.height as i64 - window.1) as usize];
+            let tile = DtTensor::build_window(&walls, &options, dt.origin, [window.0, window.1], size).unwrap();
+            let local = Domain {
+                i0: (domain.i0 - window.0).max(0),
+                j0: (domain.j0 - window.1).max(0),
+                i1: domain.i1 - window.0,
+                j1: domain.j1 - window.1,
+            };
+            let part = HeadingMask::build(&streets, &tile, local, &yaws, radius, max, 5);
+            for _ in 0..400 {
+                let (i, j) = (rng.gen_range(domain.i0..domain.i1), rng.gen_range(domain.j0..domain.j1));
+                let k = rng.gen_range(0..yaws.len());
+                let p = dt.corner_of(i, j);
+                if along_a_street(&index, p, yaws[k], radius, max) {
+                    prop_assert!(whole.allows(k, i, j), "pose {p:?} yaw {k} dropped");
+                }
+                let (li, lj) = (i - window.0, j - window.1);
+                if li >= local.i0 && lj >= local.j0 {
+                    prop_assert_eq!(part.allows(k, li, lj), whole.allows(k, i, j));
+                    // Every box holding the pose may hold an allowed one when it is allowed.
+                    for h in 0..=5u32 {
+                        if part.allows(k, li, lj) {
+                            prop_assert!(part.any(k, h, li >> h, lj >> h));
+                        }
+                        if whole.allows(k, i, j) {
+                            prop_assert!(whole.any(k, h, i >> h, j >> h));
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]
@@ -1159,6 +1325,8 @@ mod tests {
             i1: 0,
             j1: 0,
         };
-        assert!(search(&dt, &pyr, &[t], d, None, (8, 5)).0.is_empty());
+        assert!(search(&dt, &pyr, &[t], d, Masks::default(), (8, 5))
+            .0
+            .is_empty());
     }
 }

@@ -50,6 +50,7 @@ pub mod feasible;
 pub mod figure;
 pub mod geojson;
 pub mod hashing;
+pub mod heading;
 pub mod index;
 pub mod jobs;
 pub mod level;

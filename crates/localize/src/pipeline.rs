@@ -12,11 +12,12 @@
 //! ```
 
 use crate::candidates::{
-    build_template, filter, search_capped, suppress, Cap, Domain, FilterCounts, RawPose,
+    build_template, filter, search_capped, suppress, Cap, Domain, FilterCounts, Masks, RawPose,
     SearchOptions, SearchStats, StreetFilter, Template,
 };
 use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
+use crate::heading::{HeadingCache, HeadingMask};
 use crate::index::{PrepOptions, PreparedMap};
 use crate::level::{level, LevelOptions, Levelling};
 use crate::rank::{confidence, costs, rank_order, CostKind, CostOptions, Costs};
@@ -124,6 +125,7 @@ pub struct Localizer<'m> {
     /// Map preparation times.
     pub seconds: MapSeconds,
     index: MapIndex<'m>,
+    heading: HeadingCache,
 }
 
 /// A ranked pose candidate.
@@ -314,6 +316,7 @@ impl<'m> Localizer<'m> {
             feasible: prepared.feasible,
             seconds,
             index,
+            heading: HeadingCache::default(),
         })
     }
 
@@ -363,7 +366,8 @@ impl<'m> Localizer<'m> {
         self.localize_inner(segments, views, along)
     }
 
-    /// The search and finishing stages; `along_streets`: poses must head along a street.
+    /// The search and finishing stages; `along_streets`: poses must head along a street (the
+    /// search visits only those a car can have, [`HeadingMask`]).
     fn localize_inner(
         &self,
         segments: &[Segment],
@@ -385,7 +389,20 @@ impl<'m> Localizer<'m> {
         let templates = templates_on(segments, &self.dt, self.pyramid.top(), &self.options);
         out.seconds.templates = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let (raw, stats) = self.search_raw(&templates);
+        let heading = along_streets
+            .then(|| {
+                heading_mask(
+                    &self.heading,
+                    &self.map.streets.segments,
+                    &self.dt,
+                    self.domain,
+                    &templates,
+                    &self.options.search,
+                    self.pyramid.top(),
+                )
+            })
+            .flatten();
+        let (raw, stats) = self.search_masked(&templates, heading.as_deref());
         out.search = stats;
         out.seconds.search = t.elapsed().as_secs_f64();
         let place = |_: [f64; 2]| -> &dyn Place { self };
@@ -410,6 +427,15 @@ impl<'m> Localizer<'m> {
     /// whose cost is within the factor of the minimum over them, sorted, in this tensor's
     /// cells, the first `max_raw_poses` of them ([`search_capped`]).
     pub fn search_raw(&self, templates: &[Template]) -> (Vec<RawPose>, SearchStats) {
+        self.search_masked(templates, None)
+    }
+
+    /// [`Localizer::search_raw`] over the poses `heading` allows too (a car's scan).
+    pub fn search_masked(
+        &self,
+        templates: &[Template],
+        heading: Option<&HeadingMask>,
+    ) -> (Vec<RawPose>, SearchStats) {
         let cap = Cap {
             count: self.options.search.max_raw_poses,
             ..Cap::NONE
@@ -419,7 +445,10 @@ impl<'m> Localizer<'m> {
             &self.pyramid,
             templates,
             self.domain,
-            self.feasible.as_ref(),
+            Masks {
+                feasible: self.feasible.as_ref(),
+                heading,
+            },
             self.options.search.keep_factor,
             cap,
         );
@@ -584,6 +613,42 @@ pub fn templates_on(
             build_template(segments, yaw, dt, levels)
         })
         .collect()
+}
+
+/// The heading mask of a car's search on the tensor window `dt` ([`HeadingMask`]): the
+/// street filter's distance and angle over `streets`, kept in `cache` for the next scan;
+/// `None` without streets (the street filters are then off too).
+pub fn heading_mask(
+    cache: &HeadingCache,
+    streets: &[geodata::osm::model::StreetSegment],
+    dt: &DtTensor,
+    domain: Domain,
+    templates: &[Template],
+    search: &SearchOptions,
+    top: u32,
+) -> Option<std::sync::Arc<HeadingMask>> {
+    if streets.is_empty() {
+        return None;
+    }
+    let max_rad = search.along_street_deg.to_radians();
+    let key = (
+        templates.len(),
+        search.street_distance_m.to_bits(),
+        max_rad.to_bits(),
+        top,
+    );
+    cache.get_or_build(key, || {
+        let yaws: Vec<f64> = templates.iter().map(|t| t.yaw_rad).collect();
+        Some(HeadingMask::build(
+            streets,
+            dt,
+            domain,
+            &yaws,
+            search.street_distance_m,
+            max_rad,
+            top,
+        ))
+    })
 }
 
 /// The scan as the finishing stages see it.

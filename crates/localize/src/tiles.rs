@@ -28,14 +28,15 @@
 //! The crop files' format is in [`crate::crop`].
 
 use crate::candidates::{
-    limit_of, sample_segment_points, search_capped, Cap, RawPose, SearchStats,
+    limit_of, sample_segment_points, search_capped, Cap, Masks, RawPose, SearchStats,
 };
 use crate::chamfer::{bounding_box, map_edges, DtTensor};
 use crate::codec::index_err;
 pub use crate::crop::{read_crop, read_crop_from, write_crop};
+use crate::heading::HeadingCache;
 use crate::index::{PrepOptions, PreparedMap};
 use crate::pipeline::{
-    finish, templates_on, Localization, LocalizeOptions, Place, Scan, ScanSegments,
+    finish, heading_mask, templates_on, Localization, LocalizeOptions, Place, Scan, ScanSegments,
 };
 use crate::visibility::EdgeGrid;
 use crate::{LocalizeError, Result, Segment, WithContext};
@@ -522,6 +523,8 @@ pub struct LoadedTile {
     pub crop: OsmMap,
     /// Its prepared map.
     pub prepared: PreparedMap,
+    /// Its heading mask for cars' scans, built on first use.
+    heading: HeadingCache,
 }
 
 impl LoadedTile {
@@ -535,7 +538,11 @@ impl LoadedTile {
         })?;
         let (prepared, source) = PreparedMap::read(&resolve(manifest_path, &entry.index))?;
         let crop = source.load(&resolve(manifest_path, &entry.index))?;
-        Ok(LoadedTile { crop, prepared })
+        Ok(LoadedTile {
+            crop,
+            prepared,
+            heading: HeadingCache::default(),
+        })
     }
 
     /// Decodes a tile from the bytes of its index and crop files (e.g. from a distributed
@@ -543,7 +550,11 @@ impl LoadedTile {
     pub fn from_bytes(index: &[u8], crop: &[u8], name: &Path) -> Result<LoadedTile> {
         let prepared = PreparedMap::read_from(index, index.len() as u64, name)?.0;
         let crop = read_crop_from(crop, crop.len() as u64, name)?;
-        Ok(LoadedTile { crop, prepared })
+        Ok(LoadedTile {
+            crop,
+            prepared,
+            heading: HeadingCache::default(),
+        })
     }
 }
 
@@ -576,6 +587,7 @@ pub fn search_tile(
     tile: &LoadedTile,
     index: usize,
     segments: &[Segment],
+    along_streets: bool,
     options: &LocalizeOptions,
     cap: Cap,
 ) -> Result<TileSearch> {
@@ -593,12 +605,30 @@ pub fn search_tile(
         count: options.search.max_raw_poses,
         ..cap
     };
+    // The crop holds the streets within the street distance of every pose of the core, so
+    // each pose's heading flag is the whole map's.
+    let heading = along_streets
+        .then(|| {
+            heading_mask(
+                &tile.heading,
+                &tile.crop.streets.segments,
+                &p.dt,
+                p.domain,
+                &templates,
+                &options.search,
+                p.pyramid.top(),
+            )
+        })
+        .flatten();
     let (raw, stats, minimum) = search_capped(
         &p.dt,
         &p.pyramid,
         &templates,
         p.domain,
-        p.feasible.as_ref(),
+        Masks {
+            feasible: p.feasible.as_ref(),
+            heading: heading.as_deref(),
+        },
         options.search.keep_factor,
         cap,
     );
@@ -945,7 +975,7 @@ pub fn localize_tiled_batch(
                         minimum_only: true,
                         ..Cap::NONE
                     };
-                    search_tile(&tile, k, &scans[s], options, cap)
+                    search_tile(&tile, k, &scans[s], along_streets[s], options, cap)
                 })
                 .collect::<Result<_>>()?;
             for (x, r) in searched.iter().enumerate() {
@@ -988,7 +1018,7 @@ pub fn localize_tiled_batch(
             let tile = load(k)?;
             let searched: Vec<TileSearch> = wanted
                 .par_iter()
-                .map(|&(s, cap)| search_tile(&tile, k, &scans[s], options, cap))
+                .map(|&(s, cap)| search_tile(&tile, k, &scans[s], along_streets[s], options, cap))
                 .collect::<Result<_>>()?;
             for (r, &(s, _)) in searched.into_iter().zip(&wanted) {
                 search_s[s] += r.seconds;

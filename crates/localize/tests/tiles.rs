@@ -8,6 +8,7 @@ use localize::eval::mcd_scans;
 use localize::eval::run::{run_eval, EvalJob};
 use localize::eval::RankMethod;
 use localize::pipeline::{LocalizeOptions, Localizer};
+use localize::sensor::Vehicle;
 use localize::tiles::{
     build_tiles, localize_tiled_batch, read_crop, Manifest, TileOptions, MINIMUM_CAPS_M,
 };
@@ -119,6 +120,39 @@ fn tiled_and_untiled_maps_give_the_same_ranked_candidates() {
         assert_eq!(a.message, b.message, "{}", s.name);
     }
     assert!(compared >= 3, "only {compared} scans within the overlap");
+
+    // The same scans as a car's (poses head along a street): each tile's heading mask flags
+    // a pose as the whole map's does, so the answers are the whole map's again.
+    let car = LocalizeOptions {
+        vehicle: Vehicle::Car,
+        ..options.clone()
+    };
+    let whole_car = Localizer::new(&map, car.clone()).unwrap();
+    let car_batch = localize_tiled_batch(
+        &manifest_path,
+        &segments,
+        &vec![true; segments.len()],
+        &car,
+        &MINIMUM_CAPS_M,
+        None,
+        &mut |_| {},
+    )
+    .unwrap();
+    let mut fewer_boxes = 0;
+    for (n, s) in scans.iter().enumerate() {
+        let a = whole_car.localize_segments(&segments[n]);
+        let free = whole.localize_segments(&segments[n]);
+        fewer_boxes += usize::from(a.search.boxes < free.search.boxes);
+        if !car_batch.exact[n] {
+            continue;
+        }
+        let b = &car_batch.results[n];
+        assert_eq!(a.raw_poses, b.raw_poses, "car {}", s.name);
+        assert_eq!(a.filtered, b.filtered, "car {}", s.name);
+        assert_eq!(a.candidates, b.candidates, "car {}", s.name);
+    }
+    // The mask is on: a car's search bounds fewer boxes.
+    assert_eq!(fewer_boxes, scans.len());
 
     // `localize eval` of the real MCD sequence on the manifest: the scans' truth in the map
     // frame (taken from a tile's crop), and the same top-1 errors as on the map itself.
