@@ -150,7 +150,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 build_template(&segments, yaw, &localizer.dt, localizer.pyramid.top())
             })
             .collect();
-        let (raw, _) = localizer.search_raw(&templates);
+        // Searched as the pipeline searched it: over a car's headings for a car's scan.
+        let car = o.vehicle.along_streets(r.sensor.as_ref());
+        let heading = car.then(|| localizer.car_headings(&templates)).flatten();
+        let (raw, _) = localizer.search_masked(&templates, heading.as_deref());
         let min = raw.first().map_or(0, |p| p.cost);
         // Best pose near the truth (exhaustive within 4 m and 0.2 rad).
         let (ti, tj) = localizer.dt.cell_of([truth.x, truth.y]);

@@ -390,17 +390,7 @@ impl<'m> Localizer<'m> {
         out.seconds.templates = t.elapsed().as_secs_f64();
         let t = Instant::now();
         let heading = along_streets
-            .then(|| {
-                heading_mask(
-                    &self.heading,
-                    &self.map.streets.segments,
-                    &self.dt,
-                    self.domain,
-                    &templates,
-                    &self.options.search,
-                    self.pyramid.top(),
-                )
-            })
+            .then(|| self.car_headings(&templates))
             .flatten();
         let (raw, stats) = self.search_masked(&templates, heading.as_deref());
         out.search = stats;
@@ -428,6 +418,20 @@ impl<'m> Localizer<'m> {
     /// cells, the first `max_raw_poses` of them ([`search_capped`]).
     pub fn search_raw(&self, templates: &[Template]) -> (Vec<RawPose>, SearchStats) {
         self.search_masked(templates, None)
+    }
+
+    /// The heading mask of a car's search with `templates` ([`HeadingMask`], built on first
+    /// use and kept); `None` on a map without streets.
+    pub fn car_headings(&self, templates: &[Template]) -> Option<std::sync::Arc<HeadingMask>> {
+        heading_mask(
+            &self.heading,
+            &self.map.streets.segments,
+            &self.dt,
+            self.domain,
+            templates,
+            &self.options.search,
+            self.pyramid.top(),
+        )
     }
 
     /// [`Localizer::search_raw`] over the poses `heading` allows too (a car's scan).

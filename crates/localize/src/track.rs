@@ -249,10 +249,12 @@ impl Localizer<'_> {
                     .take(options.carried_states)
                     .map(|prev| prev.pose.compose(&step))
                     .filter(|p| {
-                        !mine.iter().any(|c| {
-                            c.pose.distance_to(p) < o.distinct_m
-                                && c.pose.yaw_error_to(p) < o.distinct_rad
-                        })
+                        // Not carried when one of this scan's own states continues its chain
+                        // (within the gates); a state merely near it (within the distinct
+                        // radius, 4 m) would not, and the chain would break there.
+                        !mine
+                            .iter()
+                            .any(|c| within_gates(p, &c.pose, &step, options))
                     })
                     .collect::<Vec<Pose2>>()
                     .into_par_iter()
@@ -354,12 +356,8 @@ fn extend_chains(
                 recent: vec![own],
             };
             let Some(step) = step else { return best };
-            let len = step.x.hypot(step.y);
-            let gate_m = options.gate_m + options.gate_per_m * len;
-            let gate_rad = options.gate_rad + options.gate_rad_per_m * len;
             for (p, chain) in states[i - 1].iter().zip(prev) {
-                let pred = p.pose.compose(&step);
-                if pred.distance_to(&c.pose) > gate_m || pred.yaw_error_to(&c.pose) > gate_rad {
+                if !within_gates(&p.pose.compose(&step), &c.pose, &step, options) {
                     continue;
                 }
                 let keep = chain.recent.len().min(window - 1);
@@ -376,6 +374,15 @@ fn extend_chains(
             best
         })
         .collect()
+}
+
+/// Whether a state at `pose` continues a chain whose last state, moved by the odometry
+/// `step`, predicts `predicted`: the residual is within the gates (a fixed part plus a share
+/// of the step's length).
+fn within_gates(predicted: &Pose2, pose: &Pose2, step: &Pose2, options: &TrackOptions) -> bool {
+    let len = step.x.hypot(step.y);
+    predicted.distance_to(pose) <= options.gate_m + options.gate_per_m * len
+        && predicted.yaw_error_to(pose) <= options.gate_rad + options.gate_rad_per_m * len
 }
 
 /// The best gated chain of states ending in one state.
@@ -408,6 +415,39 @@ mod tests {
 
     fn p(x: f64, y: f64, yaw_rad: f64) -> Pose2 {
         Pose2 { x, y, yaw_rad }
+    }
+
+    #[test]
+    fn the_gates_grow_with_the_step() {
+        let o = TrackOptions::default();
+        let at = p(10.0, 0.0, 0.0);
+        let short = p(1.0, 0.0, 0.0);
+        let long = p(40.0, 0.0, 0.0);
+        // 1.5 m + 5 % of the step; 3° + 4° per 50 m.
+        assert!(within_gates(&at, &p(11.4, 0.0, 0.0), &short, &o));
+        assert!(!within_gates(&at, &p(11.6, 0.0, 0.0), &short, &o));
+        assert!(within_gates(&at, &p(13.4, 0.0, 0.0), &long, &o));
+        // A state 3 m away (within the 4 m distinct radius) does not continue the chain after
+        // a short step: the carried state must then be kept.
+        assert!(!within_gates(&at, &p(13.0, 0.0, 0.0), &short, &o));
+        assert!(within_gates(
+            &at,
+            &p(10.0, 0.0, 3.0f64.to_radians()),
+            &short,
+            &o
+        ));
+        assert!(!within_gates(
+            &at,
+            &p(10.0, 0.0, 3.2f64.to_radians()),
+            &short,
+            &o
+        ));
+        assert!(within_gates(
+            &at,
+            &p(10.0, 0.0, 6.0f64.to_radians()),
+            &long,
+            &o
+        ));
     }
 
     #[test]
