@@ -605,8 +605,10 @@ pub fn search_tile(
         count: options.search.max_raw_poses,
         ..cap
     };
-    // The crop holds the streets within the street distance of every pose of the core, so
-    // each pose's heading flag is the whole map's.
+    // A pose's heading flag needs the streets within the street distance plus two
+    // half-diagonals of a base box (≈ 5 m at 0.5 m cells) of it; the crop holds those within
+    // the overlap plus the street distance of the core, so the flags are the whole map's
+    // whenever the tile is exact (`is_exact`: the overlap exceeds the visibility range).
     let heading = along_streets
         .then(|| {
             heading_mask(
