@@ -111,7 +111,7 @@ pub fn merge(plan_path: &Path) -> Result<LocalizeMerge> {
         let searches = by_scan.get(&e.scan).unwrap_or(&empty);
         let segments = e.segments();
         let ex = e.scan_segments();
-        let along = options.vehicle.along_streets(ex.sensor.as_ref());
+        let along = e.along_streets(&options);
         let mut result = finish_tiled(&manifest, searches, &segments, along, &options, &place_of);
         result.record_scan(&ex, e.points);
         scans.push(TrackRow::new(

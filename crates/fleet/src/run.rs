@@ -106,23 +106,33 @@ impl ExtractRecord {
             .collect()
     }
 
+    /// The sensor the scan was processed as, as the library reports it.
+    pub fn sensor_report(&self) -> Option<SensorReport> {
+        self.sensor.and_then(|s| {
+            geodata::sensors::SensorKind::ALL
+                .get(s.profile)
+                .map(|k| SensorReport {
+                    profile: k.name(),
+                    detected: s.detected,
+                    geometry: SensorGeometry {
+                        mount_height_m: s.mount_height_m,
+                        vfov_deg: s.vfov_deg,
+                        beams: s.beams,
+                    },
+                })
+        })
+    }
+
+    /// Whether the scan's poses must head along a street under `options`' vehicle.
+    pub fn along_streets(&self, options: &LocalizeOptions) -> bool {
+        options.vehicle.along_streets(self.sensor_report().as_ref())
+    }
+
     /// The extraction as the library reports it.
     pub fn scan_segments(&self) -> ScanSegments {
         ScanSegments {
             segments: self.segments(),
-            sensor: self.sensor.and_then(|s| {
-                geodata::sensors::SensorKind::ALL
-                    .get(s.profile)
-                    .map(|k| SensorReport {
-                        profile: k.name(),
-                        detected: s.detected,
-                        geometry: SensorGeometry {
-                            mount_height_m: s.mount_height_m,
-                            vfov_deg: s.vfov_deg,
-                            beams: s.beams,
-                        },
-                    })
-            }),
+            sensor: self.sensor_report(),
             clearance_m: self.clearance_m,
             levelling: self.level,
             vertical_cells: self.vertical_cells,
@@ -354,9 +364,7 @@ pub fn run_shard(plan_path: &Path, id: usize, tiles: TileSource<'_>) -> Result<S
                     let Some(cap) = cap.filter(|_| !segments.is_empty()) else {
                         return Ok(None);
                     };
-                    let along = options
-                        .vehicle
-                        .along_streets(e.scan_segments().sensor.as_ref());
+                    let along = e.along_streets(&options);
                     let search = search_tile(&tile, tile_index, &segments, along, &options, cap)?;
                     let line = if minimum_stage {
                         serde_json::to_string(&MinimumRecord {

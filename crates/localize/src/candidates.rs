@@ -19,7 +19,7 @@
 pub use crate::chamfer::Domain;
 use crate::chamfer::{stride_shift, BoundPyramid, DtTensor, GridView};
 use crate::feasible::FeasibleMask;
-use crate::heading::HeadingMask;
+use crate::heading::{street_direction, turn_at, HeadingMask};
 use crate::{angle_diff, orientation_diff, Pose2, Segment};
 use geodata::osm::geometry::point_segment_distance;
 use geodata::osm::index::MapIndex;
@@ -873,34 +873,16 @@ pub fn along_a_street(
         .filter_map(|i| segments.get(i))
         .collect();
     let along = near.iter().any(|s| {
-        orientation_diff(yaw_rad, direction_of(s)) <= max_rad
+        orientation_diff(yaw_rad, street_direction(s)) <= max_rad
             && point_segment_distance(p, s.a, s.b) <= radius_m
     });
     along
         || near.iter().enumerate().any(|(k, s)| {
             near[k + 1..].iter().any(|t| {
-                turn_between(s, t).is_some_and(|node| {
-                    (node[0] - p[0]).hypot(node[1] - p[1]) <= radius_m
-                        && orientation_diff(direction_of(s), direction_of(t)) > max_rad
-                })
+                turn_at(s, t, max_rad)
+                    .is_some_and(|node| (node[0] - p[0]).hypot(node[1] - p[1]) <= radius_m)
             })
         })
-}
-
-/// Direction of a street segment, radians.
-fn direction_of(s: &geodata::osm::model::StreetSegment) -> f64 {
-    (s.b[1] - s.a[1]).atan2(s.b[0] - s.a[0])
-}
-
-/// The node two street segments share (by OSM node id), if any.
-fn turn_between(
-    s: &geodata::osm::model::StreetSegment,
-    t: &geodata::osm::model::StreetSegment,
-) -> Option<[f64; 2]> {
-    [(s.from_node, s.a), (s.to_node, s.b)]
-        .into_iter()
-        .find(|&(id, _)| id == t.from_node || id == t.to_node)
-        .map(|(_, at)| at)
 }
 
 /// The street filters of [`filter`].

@@ -157,13 +157,13 @@ impl HeadingMask {
                 }
             }
         };
-        let direction = |s: &StreetSegment| (s.b[1] - s.a[1]).atan2(s.b[0] - s.a[0]);
         for s in streets {
             if s.a.iter().chain(&s.b).all(|v| v.is_finite()) {
-                stamp(s.a, s.b, &yaw_bits(Some(direction(s))), &mut grid);
+                stamp(s.a, s.b, &yaw_bits(Some(street_direction(s))), &mut grid);
             }
         }
-        // Turns: nodes shared by two segments meeting at more than `max_rad`.
+        // Turns, as `along_a_street` finds them: pairs of segments sharing a node (the flags
+        // are an OR, so the order of the stamps does not matter).
         let mut at_node: FxHashMap<i64, Vec<usize>> = FxHashMap::default();
         for (i, s) in streets.iter().enumerate() {
             at_node.entry(s.from_node).or_default().push(i);
@@ -172,22 +172,15 @@ impl HeadingMask {
             }
         }
         let every = yaw_bits(None);
-        let mut turns: Vec<[f64; 2]> = at_node
-            .iter()
-            .filter_map(|(&node, ids)| {
-                let turns = ids.iter().enumerate().any(|(x, &s)| {
-                    ids[x + 1..].iter().any(|&t| {
-                        orientation_diff(direction(&streets[s]), direction(&streets[t])) > max_rad
-                    })
-                });
-                let s = &streets[*ids.first()?];
-                let p = if s.from_node == node { s.a } else { s.b };
-                (turns && p.iter().all(|v| v.is_finite())).then_some(p)
-            })
-            .collect();
-        turns.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-        for p in turns {
-            stamp(p, p, &every, &mut grid);
+        for ids in at_node.values() {
+            for (x, &s) in ids.iter().enumerate() {
+                for &t in &ids[x + 1..] {
+                    let turn = turn_at(&streets[s], &streets[t], max_rad);
+                    if let Some(p) = turn.filter(|p| p.iter().all(|v| v.is_finite())) {
+                        stamp(p, p, &every, &mut grid);
+                    }
+                }
+            }
         }
         // The window's boxes at the base level meet at most 2 × 2 base boxes; above, the
         // union of their four children.
@@ -303,6 +296,22 @@ impl HeadingMask {
     pub fn bytes(&self) -> usize {
         8 * (self.grid.bits.len() + self.levels.iter().map(|l| l.bits.len()).sum::<usize>())
     }
+}
+
+/// Direction of a street segment, radians.
+pub(crate) fn street_direction(s: &StreetSegment) -> f64 {
+    (s.b[1] - s.a[1]).atan2(s.b[0] - s.a[0])
+}
+
+/// The node two street segments share (by OSM node id, the first of `s`'s ends that `t`
+/// has) when they meet there at more than `max_rad`: a turn, where a car heads anywhere
+/// between them.
+pub(crate) fn turn_at(s: &StreetSegment, t: &StreetSegment, max_rad: f64) -> Option<[f64; 2]> {
+    [(s.from_node, s.a), (s.to_node, s.b)]
+        .into_iter()
+        .find(|&(id, _)| id == t.from_node || id == t.to_node)
+        .map(|(_, at)| at)
+        .filter(|_| orientation_diff(street_direction(s), street_direction(t)) > max_rad)
 }
 
 /// What a heading mask depends on besides the map and the tensor window: the number of yaw

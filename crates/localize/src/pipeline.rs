@@ -413,13 +413,6 @@ impl<'m> Localizer<'m> {
         out
     }
 
-    /// Every pose of this map's domain (feasible ones only when the search is restricted)
-    /// whose cost is within the factor of the minimum over them, sorted, in this tensor's
-    /// cells, the first `max_raw_poses` of them ([`search_capped`]).
-    pub fn search_raw(&self, templates: &[Template]) -> (Vec<RawPose>, SearchStats) {
-        self.search_masked(templates, None)
-    }
-
     /// The heading mask of a car's search with `templates` ([`HeadingMask`], built on first
     /// use and kept); `None` on a map without streets.
     pub fn car_headings(&self, templates: &[Template]) -> Option<std::sync::Arc<HeadingMask>> {
@@ -434,7 +427,10 @@ impl<'m> Localizer<'m> {
         )
     }
 
-    /// [`Localizer::search_raw`] over the poses `heading` allows too (a car's scan).
+    /// Every pose of this map's domain (feasible ones only when the search is restricted,
+    /// and only those `heading` allows when given: a car's scan) whose cost is within the
+    /// factor of the minimum over them, sorted, in this tensor's cells, the first
+    /// `max_raw_poses` of them ([`search_capped`]).
     pub fn search_masked(
         &self,
         templates: &[Template],
