@@ -158,6 +158,10 @@ pub struct TrackOptions {
     pub gate_rad: f64,
     /// … plus this many radians per metre of the step (1° per 50 m assumed, with margin).
     pub gate_rad_per_m: f64,
+    /// Whether every carried state also coasts: its odometry prediction, unrefined, stays a
+    /// state of the scan at the cost measured there, so a chain outlives a scan that none of
+    /// the scan's own or refined states continues (a missed detection).
+    pub coast: bool,
 }
 
 impl Default for TrackOptions {
@@ -171,6 +175,7 @@ impl Default for TrackOptions {
             gate_per_m: 0.05,
             gate_rad: 3f64.to_radians(),
             gate_rad_per_m: 4f64.to_radians() / 50.0,
+            coast: true,
         }
     }
 }
@@ -179,7 +184,8 @@ impl Localizer<'_> {
     /// Localizes every scan of a track (segments per scan, sensor frame) with the window of
     /// `options.window` scans ending at it: every scan is searched alone, the states of each
     /// scan are its best candidates plus the previous scan's states carried forward by the
-    /// odometry and refined on its walls, and a scan's candidates are ranked by the cheapest
+    /// odometry (refined on its walls, and as predicted: [`TrackOptions::coast`]), and a
+    /// scan's candidates are ranked by the cheapest
     /// chain of states through its window whose consecutive steps agree with the odometry
     /// within the gates (the sum of the scans' costs along the chain; a Viterbi pass).
     pub fn localize_track(
@@ -240,33 +246,50 @@ impl Localizer<'_> {
                 .collect();
             // The odometry step from the previous scan (none for the first).
             let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
-            if let Some(step) = step.filter(|_| !segs.is_empty()) {
-                // The previous scan's states in its chain order: a long-followed place is
-                // carried even when its own cost on that scan was poor.
-                let carried: Vec<Candidate> = out[i - 1]
+            if let Some(step) = step {
+                // The previous scan's states in its chain order, moved by the odometry: a
+                // long-followed place is carried even when its own cost on that scan was poor.
+                let predicted: Vec<Pose2> = out[i - 1]
                     .candidates
                     .iter()
                     .take(options.carried_states)
                     .map(|prev| prev.pose.compose(&step))
-                    .filter(|p| {
-                        // Not carried when one of this scan's own states continues its chain
-                        // (within the gates); a state merely near it (within the distinct
-                        // radius, 4 m) would not, and the chain would break there.
-                        !mine
-                            .iter()
-                            .any(|c| within_gates(p, &c.pose, &step, options))
-                    })
-                    .collect::<Vec<Pose2>>()
-                    .into_par_iter()
-                    .filter_map(|p| {
-                        let visible = self.visible_from_views(&p, &[[0.0, 0.0]]);
-                        let pose = refine_pose(segs, &visible, p, &o.refine);
-                        self.pose_allowed(&pose).then(|| Candidate {
-                            pose,
-                            costs: self.costs_at(segs, pose, f64::INFINITY),
-                            refined: true,
-                            confidence: 0.0,
-                        })
+                    .collect();
+                let carried: Vec<Candidate> = predicted
+                    .par_iter()
+                    .flat_map_iter(|&p| {
+                        // Refined on this scan's walls (if it has any), unless one of its
+                        // own states continues the chain (within the gates); a state merely
+                        // near it (within the distinct radius, 4 m) would not, and the chain
+                        // would break there.
+                        let refined = (!segs.is_empty()
+                            && !mine
+                                .iter()
+                                .any(|c| within_gates(&p, &c.pose, &step, options)))
+                        .then(|| {
+                            let visible = self.visible_from_views(&p, &[[0.0, 0.0]]);
+                            refine_pose(segs, &visible, p, &o.refine)
+                        });
+                        // Coasting: the prediction itself, scored where it stands. The
+                        // chain then survives a scan whose own states and refinement all
+                        // miss its place (a map error there; on the simulated Helsinki
+                        // drive searched over a car's headings, the state that continued
+                        // the chain was 3 m off and led it away from the truth), and a
+                        // scan without walls is placed by the odometry (every state then
+                        // costs the same: nothing matched).
+                        let coasted = options.coast.then_some(p);
+                        refined
+                            .into_iter()
+                            .map(|pose| (pose, true))
+                            .chain(coasted.map(|pose| (pose, false)))
+                            .filter(|(pose, _)| self.pose_allowed(pose))
+                            .map(|(pose, refined)| Candidate {
+                                pose,
+                                costs: self.costs_at(segs, pose, f64::INFINITY),
+                                refined,
+                                confidence: 0.0,
+                            })
+                            .collect::<Vec<_>>()
                     })
                     .collect();
                 mine.extend(carried);
@@ -294,6 +317,13 @@ impl Localizer<'_> {
                 })
                 .collect();
             let mut result = single;
+            if segs.is_empty() && !ranked.is_empty() {
+                result.message = Some(
+                    "the scan has no segments; its candidates are the previous scan's states \
+                     moved by the odometry"
+                        .into(),
+                );
+            }
             result.candidates = ranked;
             let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
             // Confidence from the chains' mean costs over the window (lower is better).
