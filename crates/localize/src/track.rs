@@ -133,6 +133,11 @@ pub fn drifted_odometry(truth: &[Pose2], scale_error: f64, yaw_rad_per_m: f64) -
     out
 }
 
+/// Poses closer than this (and [`SAME_POSE_RAD`]) are one state of a scan, metres.
+const SAME_POSE_M: f64 = 1e-3;
+/// See [`SAME_POSE_M`], radians.
+const SAME_POSE_RAD: f64 = 1e-6;
+
 /// The default [`TrackOptions::history_m`]: 300 m of odometry before the window.
 pub const TRACK_HISTORY_M: f64 = 300.0;
 
@@ -276,8 +281,15 @@ impl Localizer<'_> {
                         // drive searched over a car's headings, the state that continued
                         // the chain was 3 m off and led it away from the truth), and a
                         // scan without walls is placed by the odometry (every state then
-                        // costs the same: nothing matched).
-                        let coasted = options.coast.then_some(p);
+                        // costs the same: nothing matched). Not when the refinement left
+                        // the prediction where it was: the same state twice would take two
+                        // of the next scan's carried places.
+                        let coasted = (options.coast
+                            && !refined.is_some_and(|r| {
+                                r.distance_to(&p) <= SAME_POSE_M
+                                    && r.yaw_error_to(&p) <= SAME_POSE_RAD
+                            }))
+                        .then_some(p);
                         refined
                             .into_iter()
                             .map(|pose| (pose, true))

@@ -86,4 +86,24 @@ fn a_scan_without_walls_is_placed_by_the_odometry() {
         )
         .unwrap();
     assert!(without[blind].candidates.is_empty());
+
+    // A prediction the refinement leaves in place is one state, not two (here every
+    // refinement keeps its start: no move is accepted).
+    let mut options = LocalizeOptions::default();
+    options.refine.max_shift_m = 0.0;
+    let stiff = Localizer::new(&map, options).unwrap();
+    let results = stiff
+        .localize_track(&extracted, &odometry, &TrackOptions::default())
+        .unwrap();
+    for (i, r) in results.iter().enumerate() {
+        for (k, a) in r.candidates.iter().enumerate() {
+            for b in &r.candidates[k + 1..] {
+                assert!(
+                    a.pose.distance_to(&b.pose) > 1e-3 || a.pose.yaw_error_to(&b.pose) > 1e-6,
+                    "scan {i} lists {:?} twice",
+                    a.pose
+                );
+            }
+        }
+    }
 }
