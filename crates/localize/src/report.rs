@@ -238,7 +238,7 @@ pub struct TrackRow {
     pub segments: usize,
     /// The sensor the scan was processed as.
     pub sensor: Option<SensorReport>,
-    /// Why the scan could not be localized, if so.
+    /// Why the scan could not be localized, or that the odometry alone placed it (no walls).
     pub message: Option<String>,
 }
 
