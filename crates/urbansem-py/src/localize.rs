@@ -75,6 +75,16 @@ pub struct PyLocalizer {
     load_map_s: f64,
 }
 
+/// A report as `urbansem localize --json` prints it: a number without a JSON form (the
+/// unknown d_DCM of a state carried by a track, ∞) becomes `None`, as the CLI writes `null`.
+fn as_cli_json<'py, T: serde::Serialize>(
+    py: Python<'py>,
+    value: &T,
+) -> PyResult<Bound<'py, PyAny>> {
+    let json = serde_json::to_value(value).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(pythonize::pythonize(py, &json)?)
+}
+
 fn sensor_choice(sensor: &str) -> PyResult<SensorChoice> {
     if sensor == "auto" {
         return Ok(SensorChoice::Auto);
@@ -312,7 +322,7 @@ impl PyLocalizer {
                 ))
             })
             .map_err(raise!(LocalizeError))?;
-        Ok(pythonize::pythonize(py, &report)?)
+        as_cli_json(py, &report)
     }
 
     /// Localizes a track: scans (each `(n, 3)` float64) tied by odometry (`(m, 3)` poses
@@ -399,7 +409,7 @@ impl PyLocalizer {
                 track_rows(localizer, &names, &extracted, &odo, &track, top)
             })
             .map_err(raise!(LocalizeError))?;
-        Ok(pythonize::pythonize(py, &rows)?)
+        as_cli_json(py, &rows)
     }
 
     /// The wall segments of a scan (`(n, 3)` float64) in the sensor frame as an `(k, 4)`
