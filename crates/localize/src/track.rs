@@ -277,14 +277,15 @@ impl Localizer<'_> {
                             refine_pose(segs, &visible, p, &o.refine)
                         });
                         // Coasting: the prediction itself, scored where it stands, even
-                        // when an own state continues the chain. The chain then survives a scan whose own states and refinement all
-                        // miss its place (a map error there; on the simulated Helsinki
-                        // drive searched over a car's headings, the state that continued
-                        // the chain was 3 m off and led it away from the truth), and a
-                        // scan without walls is placed by the odometry (every state then
-                        // costs the same: nothing matched). Not when the refinement left
-                        // the prediction where it was: the same state twice would take two
-                        // of the next scan's carried places.
+                        // when an own state continues the chain. The chain then survives a
+                        // scan whose own states and refinement all miss its place (a map
+                        // error there; on the simulated Helsinki drive searched over a
+                        // car's headings, the state that continued the chain was 3 m off
+                        // and led it away from the truth), and a scan without walls is
+                        // placed by the odometry (every state then costs the same: nothing
+                        // matched). Not when the refinement left the prediction where it
+                        // was: the same state twice would take two of the next scan's
+                        // carried places.
                         let coasted = (options.coast
                             && !refined.is_some_and(|r| {
                                 r.distance_to(&p) <= SAME_POSE_M
