@@ -142,6 +142,7 @@ def test_vehicle_free_equals_the_cli(cli, map_path, scans, results):
 def test_top_candidate_is_within_the_thesis_threshold(scans, results):
     for (s, _), r in zip(scans, results):
         assert r.best is not None, (s.name, r.message)
+        assert r.accepted and r.message is None, (s.name, r.message)
         x, y, yaw = s.truth
         err_m = math.hypot(r.best.x - x, r.best.y - y)
         err_rad = abs((r.best.yaw_grid - yaw + math.pi) % (2 * math.pi) - math.pi)

@@ -132,8 +132,11 @@ class LocalizeResult:
     confidence: float
     #: Number of candidates (all, not only those listed).
     candidate_count: int
-    #: Why the scan could not be localized, if so.
+    #: Why the scan could not be localized, or why its best candidate is not accepted.
     message: Optional[str]
+    #: Whether the best candidate passes the acceptance gate (``max_accept_cost_m``); the
+    #: candidates are listed either way, with confidence 0 when it does not.
+    accepted: bool
     #: The dict ``urbansem localize --json`` prints.
     report: Dict[str, Any] = field(repr=False, compare=False)
 
@@ -154,6 +157,7 @@ class LocalizeResult:
             confidence=d["confidence"],
             candidate_count=d["candidate_count"],
             message=d["message"],
+            accepted=d["accepted"],
             report=d,
         )
 

@@ -68,9 +68,9 @@ pub struct LocalizeOptions {
     pub distinct_m: f64,
     /// Poses turned more than this are distinct (confidence), radians.
     pub distinct_rad: f64,
-    /// The result is empty when the best candidate's symmetric cost exceeds this and its
-    /// d_DCM exceeds `max_accept_dcm_m`, metres (no pose explains the scan: it is probably
-    /// outside the map).
+    /// The best candidate is not accepted when its symmetric cost exceeds this and its
+    /// d_DCM exceeds `max_accept_dcm_m`, metres (no pose explains the scan well: it may be
+    /// outside the map); the candidates are kept, with confidence 0 and a message.
     pub max_accept_cost_m: f64,
     /// See `max_accept_cost_m`: a candidate whose segments lie on map edges (low d_DCM) is
     /// kept even when the visibility-aware costs are high (a building of the map missing in
@@ -211,8 +211,11 @@ pub struct Localization {
     pub filtered: FilterCounts,
     /// Branch-and-bound statistics.
     pub search: SearchStats,
-    /// Why the result is empty, when it is.
+    /// Why the result is empty or not accepted, when it is.
     pub message: Option<String>,
+    /// Whether the best candidate passes the acceptance gate
+    /// ([`LocalizeOptions::max_accept_cost_m`]); false without candidates.
+    pub accepted: bool,
     /// Seconds per stage.
     pub seconds: StageSeconds,
 }
@@ -234,6 +237,7 @@ impl Localization {
             filtered: FilterCounts::default(),
             search: SearchStats::default(),
             message: None,
+            accepted: false,
             seconds: StageSeconds::default(),
         }
     }
@@ -738,17 +742,22 @@ pub(crate) fn finish<'p>(
     if let Some(first) = cands.first_mut() {
         first.confidence = out.confidence;
     }
-    if let Some(best) = cands.first() {
-        if best.costs.symmetric > o.max_accept_cost_m && best.costs.dcm > o.max_accept_dcm_m {
+    let n_cands = cands.len();
+    if let Some(best) = cands.first_mut() {
+        out.accepted =
+            !(best.costs.symmetric > o.max_accept_cost_m && best.costs.dcm > o.max_accept_dcm_m);
+        if !out.accepted {
+            // Kept, not dropped: a car's scan of a real street sees mostly things no map
+            // holds (parked cars, hedges, trees), so its true pose can cost this much too.
             out.message = Some(format!(
-                "no pose explains the scan: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m ({} candidates dropped); the scan is probably outside the map",
+                "no pose explains the scan well: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m; the scan may be outside the map, or see mostly things the map does not hold; its {} candidates are kept with confidence 0",
                 best.costs.symmetric,
                 o.max_accept_cost_m,
                 best.costs.dcm,
                 o.max_accept_dcm_m,
-                cands.len()
+                n_cands
             ));
-            cands.clear();
+            best.confidence = 0.0;
             out.confidence = 0.0;
         }
     } else {
@@ -872,6 +881,7 @@ mod tests {
         assert!(best.pose.distance_to(&truth) < 0.3, "{best:?}");
         assert!(best.pose.yaw_error_to(&truth) < 0.01, "{best:?}");
         assert!(r.message.is_none());
+        assert!(r.accepted && r.confidence > 0.0, "{}", r.confidence);
     }
 
     /// Streets along x through the gaps between the rows of [`random_city`].
@@ -992,7 +1002,7 @@ mod tests {
     }
 
     #[test]
-    fn scan_of_a_place_outside_the_map_gives_an_empty_result_with_a_message() {
+    fn scan_of_a_place_outside_the_map_is_not_accepted_and_says_so() {
         let map = random_city(2);
         let mut options = LocalizeOptions::default();
         options.search.yaw_step_deg = 5.0;
@@ -1008,7 +1018,11 @@ mod tests {
             .map(|k| Segment::new(ring[k], ring[(k + 1) % 12]))
             .collect();
         let r = localizer.localize_points(&wall_points(&walls)).unwrap();
-        assert!(r.candidates.is_empty(), "{:?}", r.candidates.first());
+        // The candidates are kept for the user to judge, flagged: not accepted, confidence 0.
+        assert!(!r.accepted);
+        assert!(!r.candidates.is_empty());
+        assert_eq!(r.confidence, 0.0);
+        assert_eq!(r.candidates[0].confidence, 0.0);
         assert!(
             r.message
                 .as_deref()

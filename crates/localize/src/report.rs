@@ -127,8 +127,11 @@ pub struct LocalizeReport {
     pub filtered: FilterCounts,
     /// Search statistics.
     pub search: SearchStats,
-    /// Why the scan could not be localized, if so.
+    /// Why the scan could not be localized, or why its best candidate is not accepted.
     pub message: Option<String>,
+    /// Whether the best candidate passes the acceptance gate (`--max-accept-cost-m`); the
+    /// candidates are listed either way.
+    pub accepted: bool,
     /// Seconds.
     pub seconds: LocalizeSeconds,
     /// On a tiled map: the tiles searched.
@@ -201,6 +204,7 @@ impl LocalizeReport {
             filtered: result.filtered,
             search: result.search,
             message: result.message.clone(),
+            accepted: result.accepted,
             seconds: LocalizeSeconds {
                 load_map: load_map_seconds,
                 map_edges: prepared.edges,

@@ -350,8 +350,10 @@ pub struct ScanRow {
     pub top_costs: Option<Costs>,
     /// Per method, the rank (1 = top) of the first candidate within 2 m / 3° of the truth.
     pub first_accurate_rank: BTreeMap<String, Option<usize>>,
-    /// Why the scan could not be localized, if so.
+    /// Why the scan could not be localized, or why its best candidate is not accepted.
     pub message: Option<String>,
+    /// Whether the best candidate passes the acceptance gate.
+    pub accepted: bool,
     /// Seconds per stage.
     pub seconds: StageSeconds,
     /// Seconds of the hashing baseline.
@@ -397,6 +399,7 @@ impl ScanRow {
             top_costs: r.top_costs,
             first_accurate_rank,
             message: r.result.message.clone(),
+            accepted: r.result.accepted,
             seconds: r.result.seconds,
             hashing_seconds: r.hashing_seconds,
         }

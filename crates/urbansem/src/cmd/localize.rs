@@ -196,7 +196,7 @@ pub struct TrackArgs {
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
-    /// When no pose explains the scan.
+    /// When no pose explains the scan well.
     #[command(flatten)]
     pub gate: GateArgs,
 }
@@ -287,16 +287,17 @@ impl LevelArg {
     }
 }
 
-/// When the answer is "no pose explains the scan" (an empty candidate list): the best
-/// candidate's symmetric cost and its d_DCM both above their limits.
+/// When the answer is "no pose explains the scan well" (`"accepted": false`, confidence 0,
+/// a message; the candidates are still listed): the best candidate's symmetric cost and its
+/// d_DCM both above their limits.
 #[derive(Args, Clone)]
 pub struct GateArgs {
-    /// Largest symmetric cost of an answer, metres (unless its d_DCM is below
-    /// --max-accept-dcm-m); `inf` never refuses.
+    /// Largest symmetric cost of an accepted answer, metres (unless its d_DCM is below
+    /// --max-accept-dcm-m); `inf` accepts every answer.
     #[arg(long, default_value_t = LocalizeOptions::default().max_accept_cost_m)]
     pub max_accept_cost_m: f64,
-    /// Largest d_DCM of an answer, metres (unless its symmetric cost is below
-    /// --max-accept-cost-m); `inf` never refuses.
+    /// Largest d_DCM of an accepted answer, metres (unless its symmetric cost is below
+    /// --max-accept-cost-m); `inf` accepts every answer.
     #[arg(long, default_value_t = LocalizeOptions::default().max_accept_dcm_m)]
     pub max_accept_dcm_m: f64,
     /// Most poses kept from the search, the cheapest (0: every pose within the keep factor
@@ -528,7 +529,7 @@ pub struct RunArgs {
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
-    /// When no pose explains the scan.
+    /// When no pose explains the scan well.
     #[command(flatten)]
     pub gate: GateArgs,
 }
@@ -615,7 +616,7 @@ pub struct EvalArgs {
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
-    /// When no pose explains the scan.
+    /// When no pose explains the scan well.
     #[command(flatten)]
     pub gate: GateArgs,
 }
