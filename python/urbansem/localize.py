@@ -135,7 +135,7 @@ class LocalizeResult:
     #: Why the scan could not be localized, or why its best candidate is not accepted.
     message: Optional[str]
     #: Whether the best candidate passes the acceptance gate (``max_accept_cost_m``); the
-    #: candidates are listed either way, with confidence 0 when it does not.
+    #: candidates and their confidence are listed either way.
     accepted: bool
     #: The dict ``urbansem localize --json`` prints.
     report: Dict[str, Any] = field(repr=False, compare=False)

@@ -70,7 +70,7 @@ pub struct LocalizeOptions {
     pub distinct_rad: f64,
     /// The best candidate is not accepted when its symmetric cost exceeds this and its
     /// d_DCM exceeds `max_accept_dcm_m`, metres (no pose explains the scan well: it may be
-    /// outside the map); the candidates are kept, with confidence 0 and a message.
+    /// outside the map); the candidates and their confidence are kept, with a message.
     pub max_accept_cost_m: f64,
     /// See `max_accept_cost_m`: a candidate whose segments lie on map edges (low d_DCM) is
     /// kept even when the visibility-aware costs are high (a building of the map missing in
@@ -742,23 +742,20 @@ pub(crate) fn finish<'p>(
     if let Some(first) = cands.first_mut() {
         first.confidence = out.confidence;
     }
-    let n_cands = cands.len();
-    if let Some(best) = cands.first_mut() {
+    if let Some(best) = cands.first() {
         out.accepted =
             !(best.costs.symmetric > o.max_accept_cost_m && best.costs.dcm > o.max_accept_dcm_m);
         if !out.accepted {
             // Kept, not dropped: a car's scan of a real street sees mostly things no map
             // holds (parked cars, hedges, trees), so its true pose can cost this much too.
             out.message = Some(format!(
-                "no pose explains the scan well: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m; the scan may be outside the map, or see mostly things the map does not hold; its {} candidates are kept with confidence 0",
+                "no pose explains the scan well: the best candidate's symmetric cost is {:.2} m > {:.2} m and its d_DCM {:.2} m > {:.2} m; the scan may be outside the map, or see mostly things the map does not hold; its {} candidates are kept",
                 best.costs.symmetric,
                 o.max_accept_cost_m,
                 best.costs.dcm,
                 o.max_accept_dcm_m,
-                n_cands
+                cands.len()
             ));
-            best.confidence = 0.0;
-            out.confidence = 0.0;
         }
     } else {
         out.message = Some(format!(
@@ -1018,11 +1015,11 @@ mod tests {
             .map(|k| Segment::new(ring[k], ring[(k + 1) % 12]))
             .collect();
         let r = localizer.localize_points(&wall_points(&walls)).unwrap();
-        // The candidates are kept for the user to judge, flagged: not accepted, confidence 0.
+        // The candidates are kept for the user to judge, flagged: not accepted. Their
+        // confidence (the margin to the next distinct pose) is the search's, not the gate's.
         assert!(!r.accepted);
         assert!(!r.candidates.is_empty());
-        assert_eq!(r.confidence, 0.0);
-        assert_eq!(r.candidates[0].confidence, 0.0);
+        assert_eq!(r.candidates[0].confidence, r.confidence);
         assert!(
             r.message
                 .as_deref()

@@ -287,8 +287,8 @@ impl LevelArg {
     }
 }
 
-/// When the answer is "no pose explains the scan well" (`"accepted": false`, confidence 0,
-/// a message; the candidates are still listed): the best candidate's symmetric cost and its
+/// When the answer is "no pose explains the scan well" (`"accepted": false` and a message;
+/// the candidates and their confidence are still listed): the best candidate's symmetric cost and its
 /// d_DCM both above their limits.
 #[derive(Args, Clone)]
 pub struct GateArgs {
