@@ -213,8 +213,9 @@ pub struct Localization {
     pub search: SearchStats,
     /// Why the result is empty or not accepted, when it is.
     pub message: Option<String>,
-    /// Whether the best candidate passes the acceptance gate
-    /// ([`LocalizeOptions::max_accept_cost_m`]); false without candidates.
+    /// Whether the best candidate of the scan's own search passes the acceptance gate
+    /// ([`LocalizeOptions::max_accept_cost_m`]); false without candidates. Track mode
+    /// re-ranks the candidates and leaves it as the search set it.
     pub accepted: bool,
     /// Seconds per stage.
     pub seconds: StageSeconds,

@@ -352,7 +352,8 @@ pub struct ScanRow {
     pub first_accurate_rank: BTreeMap<String, Option<usize>>,
     /// Why the scan could not be localized, or why its best candidate is not accepted.
     pub message: Option<String>,
-    /// Whether the best candidate passes the acceptance gate.
+    /// Whether the best candidate of the scan's own search passes the acceptance gate (in
+    /// track mode too, where the chains re-rank the candidates).
     pub accepted: bool,
     /// Seconds per stage.
     pub seconds: StageSeconds,

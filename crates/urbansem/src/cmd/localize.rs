@@ -288,8 +288,8 @@ impl LevelArg {
 }
 
 /// When the answer is "no pose explains the scan well" (`"accepted": false` and a message;
-/// the candidates and their confidence are still listed): the best candidate's symmetric cost and its
-/// d_DCM both above their limits.
+/// the candidates and their confidence are still listed): the best candidate's symmetric
+/// cost and its d_DCM both above their limits.
 #[derive(Args, Clone)]
 pub struct GateArgs {
     /// Largest symmetric cost of an accepted answer, metres (unless its d_DCM is below
