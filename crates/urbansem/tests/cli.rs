@@ -868,6 +868,7 @@ fn tiled_map_localizes_as_the_whole_map() {
             "top1",
             "top_costs",
             "first_accurate_rank",
+            "own_ranking",
             "raw_poses",
             "candidates",
             "confidence",

@@ -151,6 +151,15 @@ impl ScanOutcome {
     }
 }
 
+/// A scan's result in the localizer's own order of its candidates.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OwnRanking {
+    /// Error of the first candidate (NaN without one).
+    pub top1: Top1Error,
+    /// Rank (1 = top) of the first candidate within 2 m / 3° of the truth.
+    pub first_accurate_rank: Option<usize>,
+}
+
 /// Error of a top-1 pose.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Top1Error {
@@ -350,6 +359,9 @@ pub struct ScanRow {
     pub top_costs: Option<Costs>,
     /// Per method, the rank (1 = top) of the first candidate within 2 m / 3° of the truth.
     pub first_accurate_rank: BTreeMap<String, Option<usize>>,
+    /// The localizer's own order of the candidates (in track mode the chains' ranking, which
+    /// the per-cost fields above re-sort; otherwise the default cost's).
+    pub own_ranking: OwnRanking,
     /// Why the scan could not be localized, or why its best candidate is not accepted.
     pub message: Option<String>,
     /// Whether the best candidate of the scan's own search passes the acceptance gate (in
@@ -380,6 +392,23 @@ impl ScanRow {
                 (m.name().to_owned(), rank)
             })
             .collect();
+        let own = &r.result.candidates;
+        let own_ranking = OwnRanking {
+            top1: own.first().map_or(
+                Top1Error {
+                    error_m: f64::NAN,
+                    error_deg: f64::NAN,
+                },
+                |c| Top1Error {
+                    error_m: c.pose.distance_to(&r.truth),
+                    error_deg: c.pose.yaw_error_to(&r.truth).to_degrees(),
+                },
+            ),
+            first_accurate_rank: own
+                .iter()
+                .position(|c| strict.accepts(&c.pose, &r.truth))
+                .map(|k| k + 1),
+        };
         ScanRow {
             scan: r.name.clone(),
             truth: TruthRow {
@@ -399,6 +428,7 @@ impl ScanRow {
             top1,
             top_costs: r.top_costs,
             first_accurate_rank,
+            own_ranking,
             message: r.result.message.clone(),
             accepted: r.result.accepted,
             seconds: r.result.seconds,
@@ -1068,6 +1098,53 @@ mod tests {
         assert_eq!(row.first_accurate_rank["reverse"], Some(3));
         assert_eq!(row.first_accurate_rank["hashing"], Some(2));
         assert_eq!(row.first_accurate_rank["dcm"], None);
+    }
+
+    #[test]
+    fn the_own_ranking_keeps_the_localizer_order_the_cost_fields_resort() {
+        let truth = Pose2 {
+            x: 10.0,
+            y: 20.0,
+            yaw_rad: 0.5,
+        };
+        let candidate = |dx: f64, symmetric: f64| crate::pipeline::Candidate {
+            pose: Pose2 {
+                x: truth.x + dx,
+                ..truth
+            },
+            costs: Costs {
+                dcm: symmetric,
+                forward: symmetric,
+                reverse: symmetric,
+                symmetric,
+            },
+            refined: true,
+            confidence: 0.0,
+        };
+        // A track ranks the accurate candidate second although it is the cheapest.
+        let mut result = Localization::empty(CostKind::Symmetric);
+        result.candidates = vec![candidate(6.0, 1.5), candidate(0.5, 1.0)];
+        let row = ScanRow::new(&ScanOutcome::new(
+            "s".into(),
+            truth,
+            result,
+            Vec::new(),
+            0.0,
+        ));
+        assert_eq!(row.first_accurate_rank["symmetric"], Some(1));
+        assert_eq!(row.own_ranking.first_accurate_rank, Some(2));
+        assert!((row.own_ranking.top1.error_m - 6.0).abs() < 1e-12);
+        assert_eq!(row.own_ranking.top1.error_deg, 0.0);
+        let empty = ScanOutcome::new(
+            "e".into(),
+            truth,
+            Localization::empty(CostKind::Symmetric),
+            Vec::new(),
+            0.0,
+        );
+        let row = ScanRow::new(&empty);
+        assert_eq!(row.own_ranking.first_accurate_rank, None);
+        assert!(row.own_ranking.top1.error_m.is_nan());
     }
 
     #[test]
