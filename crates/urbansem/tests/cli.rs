@@ -2010,6 +2010,21 @@ fn real_car_scans_as_tracks_on_facade_maps_of_the_other_half() {
         );
         let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
         let t = &v["track"];
+        // The per-scan rows in the track's own order agree with the track counts.
+        let after: Vec<&serde_json::Value> =
+            v["per_scan"].as_array().unwrap().iter().skip(4).collect();
+        let own_within = |n: u64| {
+            after
+                .iter()
+                .filter(|r| {
+                    r["own_ranking"]["first_accurate_rank"]
+                        .as_u64()
+                        .is_some_and(|k| k <= n)
+                })
+                .count() as u64
+        };
+        assert_eq!(own_within(1), t["top1_within_2m_3deg"].as_u64().unwrap());
+        assert_eq!(own_within(10), t["top10_within_2m_3deg"].as_u64().unwrap());
         found.push((
             t["top1_within_2m_3deg"].as_u64().unwrap(),
             t["scans_after_first_window"].as_u64().unwrap(),
