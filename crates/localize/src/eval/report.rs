@@ -138,7 +138,12 @@ impl ScanOutcome {
 
     /// Position (m) and heading (°) error of `method`'s top pose (NaN without one).
     pub fn top1_error(&self, method: RankMethod) -> Top1Error {
-        self.ranked_by(method).first().map_or(
+        self.error_of(self.ranked_by(method).first())
+    }
+
+    /// Position (m) and heading (°) error of a pose (NaN without one).
+    fn error_of(&self, pose: Option<&Pose2>) -> Top1Error {
+        pose.map_or(
             Top1Error {
                 error_m: f64::NAN,
                 error_deg: f64::NAN,
@@ -148,6 +153,23 @@ impl ScanOutcome {
                 error_deg: p.yaw_error_to(&self.truth).to_degrees(),
             },
         )
+    }
+
+    /// Rank (1 = top) of the first of `poses` within 2 m / 3° of the truth.
+    fn first_accurate_rank<'p>(&self, poses: impl IntoIterator<Item = &'p Pose2>) -> Option<usize> {
+        poses
+            .into_iter()
+            .position(|p| Accuracy::STRICT.accepts(p, &self.truth))
+            .map(|k| k + 1)
+    }
+
+    /// The result in the localizer's own order of its candidates.
+    pub fn own_ranking(&self) -> OwnRanking {
+        let own = &self.result.candidates;
+        OwnRanking {
+            top1: self.error_of(own.first().map(|c| &c.pose)),
+            first_accurate_rank: self.first_accurate_rank(own.iter().map(|c| &c.pose)),
+        }
     }
 }
 
@@ -380,35 +402,10 @@ impl ScanRow {
             .iter()
             .map(|&m| (m.name().to_owned(), r.top1_error(m)))
             .collect();
-        let strict = Accuracy::STRICT;
         let first_accurate_rank = RankMethod::ALL
             .iter()
-            .map(|&m| {
-                let rank = r
-                    .ranked_by(m)
-                    .iter()
-                    .position(|p| strict.accepts(p, &r.truth))
-                    .map(|k| k + 1);
-                (m.name().to_owned(), rank)
-            })
+            .map(|&m| (m.name().to_owned(), r.first_accurate_rank(r.ranked_by(m))))
             .collect();
-        let own = &r.result.candidates;
-        let own_ranking = OwnRanking {
-            top1: own.first().map_or(
-                Top1Error {
-                    error_m: f64::NAN,
-                    error_deg: f64::NAN,
-                },
-                |c| Top1Error {
-                    error_m: c.pose.distance_to(&r.truth),
-                    error_deg: c.pose.yaw_error_to(&r.truth).to_degrees(),
-                },
-            ),
-            first_accurate_rank: own
-                .iter()
-                .position(|c| strict.accepts(&c.pose, &r.truth))
-                .map(|k| k + 1),
-        };
         ScanRow {
             scan: r.name.clone(),
             truth: TruthRow {
@@ -428,7 +425,7 @@ impl ScanRow {
             top1,
             top_costs: r.top_costs,
             first_accurate_rank,
-            own_ranking,
+            own_ranking: r.own_ranking(),
             message: r.result.message.clone(),
             accepted: r.result.accepted,
             seconds: r.result.seconds,
@@ -673,11 +670,7 @@ impl EvalReport {
             let after: Vec<&ScanOutcome> =
                 records.iter().skip(t.window.saturating_sub(1)).collect();
             let within = |r: &ScanOutcome, n: usize| {
-                r.result
-                    .candidates
-                    .iter()
-                    .take(n)
-                    .any(|c| strict.accepts(&c.pose, &r.truth))
+                r.own_ranking().first_accurate_rank.is_some_and(|k| k <= n)
             };
             TrackCounts {
                 window: t.window,
