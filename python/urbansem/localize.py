@@ -343,14 +343,16 @@ class Localizer:
         names: Optional[Sequence[str]] = None,
         relative: bool = False,
         history_m: float = 300.0,
+        causal: bool = False,
     ) -> List[TrackRow]:
-        """Localizes every scan with the window of ``window`` scans ending at it, tied by
-        odometry: one pose per scan in any odometry frame, as (m, 3) ``x, y, yaw`` rows (the
+        """Localizes every scan with the windows of ``window`` scans before and after it, tied
+        by odometry: one pose per scan in any odometry frame, as (m, 3) ``x, y, yaw`` rows (the
         lines of ``localize track --odometry``) or (m, 4, 4) matrices, or with ``relative``
         the m − 1 steps between consecutive scans (each in the previous scan's frame); one
         row per scan, as ``urbansem localize track --json`` lists them. ``history_m``: the
         odometry distance before the window through which a chain's consistency still counts
-        (``localize track --history-m``)."""
+        (``localize track --history-m``). ``causal``: rank each scan by the scans before it
+        only, as a robot driving would (``localize track --causal``)."""
         arrays = [_points(s, f"scans[{i}]") for i, s in enumerate(scans)]
         rows = self._native.track(
             arrays,
@@ -359,6 +361,7 @@ class Localizer:
             top=top,
             names=list(names) if names is not None else None,
             history_m=history_m,
+            causal=causal,
         )
         return [TrackRow.from_dict(_json(r), self.cost) for r in rows]
 

@@ -327,6 +327,7 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         odometry: "drifted truth".into(),
         window: WINDOW,
         history_m: localize::track::TRACK_HISTORY_M,
+        smoothed: localize::track::TrackOptions::default().smooth,
         cost: results
             .first()
             .map_or(LocalizeOptions::default().rank_by, |r| r.rank_by)

@@ -231,6 +231,7 @@ pub(crate) mod tests {
             odometry: "odo.txt".into(),
             window: 3,
             history_m: crate::track::TRACK_HISTORY_M,
+            smoothed: true,
             cost: "reverse",
             scans: vec![
                 row(0, Some(candidate(map, 0, 0.0, 0.0, 0.1))),

@@ -280,6 +280,8 @@ pub struct TrackJob {
     pub window: usize,
     /// Odometry distance before the window through which chains still count, metres.
     pub history_m: f64,
+    /// Whether the scans after each scan count too ([`TrackOptions::smooth`]).
+    pub smooth: bool,
     /// The localizer's options.
     pub options: LocalizeOptions,
     /// Candidates listed per scan.
@@ -328,6 +330,7 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
     let track = TrackOptions {
         window: job.window,
         history_m: job.history_m,
+        smooth: job.smooth,
         ..Default::default()
     };
     let scans = track_rows(&localizer, &names, &extracted, &odometry, &track, job.top)?;
@@ -338,6 +341,7 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
         odometry: job.odometry.display().to_string(),
         window: job.window,
         history_m: job.history_m,
+        smoothed: job.smooth,
         cost: job.options.rank_by.name(),
         scans,
         seconds: TrackSeconds {
@@ -370,6 +374,8 @@ pub struct BagTrackJob {
     pub window: usize,
     /// Odometry distance before the window through which chains still count, metres.
     pub history_m: f64,
+    /// Whether the scans after each scan count too ([`TrackOptions::smooth`]).
+    pub smooth: bool,
     /// The localizer's options.
     pub options: LocalizeOptions,
     /// Candidates listed per scan.
@@ -464,6 +470,7 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
     let track = TrackOptions {
         window: job.window,
         history_m: job.history_m,
+        smooth: job.smooth,
         ..Default::default()
     };
     let scans = track_rows(&localizer, &names, &extracted, &odometry, &track, job.top)?;
@@ -474,6 +481,7 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
         odometry: format!("{} {}", job.bag.display(), job.odometry_topic),
         window: job.window,
         history_m: job.history_m,
+        smoothed: job.smooth,
         cost: job.options.rank_by.name(),
         seconds: TrackSeconds {
             total: seconds,

@@ -297,6 +297,8 @@ pub struct TrackReport {
     pub window: usize,
     /// Odometry distance before the window through which chains still count, metres.
     pub history_m: f64,
+    /// Whether the scans after each scan counted too (`--causal`: only those before it).
+    pub smoothed: bool,
     /// The cost that ranks the candidates.
     pub cost: &'static str,
     /// One row per scan, in file-name order.

@@ -17,6 +17,15 @@
 //! dictate. A first version searched the window's segments as one scan (slower, and its
 //! top-1 was worse: README).
 //!
+//! Smoothing ([`TrackOptions::smooth`], the default): a batch of scans is also passed
+//! backward (the scans reversed, each odometry step inverted), so each scan gets states
+//! carried back from the scan after it too, and every state is ranked by the best chain
+//! through it, the chain ending at it joined to the chain starting at it over the merged
+//! states (`smoothed_chains`). Links are judged forward in time in both directions: a long
+//! step with a few degrees of odometry turn predicts the later pose well but swings the
+//! inverted prediction of the earlier one beyond the gate. On the real KITTI-360 tracks it
+//! mends the first scans, where no chain has settled (README).
+//!
 //! Odometry files have one line per scan, `x_m y_m yaw_rad` (optionally preceded by the scan
 //! file name, which must then match), in any local frame; `#` starts a comment.
 
@@ -167,6 +176,10 @@ pub struct TrackOptions {
     /// state of the scan at the cost measured there, so a chain outlives a scan that none of
     /// the scan's own or refined states continues (a missed detection).
     pub coast: bool,
+    /// Whether later scans count too (a batch of scans, not a robot driving): the pass runs
+    /// forward and backward, and each scan's states (both passes') are ranked by the best
+    /// chain through them over the scans before and after ([`Localizer::localize_track`]).
+    pub smooth: bool,
 }
 
 impl Default for TrackOptions {
@@ -181,6 +194,7 @@ impl Default for TrackOptions {
             gate_rad: 3f64.to_radians(),
             gate_rad_per_m: 4f64.to_radians() / 50.0,
             coast: true,
+            smooth: true,
         }
     }
 }
@@ -217,7 +231,80 @@ impl Localizer<'_> {
             .par_iter()
             .map(|scan| self.localize_free(&scan.segments))
             .collect();
-        Ok(self.track_pass(scans, singles, odometry, options))
+        if !options.smooth {
+            return Ok(self.track_pass(scans, singles, odometry, options));
+        }
+        // Smoothing: the same pass over the scans in reverse order (each odometry step
+        // inverted) gives every scan the states carried back from the scans after it.
+        let own_refine: Vec<f64> = singles.iter().map(|s| s.seconds.refine).collect();
+        let forward = self.track_pass(scans, singles.clone(), odometry, options);
+        let reversed: Vec<ScanSegments> = scans.iter().rev().cloned().collect();
+        let odometry_reversed: Vec<Pose2> = odometry.iter().rev().copied().collect();
+        let mut backward = self.track_pass(
+            &reversed,
+            singles.into_iter().rev().collect(),
+            &odometry_reversed,
+            options,
+        );
+        backward.reverse();
+        Ok(self.smooth_pass(forward, backward, &own_refine, odometry, options))
+    }
+
+    /// Ranks every scan's states (the forward and the backward pass's, merged) by the best
+    /// gated chain through them: the chain ending at the state over the scans before it and
+    /// the chain starting at it over the scans after it, each found by a Viterbi pass over the
+    /// merged states and capped as one pass's chains are; the longer combined chain first,
+    /// then the smaller mean cost over the two windows.
+    fn smooth_pass(
+        &self,
+        forward: Vec<Localization>,
+        backward: Vec<Localization>,
+        own_refine: &[f64],
+        odometry: &[Pose2],
+        options: &TrackOptions,
+    ) -> Vec<Localization> {
+        let t = std::time::Instant::now();
+        let o = &self.options;
+        let states: Vec<Vec<Candidate>> = forward
+            .iter()
+            .zip(&backward)
+            .map(|(f, b)| {
+                let mut merged = f.candidates.clone();
+                for c in &b.candidates {
+                    if !merged.iter().any(|m| {
+                        m.pose.distance_to(&c.pose) <= SAME_POSE_M
+                            && m.pose.yaw_error_to(&c.pose) <= SAME_POSE_RAD
+                    }) {
+                        merged.push(*c);
+                    }
+                }
+                merged
+            })
+            .collect();
+        let through = smoothed_chains(&states, odometry, self.options.rank_by, options);
+        let seconds = t.elapsed().as_secs_f64() / forward.len().max(1) as f64;
+        forward
+            .into_iter()
+            .zip(backward)
+            .enumerate()
+            .map(|(i, (mut result, back))| {
+                let through = &through[i];
+                let mut order: Vec<usize> = (0..states[i].len()).collect();
+                order.sort_by(|&x, &y| through[x].better(&through[y]));
+                let chain: Vec<f64> = order.iter().map(|&s| through[s].mean_cost()).collect();
+                set_ranked(
+                    &mut result,
+                    order.iter().map(|&s| states[i][s]).collect(),
+                    &chain,
+                    o,
+                );
+                // Both passes' track time (the scan's own search counted once).
+                let extra = (back.seconds.refine - own_refine[i]).max(0.0) + seconds;
+                result.seconds.refine += extra;
+                result.seconds.total += extra;
+                result
+            })
+            .collect()
     }
 
     /// The track pass of [`Localizer::localize_track`] on every scan's own search result
@@ -233,14 +320,7 @@ impl Localizer<'_> {
         let mut out: Vec<Localization> = Vec::with_capacity(scans.len());
         let mut states: Vec<Vec<Candidate>> = Vec::with_capacity(scans.len());
         let mut chains: Vec<Chain> = Vec::new();
-        // Odometry distance travelled up to each scan.
-        let travelled: Vec<f64> = std::iter::once(0.0)
-            .chain(odometry.windows(2).scan(0.0, |d, w| {
-                let step = w[0].inverse().compose(&w[1]);
-                *d += step.x.hypot(step.y);
-                Some(*d)
-            }))
-            .collect();
+        let travelled = travelled_m(odometry);
         for (i, (scan, single)) in scans.iter().zip(singles).enumerate() {
             let segs = &scan.segments;
             let t = std::time::Instant::now();
@@ -319,6 +399,7 @@ impl Localizer<'_> {
                 cap,
                 self.options.rank_by,
                 options,
+                false,
             );
             let mut order: Vec<usize> = (0..states[i].len()).collect();
             order.sort_by(|&a, &b| chains[a].better(&chains[b]));
@@ -338,21 +419,8 @@ impl Localizer<'_> {
                         .into(),
                 );
             }
-            result.candidates = ranked;
-            let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
-            // Confidence from the chains' mean costs over the window (lower is better).
-            let chain: Vec<f64> = result.candidates.iter().map(|c| c.confidence).collect();
-            result.confidence = if chain.is_empty() {
-                0.0
-            } else {
-                confidence(&chain, &poses, o.distinct_m, o.distinct_rad)
-            };
-            for c in &mut result.candidates {
-                c.confidence = 0.0;
-            }
-            if let Some(first) = result.candidates.first_mut() {
-                first.confidence = result.confidence;
-            }
+            let chain: Vec<f64> = ranked.iter().map(|c| c.confidence).collect();
+            set_ranked(&mut result, ranked, &chain, o);
             result.seconds.refine += t.elapsed().as_secs_f64();
             result.seconds.total += t.elapsed().as_secs_f64();
             result.record_extraction(scan);
@@ -360,6 +428,84 @@ impl Localizer<'_> {
         }
         out
     }
+}
+
+/// Sets a scan's candidates in their ranked order, with the confidence from their chains'
+/// mean costs (`chain`, in the same order; lower is better) on the result and its first
+/// candidate.
+fn set_ranked(
+    result: &mut Localization,
+    ranked: Vec<Candidate>,
+    chain: &[f64],
+    o: &crate::pipeline::LocalizeOptions,
+) {
+    result.candidates = ranked;
+    let poses: Vec<Pose2> = result.candidates.iter().map(|c| c.pose).collect();
+    result.confidence = if chain.is_empty() {
+        0.0
+    } else {
+        confidence(chain, &poses, o.distinct_m, o.distinct_rad)
+    };
+    for c in &mut result.candidates {
+        c.confidence = 0.0;
+    }
+    if let Some(first) = result.candidates.first_mut() {
+        first.confidence = result.confidence;
+    }
+}
+
+/// The best gated chain ending in each state of each scan (a Viterbi pass over fixed
+/// states, one odometry pose per scan; `reversed`: the scans and odometry run backward in
+/// time, [`extend_chains`]).
+fn viterbi(
+    states: &[Vec<Candidate>],
+    odometry: &[Pose2],
+    kind: CostKind,
+    options: &TrackOptions,
+    reversed: bool,
+) -> Vec<Vec<Chain>> {
+    let travelled = travelled_m(odometry);
+    let mut out: Vec<Vec<Chain>> = Vec::with_capacity(states.len());
+    for i in 0..states.len() {
+        let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
+        let cap = chain_cap(&travelled, i, options);
+        let prev: &[Chain] = out.last().map_or(&[], |v| v.as_slice());
+        let next = extend_chains(states, prev, step, i, cap, kind, options, reversed);
+        out.push(next);
+    }
+    out
+}
+
+/// The best gated chain through each state of each scan: the chain ending at it (over the
+/// scans before) joined to the chain starting at it (over the scans after), each from a
+/// Viterbi pass over the same states and links ([`Chain::joined`]).
+fn smoothed_chains(
+    states: &[Vec<Candidate>],
+    odometry: &[Pose2],
+    kind: CostKind,
+    options: &TrackOptions,
+) -> Vec<Vec<Chain>> {
+    let before = viterbi(states, odometry, kind, options, false);
+    let states_reversed: Vec<Vec<Candidate>> = states.iter().rev().cloned().collect();
+    let odometry_reversed: Vec<Pose2> = odometry.iter().rev().copied().collect();
+    let mut after = viterbi(&states_reversed, &odometry_reversed, kind, options, true);
+    after.reverse();
+    before
+        .iter()
+        .zip(&after)
+        .map(|(b, a)| b.iter().zip(a).map(|(b, a)| b.joined(a)).collect())
+        .collect()
+}
+
+/// Odometry distance travelled up to each scan, metres.
+fn travelled_m(odometry: &[Pose2]) -> Vec<f64> {
+    std::iter::once(0.0)
+        .chain(odometry.windows(2).scan(0.0, |d, w| {
+            let step = w[0].inverse().compose(&w[1]);
+            *d += step.x.hypot(step.y);
+            Some(*d)
+        }))
+        .collect()
 }
 
 /// The longest chain length counted at scan i: the window's scans and those within the
@@ -380,7 +526,11 @@ fn chain_cap(travelled: &[f64], i: usize, options: &TrackOptions) -> usize {
 
 /// The best chain ending in each state of scan i, extending the chains of scan i − 1
 /// (`prev`, one per state of `states[i - 1]`) by the odometry `step` within the gates;
-/// lengths are capped at `cap` scans, costs (of `kind`) kept over the window.
+/// lengths are capped at `cap` scans, costs (of `kind`) kept over the window. `reversed`:
+/// the scans run backward in time (`step` is an inverted odometry step), and each link is
+/// still judged forward in time, from the earlier state to the later one, so both passes
+/// of a smoothed track agree on which states are linked.
+#[allow(clippy::too_many_arguments)]
 fn extend_chains(
     states: &[Vec<Candidate>],
     prev: &[Chain],
@@ -389,6 +539,7 @@ fn extend_chains(
     cap: usize,
     kind: CostKind,
     options: &TrackOptions,
+    reversed: bool,
 ) -> Vec<Chain> {
     let window = options.window.max(1);
     states[i]
@@ -400,8 +551,15 @@ fn extend_chains(
                 recent: vec![own],
             };
             let Some(step) = step else { return best };
+            let forward_step = if reversed { step.inverse() } else { step };
             for (p, chain) in states[i - 1].iter().zip(prev) {
-                if !within_gates(&p.pose.compose(&step), &c.pose, &step, options) {
+                let (earlier, later) = if reversed { (c, p) } else { (p, c) };
+                if !within_gates(
+                    &earlier.pose.compose(&forward_step),
+                    &later.pose,
+                    &forward_step,
+                    options,
+                ) {
                     continue;
                 }
                 let keep = chain.recent.len().min(window - 1);
@@ -444,6 +602,18 @@ impl Chain {
         self.recent.iter().sum::<f64>() / self.recent.len().max(1) as f64
     }
 
+    /// The chain through one state: `self` ending at it and `after` starting at it (both
+    /// hold the state's own cost last).
+    fn joined(&self, after: &Chain) -> Chain {
+        let mut recent = self.recent.clone();
+        let n = after.recent.len().saturating_sub(1);
+        recent.extend(after.recent[..n].iter().rev());
+        Chain {
+            length: self.length + after.length.saturating_sub(1),
+            recent,
+        }
+    }
+
     /// Longer chains first; among equals, the cheaper over the window.
     fn better(&self, other: &Chain) -> std::cmp::Ordering {
         other
@@ -459,6 +629,21 @@ mod tests {
 
     fn p(x: f64, y: f64, yaw_rad: f64) -> Pose2 {
         Pose2 { x, y, yaw_rad }
+    }
+
+    /// A refined state heading east at (x, y) with every cost `cost`.
+    fn cand(x: f64, y: f64, cost: f64) -> Candidate {
+        Candidate {
+            pose: p(x, y, 0.0),
+            costs: crate::rank::Costs {
+                dcm: cost,
+                forward: cost,
+                reverse: cost,
+                symmetric: cost,
+            },
+            refined: true,
+            confidence: 0.0,
+        }
     }
 
     #[test]
@@ -514,17 +699,6 @@ mod tests {
             history_m,
             ..Default::default()
         };
-        let cand = |x: f64, y: f64, cost: f64| Candidate {
-            pose: p(x, y, 0.0),
-            costs: crate::rank::Costs {
-                dcm: cost,
-                forward: cost,
-                reverse: cost,
-                symmetric: cost,
-            },
-            refined: true,
-            confidence: 0.0,
-        };
         let odometry: Vec<Pose2> = (0..8).map(|i| p(10.0 * i as f64, 0.0, 0.0)).collect();
         let travelled: Vec<f64> = (0..8).map(|i| 10.0 * i as f64).collect();
         let mut states = Vec::new();
@@ -538,7 +712,16 @@ mod tests {
             states.push(here);
             let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
             let cap = chain_cap(&travelled, i, &options);
-            chains = extend_chains(&states, &chains, step, i, cap, CostKind::Reverse, &options);
+            chains = extend_chains(
+                &states,
+                &chains,
+                step,
+                i,
+                cap,
+                CostKind::Reverse,
+                &options,
+                false,
+            );
         }
         (states.pop().unwrap(), chains)
     }
@@ -566,6 +749,62 @@ mod tests {
         let travelled: Vec<f64> = (0..8).map(|i| 10.0 * i as f64).collect();
         assert_eq!(chain_cap(&travelled, 7, &options), 6);
         assert_eq!(chain_cap(&travelled, 1, &options), 3);
+    }
+
+    /// Scans 0–7 along x in 10 m steps: the truth (cost 0.3) at every scan, and a decoy 50 m
+    /// to the side (cost 0.1) at scans 0–2 only. Ranked by the scans before each scan, the
+    /// decoy wins scans 0–2 (as long a chain, cheaper); smoothed, the truth's chain runs on
+    /// through scan 7 and wins every scan.
+    #[test]
+    fn smoothing_lets_later_scans_settle_the_first_ones() {
+        let odometry: Vec<Pose2> = (0..8).map(|i| p(10.0 * i as f64, 0.0, 0.0)).collect();
+        let states: Vec<Vec<Candidate>> = (0..8)
+            .map(|i| {
+                let x = 10.0 * i as f64;
+                let mut here = vec![cand(x, 0.0, 0.3)];
+                if i <= 2 {
+                    here.push(cand(x, 50.0, 0.1));
+                }
+                here
+            })
+            .collect();
+        let options = TrackOptions {
+            window: 3,
+            ..Default::default()
+        };
+        let kind = CostKind::Symmetric;
+        let causal = viterbi(&states, &odometry, kind, &options, false);
+        for (i, chains) in causal.iter().enumerate().take(3) {
+            assert!(chains[1].better(&chains[0]).is_lt(), "scan {i}");
+        }
+        let smoothed = smoothed_chains(&states, &odometry, kind, &options);
+        for (i, chains) in smoothed.iter().enumerate() {
+            assert_eq!(chains[0].length, 8, "scan {i}: {chains:?}");
+            if i <= 2 {
+                assert_eq!(chains[1].length, 3, "scan {i}: {chains:?}");
+                assert!(chains[0].better(&chains[1]).is_lt(), "scan {i}");
+            }
+        }
+        // The joined chain holds each state's cost once: the window before and after it.
+        assert_eq!(smoothed[4][0].recent.len(), 5);
+        assert!((smoothed[4][0].mean_cost() - 0.3).abs() < 1e-12);
+        // A link is judged forward in time in both passes: the backward pass links the same
+        // pairs as the forward one. A 200 m step whose odometry turns 5° too far predicts the
+        // later scan's pose well (the error is in its heading, within the yaw gate), while its
+        // inverse swings the earlier scan's prediction 17 m sideways, beyond the 11.5 m gate.
+        let odometry = [
+            p(0.0, 0.0, 0.0),
+            p(40.0, 0.0, 0.0),
+            p(240.0, 0.0, 5f64.to_radians()),
+        ];
+        let states: Vec<Vec<Candidate>> = [0.0, 40.0, 240.0]
+            .iter()
+            .map(|&x| vec![cand(x, 0.0, 0.2)])
+            .collect();
+        let smoothed = smoothed_chains(&states, &odometry, kind, &options);
+        for (i, chains) in smoothed.iter().enumerate() {
+            assert_eq!(chains[0].length, 3, "scan {i}");
+        }
     }
 
     #[test]

@@ -328,7 +328,7 @@ impl PyLocalizer {
     /// Localizes a track: scans (each `(n, 3)` float64) tied by odometry (`(m, 3)` poses
     /// `x, y, yaw` in any odometry frame, one per scan); one dict per scan as the rows of
     /// `urbansem localize track --json`.
-    #[pyo3(signature = (scans, odometry, *, window = 5, top = 5, names = None, history_m = localize::track::TRACK_HISTORY_M))]
+    #[pyo3(signature = (scans, odometry, *, window = 5, top = 5, names = None, history_m = localize::track::TRACK_HISTORY_M, causal = false))]
     #[allow(clippy::too_many_arguments)]
     fn track<'py>(
         &self,
@@ -339,6 +339,7 @@ impl PyLocalizer {
         top: usize,
         names: Option<Vec<String>>,
         history_m: f64,
+        causal: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         if window == 0 {
             return Err(PyValueError::new_err(
@@ -404,6 +405,7 @@ impl PyLocalizer {
                 let track = localize::track::TrackOptions {
                     window,
                     history_m,
+                    smooth: !causal,
                     ..Default::default()
                 };
                 track_rows(localizer, &names, &extracted, &odo, &track, top)

@@ -260,6 +260,8 @@ pub struct TrackSetup {
     pub odometry_drift: f64,
     /// Heading drift, degrees per 50 m.
     pub odometry_yaw_drift_deg: f64,
+    /// Whether the scans after each scan count too ([`crate::track::TrackOptions::smooth`]).
+    pub smooth: bool,
 }
 
 /// Track-mode counts: the scans after the first window, judged in the localizer's order.
@@ -279,6 +281,13 @@ pub struct TrackCounts {
     pub top1_within_2m_3deg: usize,
     /// Of them, with one of the top 10 within 2 m and 3°.
     pub top10_within_2m_3deg: usize,
+    /// Every scan of the track, the first window's included.
+    pub scans: usize,
+    /// Of them, with the top candidate within 2 m and 3°.
+    pub top1_within_2m_3deg_every_scan: usize,
+    /// Whether the scans after each scan counted too (the default; `--causal`: only those
+    /// before it, as a robot driving would).
+    pub smoothed: bool,
     /// The cost whose chains rank the candidates (`reverse`, `symmetric`, …).
     pub cost: &'static str,
 }
@@ -680,6 +689,9 @@ impl EvalReport {
                 scans_after_first_window: after.len(),
                 top1_within_2m_3deg: after.iter().filter(|r| within(r, 1)).count(),
                 top10_within_2m_3deg: after.iter().filter(|r| within(r, 10)).count(),
+                scans: records.len(),
+                top1_within_2m_3deg_every_scan: records.iter().filter(|r| within(r, 1)).count(),
+                smoothed: t.smooth,
                 cost: records
                     .first()
                     .map_or(LocalizeOptions::default().rank_by, |r| r.result.rank_by)

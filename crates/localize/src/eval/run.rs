@@ -205,6 +205,7 @@ fn track_results(
     let options = TrackOptions {
         window: setup.window,
         history_m: setup.history_m,
+        smooth: setup.smooth,
         ..Default::default()
     };
     localizer.localize_track(&extracted, &odometry, &options)

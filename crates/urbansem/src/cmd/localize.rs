@@ -6,7 +6,8 @@
 //! - `urbansem localize extract-eval --dataset DIR [--stride N] [--json]` (DIR: a labelled
 //!   KITTI-360 or MCD sequence): wall-extraction precision, recall, segments per scan.
 //! - `urbansem localize track --map MAP --scans DIR --odometry FILE [--window K] [--history-m M] [--json] [--geojson FILE] [--poses-tum FILE] [--poses-kitti FILE]`:
-//!   every scan of a folder with the window of K scans ending at it, tied by odometry.
+//!   every scan of a folder with the windows of K scans before and after it (`--causal`:
+//!   ending at it), tied by odometry.
 //!
 //! Every form takes `--sensor auto|terrestrial|hdl64|vlp16|os1-64|os1-128` and the extraction
 //! knobs of [`ExtractArgs`] (issue 15).
@@ -47,7 +48,8 @@ pub enum LocalizeCommand {
     /// Wall-segment extraction quality on labelled scans (KITTI-360, MCD, simulated): precision,
     /// recall, segments per scan.
     ExtractEval(ExtractEvalArgs),
-    /// Localize every scan of a track: a window of scans tied by odometry, searched as one.
+    /// Localize every scan of a track: scans tied by odometry, ranked by chains through the
+    /// scans before and after each.
     Track(TrackArgs),
     /// Prepare a map once and save it as an index (`.uloc`) that every `localize` command
     /// accepts as `--map`.
@@ -166,6 +168,10 @@ pub struct TrackArgs {
     /// still counts (an older consistent chain beats a younger one; 0: the window only).
     #[arg(long, default_value_t = localize::track::TRACK_HISTORY_M)]
     pub history_m: f64,
+    /// Rank each scan's candidates by the scans before it only, as a robot driving would
+    /// (default: by the scans before and after it, a forward and a backward pass).
+    #[arg(long)]
+    pub causal: bool,
     /// Candidates printed per scan.
     #[arg(long, default_value_t = 5)]
     pub top: usize,
@@ -599,7 +605,7 @@ pub struct EvalArgs {
     /// Width of the distractor ring around the map's building bounding box, metres.
     #[arg(long, default_value_t = 400.0)]
     pub distractor_ring_m: f64,
-    /// Track mode: localize each scan with the window of K scans ending at it, tied by
+    /// Track mode: localize each scan with the windows of K scans around it, tied by
     /// odometry made from the true poses with drift (scans in file-name order).
     #[arg(long)]
     pub track: Option<usize>,
@@ -607,6 +613,10 @@ pub struct EvalArgs {
     /// consistency still counts (0: the window only).
     #[arg(long, default_value_t = localize::track::TRACK_HISTORY_M)]
     pub history_m: f64,
+    /// Track mode: rank each scan's candidates by the scans before it only, as a robot
+    /// driving would (default: by the scans before and after it).
+    #[arg(long)]
+    pub causal: bool,
     /// Track mode: odometry scale error (0.02: 2 % of the distance travelled).
     #[arg(long, default_value_t = localize::track::ODOMETRY_SCALE_DRIFT)]
     pub odometry_drift: f64,
@@ -831,6 +841,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
                 max_gap_s: args.max_gap,
                 window: args.window,
                 history_m: args.history_m,
+                smooth: !args.causal,
                 options,
                 top: args.top,
             };
@@ -849,6 +860,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
             odometry: odometry.clone(),
             window: args.window,
             history_m: args.history_m,
+            smooth: !args.causal,
             options,
             top: args.top,
         })?,
@@ -1021,6 +1033,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if args.track == Some(0) {
         super::usage!("--track 0: expected a window of at least 1 scan");
     }
+    if args.causal && args.track.is_none() {
+        super::usage!("--causal ranks a track's scans: it needs --track K");
+    }
     every_nth(
         ("--scan-every", args.scan_every),
         ("--scan-offset", args.scan_offset),
@@ -1053,6 +1068,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         track: args.track.map(|window| TrackSetup {
             window,
             history_m: args.history_m,
+            smooth: !args.causal,
             odometry_drift: args.odometry_drift,
             odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
         }),
