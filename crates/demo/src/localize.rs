@@ -328,6 +328,7 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         window: WINDOW,
         history_m: localize::track::TRACK_HISTORY_M,
         smoothed: localize::track::TrackOptions::default().smooth,
+        pose_graph: localize::track::TrackOptions::default().refine_poses,
         cost: results
             .first()
             .map_or(LocalizeOptions::default().rank_by, |r| r.rank_by)

@@ -232,6 +232,7 @@ pub(crate) mod tests {
             window: 3,
             history_m: crate::track::TRACK_HISTORY_M,
             smoothed: true,
+            pose_graph: true,
             cost: "reverse",
             scans: vec![
                 row(0, Some(candidate(map, 0, 0.0, 0.0, 0.1))),

@@ -282,6 +282,8 @@ pub struct TrackJob {
     pub history_m: f64,
     /// Whether the scans after each scan count too ([`TrackOptions::smooth`]).
     pub smooth: bool,
+    /// Whether smoothed answers are refined together ([`TrackOptions::refine_poses`]).
+    pub pose_graph: bool,
     /// The localizer's options.
     pub options: LocalizeOptions,
     /// Candidates listed per scan.
@@ -331,6 +333,7 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
         window: job.window,
         history_m: job.history_m,
         smooth: job.smooth,
+        refine_poses: job.pose_graph,
         ..Default::default()
     };
     let scans = track_rows(&localizer, &names, &extracted, &odometry, &track, job.top)?;
@@ -342,6 +345,7 @@ pub fn track_folder(job: &TrackJob) -> Result<TrackReport> {
         window: job.window,
         history_m: job.history_m,
         smoothed: job.smooth,
+        pose_graph: job.smooth && job.pose_graph,
         cost: job.options.rank_by.name(),
         scans,
         seconds: TrackSeconds {
@@ -376,6 +380,8 @@ pub struct BagTrackJob {
     pub history_m: f64,
     /// Whether the scans after each scan count too ([`TrackOptions::smooth`]).
     pub smooth: bool,
+    /// Whether smoothed answers are refined together ([`TrackOptions::refine_poses`]).
+    pub pose_graph: bool,
     /// The localizer's options.
     pub options: LocalizeOptions,
     /// Candidates listed per scan.
@@ -471,6 +477,7 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
         window: job.window,
         history_m: job.history_m,
         smooth: job.smooth,
+        refine_poses: job.pose_graph,
         ..Default::default()
     };
     let scans = track_rows(&localizer, &names, &extracted, &odometry, &track, job.top)?;
@@ -482,6 +489,7 @@ pub fn track_bag(job: &BagTrackJob) -> Result<(TrackReport, usize)> {
         window: job.window,
         history_m: job.history_m,
         smoothed: job.smooth,
+        pose_graph: job.smooth && job.pose_graph,
         cost: job.options.rank_by.name(),
         seconds: TrackSeconds {
             total: seconds,

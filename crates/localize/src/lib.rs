@@ -49,6 +49,7 @@ pub mod facade_map;
 pub mod feasible;
 pub mod figure;
 pub mod geojson;
+pub mod graph;
 pub mod hashing;
 pub mod heading;
 pub mod index;
@@ -203,6 +204,11 @@ impl Accuracy {
         pose.distance_to(truth) <= self.max_m && pose.yaw_error_to(truth) <= self.max_rad
     }
 }
+
+/// The odometry drift the track targets assume: 2 % of the distance travelled.
+pub const ODOMETRY_SCALE_DRIFT: f64 = 0.02;
+/// The odometry heading drift the track targets assume, degrees per 50 m travelled.
+pub const ODOMETRY_YAW_DRIFT_DEG_PER_50M: f64 = 1.0;
 
 /// Absolute difference of two angles in [0, π].
 pub fn angle_diff(a: f64, b: f64) -> f64 {

@@ -39,6 +39,66 @@ impl Default for RefineOptions {
     }
 }
 
+impl RefineOptions {
+    /// The correspondence radius at iteration `it` of `iterations`: from the start distance
+    /// to the end distance linearly.
+    pub(crate) fn radius_at(&self, it: usize, iterations: usize) -> f64 {
+        let f = if iterations > 1 {
+            it as f64 / (iterations - 1) as f64
+        } else {
+            1.0
+        };
+        self.start_distance_m + f * (self.end_distance_m - self.start_distance_m)
+    }
+}
+
+/// The Gauss–Newton normal equations (H, g) of the point-to-line residuals of `samples`
+/// (sensor frame, with their orientations) at `pose` against `edges` (with theirs), each
+/// sample matched to the nearest edge within `radius` and the orientation limit, Huber
+/// weighted; the unknowns are (x, y, yaw) and the third value is the number of samples matched.
+pub(crate) fn normal_equations(
+    samples: &[([f64; 2], f64)],
+    edges: &[(Segment, f64)],
+    pose: &Pose2,
+    radius: f64,
+    options: &RefineOptions,
+) -> (Matrix3<f64>, Vector3<f64>, usize) {
+    let mut h = Matrix3::<f64>::zeros();
+    let mut g = Vector3::<f64>::zeros();
+    let mut used = 0usize;
+    for (p_s, o_s) in samples {
+        let p = pose.apply(*p_s);
+        let o = o_s + pose.yaw_rad;
+        let mut best: Option<(f64, &Segment)> = None;
+        for (e, eo) in edges {
+            if orientation_diff(o, *eo) > options.max_angle_rad {
+                continue;
+            }
+            let d = e.distance_to(p);
+            if d < radius && best.is_none_or(|(bd, _)| d < bd) {
+                best = Some((d, e));
+            }
+        }
+        let Some((_, e)) = best else {
+            continue;
+        };
+        let len = e.length();
+        let nrm = [-(e.b[1] - e.a[1]) / len, (e.b[0] - e.a[0]) / len];
+        let r = nrm[0] * (p[0] - e.a[0]) + nrm[1] * (p[1] - e.a[1]);
+        let w = if r.abs() <= options.huber_m {
+            1.0
+        } else {
+            options.huber_m / r.abs()
+        };
+        let dtheta = nrm[0] * -(p[1] - pose.y) + nrm[1] * (p[0] - pose.x);
+        let j = Vector3::new(nrm[0], nrm[1], dtheta);
+        h += w * j * j.transpose();
+        g += w * j * r;
+        used += 1;
+    }
+    (h, g, used)
+}
+
 /// The refined pose of scan segments (sensor frame) against map edges, from `start`.
 pub fn refine_pose(
     scan: &[Segment],
@@ -54,46 +114,8 @@ pub fn refine_pose(
     let mut pose = start;
     let n_it = options.iterations.max(1);
     for it in 0..n_it {
-        let f = if n_it > 1 {
-            it as f64 / (n_it - 1) as f64
-        } else {
-            1.0
-        };
-        let radius =
-            options.start_distance_m + f * (options.end_distance_m - options.start_distance_m);
-        let mut h = Matrix3::<f64>::zeros();
-        let mut g = Vector3::<f64>::zeros();
-        let mut used = 0usize;
-        for (p_s, o_s) in &samples {
-            let p = pose.apply(*p_s);
-            let o = o_s + pose.yaw_rad;
-            let mut best: Option<(f64, &Segment)> = None;
-            for (e, eo) in &edge_o {
-                if orientation_diff(o, *eo) > options.max_angle_rad {
-                    continue;
-                }
-                let d = e.distance_to(p);
-                if d < radius && best.is_none_or(|(bd, _)| d < bd) {
-                    best = Some((d, e));
-                }
-            }
-            let Some((_, e)) = best else {
-                continue;
-            };
-            let len = e.length();
-            let nrm = [-(e.b[1] - e.a[1]) / len, (e.b[0] - e.a[0]) / len];
-            let r = nrm[0] * (p[0] - e.a[0]) + nrm[1] * (p[1] - e.a[1]);
-            let w = if r.abs() <= options.huber_m {
-                1.0
-            } else {
-                options.huber_m / r.abs()
-            };
-            let dtheta = nrm[0] * -(p[1] - pose.y) + nrm[1] * (p[0] - pose.x);
-            let j = Vector3::new(nrm[0], nrm[1], dtheta);
-            h += w * j * j.transpose();
-            g += w * j * r;
-            used += 1;
-        }
+        let radius = options.radius_at(it, n_it);
+        let (mut h, g, used) = normal_equations(&samples, &edge_o, &pose, radius, options);
         if used < 3 {
             break;
         }

@@ -299,6 +299,8 @@ pub struct TrackReport {
     pub history_m: f64,
     /// Whether the scans after each scan counted too (`--causal`: only those before it).
     pub smoothed: bool,
+    /// Whether the smoothed answers were refined together (`--no-pose-graph`: not).
+    pub pose_graph: bool,
     /// The cost that ranks the candidates.
     pub cost: &'static str,
     /// One row per scan, in file-name order.

@@ -25,6 +25,8 @@
 //! step with a few degrees of odometry turn predicts the later pose well but swings the
 //! inverted prediction of the earlier one beyond the gate. On the real KITTI-360 tracks it
 //! mends the first scans, where no chain has settled (README).
+//! Then each run of linked answers is refined as a pose graph ([`crate::graph`],
+//! [`TrackOptions::refine_poses`]): the walls and the odometry place the scans together.
 //!
 //! Odometry files have one line per scan, `x_m y_m yaw_rad` (optionally preceded by the scan
 //! file name, which must then match), in any local frame; `#` starts a comment.
@@ -32,7 +34,7 @@
 use crate::pipeline::{Candidate, Localization, Localizer, ScanSegments};
 use crate::rank::{confidence, CostKind};
 use crate::refine::refine_pose;
-use crate::{LocalizeError, Pose2, Result};
+use crate::{LocalizeError, Pose2, Result, Segment};
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -111,10 +113,7 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
     Ok(poses)
 }
 
-/// The odometry drift the track targets assume: 2 % of the distance travelled.
-pub const ODOMETRY_SCALE_DRIFT: f64 = 0.02;
-/// The odometry heading drift the track targets assume, degrees per 50 m travelled.
-pub const ODOMETRY_YAW_DRIFT_DEG_PER_50M: f64 = 1.0;
+pub use crate::{ODOMETRY_SCALE_DRIFT, ODOMETRY_YAW_DRIFT_DEG_PER_50M};
 
 /// Odometry from true poses with drift: every step's translation scaled by `1 + scale_error`
 /// and its heading turned by `yaw_rad_per_m` per metre travelled (a systematic drift, the
@@ -180,6 +179,9 @@ pub struct TrackOptions {
     /// forward and backward, and each scan's states (both passes') are ranked by the best
     /// chain through them over the scans before and after ([`Localizer::localize_track`]).
     pub smooth: bool,
+    /// Whether a smoothed track's answers are moved to fit their walls and the odometry
+    /// together, run by run ([`crate::graph`]).
+    pub refine_poses: bool,
 }
 
 impl Default for TrackOptions {
@@ -195,6 +197,7 @@ impl Default for TrackOptions {
             gate_rad_per_m: 4f64.to_radians() / 50.0,
             coast: true,
             smooth: true,
+            refine_poses: true,
         }
     }
 }
@@ -247,7 +250,7 @@ impl Localizer<'_> {
             options,
         );
         backward.reverse();
-        Ok(self.smooth_pass(forward, backward, &own_refine, odometry, options))
+        Ok(self.smooth_pass(scans, forward, backward, &own_refine, odometry, options))
     }
 
     /// Ranks every scan's states (the forward and the backward pass's, merged) by the best
@@ -257,6 +260,7 @@ impl Localizer<'_> {
     /// then the smaller mean cost over the two windows.
     fn smooth_pass(
         &self,
+        scans: &[ScanSegments],
         forward: Vec<Localization>,
         backward: Vec<Localization>,
         own_refine: &[f64],
@@ -283,7 +287,7 @@ impl Localizer<'_> {
             .collect();
         let through = smoothed_chains(&states, odometry, self.options.rank_by, options);
         let seconds = t.elapsed().as_secs_f64() / forward.len().max(1) as f64;
-        forward
+        let mut out: Vec<Localization> = forward
             .into_iter()
             .zip(backward)
             .enumerate()
@@ -304,7 +308,81 @@ impl Localizer<'_> {
                 result.seconds.total += extra;
                 result
             })
-            .collect()
+            .collect();
+        if options.refine_poses {
+            let t = std::time::Instant::now();
+            self.refine_answers(scans, &mut out, odometry, options);
+            let per_scan = t.elapsed().as_secs_f64() / out.len().max(1) as f64;
+            for r in &mut out {
+                r.seconds.refine += per_scan;
+                r.seconds.total += per_scan;
+            }
+        }
+        out
+    }
+
+    /// Moves each run of linked answers (consecutive scans whose top candidates agree with
+    /// the odometry within the gates) to fit their walls and the odometry together
+    /// ([`crate::graph::refine_run`]); each moved top candidate is scored where it lands.
+    fn refine_answers(
+        &self,
+        scans: &[ScanSegments],
+        out: &mut [Localization],
+        odometry: &[Pose2],
+        options: &TrackOptions,
+    ) {
+        let tops: Vec<Option<Pose2>> = out
+            .iter()
+            .map(|r| r.candidates.first().map(|c| c.pose))
+            .collect();
+        let mut start = 0;
+        while start < out.len() {
+            let mut end = start + 1;
+            while end < out.len() {
+                let step = odometry[end - 1].inverse().compose(&odometry[end]);
+                let linked = match (tops[end - 1], tops[end]) {
+                    (Some(a), Some(b)) => within_gates(&a.compose(&step), &b, &step, options),
+                    _ => false,
+                };
+                if !linked {
+                    break;
+                }
+                end += 1;
+            }
+            if end - start >= 2 {
+                let poses: Vec<Pose2> = tops[start..end].iter().flatten().copied().collect();
+                let segments: Vec<Vec<Segment>> = scans[start..end]
+                    .iter()
+                    .map(|s| s.segments.clone())
+                    .collect();
+                let edges: Vec<Vec<Segment>> = poses
+                    .iter()
+                    .map(|p| self.visible_from_views(p, &[[0.0, 0.0]]))
+                    .collect();
+                let steps: Vec<Pose2> = (start..end - 1)
+                    .map(|i| odometry[i].inverse().compose(&odometry[i + 1]))
+                    .collect();
+                let refined = crate::graph::refine_run(
+                    &segments,
+                    &edges,
+                    &poses,
+                    &steps,
+                    &crate::graph::GraphOptions::default(),
+                    &self.options.refine,
+                );
+                for (k, pose) in refined.into_iter().enumerate() {
+                    let r = &mut out[start + k];
+                    if let Some(first) = r.candidates.first_mut() {
+                        if pose != first.pose && self.pose_allowed(&pose) {
+                            first.costs =
+                                self.costs_at(&scans[start + k].segments, pose, first.costs.dcm);
+                            first.pose = pose;
+                        }
+                    }
+                }
+            }
+            start = end;
+        }
     }
 
     /// The track pass of [`Localizer::localize_track`] on every scan's own search result

@@ -262,6 +262,9 @@ pub struct TrackSetup {
     pub odometry_yaw_drift_deg: f64,
     /// Whether the scans after each scan count too ([`crate::track::TrackOptions::smooth`]).
     pub smooth: bool,
+    /// Whether a smoothed track's answers are refined together
+    /// ([`crate::track::TrackOptions::refine_poses`]).
+    pub pose_graph: bool,
 }
 
 /// Track-mode counts: the scans after the first window, judged in the localizer's order.
@@ -288,6 +291,9 @@ pub struct TrackCounts {
     /// Whether the scans after each scan counted too (the default; `--causal`: only those
     /// before it, as a robot driving would).
     pub smoothed: bool,
+    /// Whether the smoothed answers were moved to fit their walls and the odometry together
+    /// (the default; `--no-pose-graph`: the chains' states as they are).
+    pub pose_graph: bool,
     /// The cost whose chains rank the candidates (`reverse`, `symmetric`, …).
     pub cost: &'static str,
 }
@@ -692,6 +698,7 @@ impl EvalReport {
                 scans: records.len(),
                 top1_within_2m_3deg_every_scan: records.iter().filter(|r| within(r, 1)).count(),
                 smoothed: t.smooth,
+                pose_graph: t.smooth && t.pose_graph,
                 cost: records
                     .first()
                     .map_or(LocalizeOptions::default().rank_by, |r| r.result.rank_by)

@@ -206,6 +206,7 @@ fn track_results(
         window: setup.window,
         history_m: setup.history_m,
         smooth: setup.smooth,
+        refine_poses: setup.pose_graph,
         ..Default::default()
     };
     localizer.localize_track(&extracted, &odometry, &options)

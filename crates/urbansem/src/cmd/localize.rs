@@ -172,6 +172,10 @@ pub struct TrackArgs {
     /// (default: by the scans before and after it, a forward and a backward pass).
     #[arg(long)]
     pub causal: bool,
+    /// Keep the smoothed chains' states as they are (default: each run of linked answers is
+    /// moved to fit its walls and the odometry together, a pose graph).
+    #[arg(long)]
+    pub no_pose_graph: bool,
     /// Candidates printed per scan.
     #[arg(long, default_value_t = 5)]
     pub top: usize,
@@ -617,6 +621,10 @@ pub struct EvalArgs {
     /// driving would (default: by the scans before and after it).
     #[arg(long)]
     pub causal: bool,
+    /// Track mode: keep the smoothed chains' states as they are (default: refined together
+    /// with the odometry, a pose graph).
+    #[arg(long)]
+    pub no_pose_graph: bool,
     /// Track mode: odometry scale error (0.02: 2 % of the distance travelled).
     #[arg(long, default_value_t = localize::track::ODOMETRY_SCALE_DRIFT)]
     pub odometry_drift: f64,
@@ -842,6 +850,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
                 window: args.window,
                 history_m: args.history_m,
                 smooth: !args.causal,
+                pose_graph: !args.no_pose_graph,
                 options,
                 top: args.top,
             };
@@ -861,6 +870,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
             window: args.window,
             history_m: args.history_m,
             smooth: !args.causal,
+            pose_graph: !args.no_pose_graph,
             options,
             top: args.top,
         })?,
@@ -1036,6 +1046,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if args.causal && args.track.is_none() {
         super::usage!("--causal ranks a track's scans: it needs --track K");
     }
+    if args.no_pose_graph && args.track.is_none() {
+        super::usage!("--no-pose-graph refines a track's answers: it needs --track K");
+    }
     every_nth(
         ("--scan-every", args.scan_every),
         ("--scan-offset", args.scan_offset),
@@ -1069,6 +1082,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             window,
             history_m: args.history_m,
             smooth: !args.causal,
+            pose_graph: !args.no_pose_graph,
             odometry_drift: args.odometry_drift,
             odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
         }),
