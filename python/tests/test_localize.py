@@ -163,7 +163,7 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
         "--odometry", odo_file, "--window", "3", "--json",
     )
     assert [r.report for r in rows] == expected["scans"]
-    assert expected["history_m"] == 300.0 and expected["smoothed"] is True
+    assert expected["history_m"] == 300.0 and expected["smoothed"] is True and expected["pose_graph"] is True
     for r, (s, _) in zip(rows, scans):
         assert r.x is not None and math.hypot(r.x - s.truth[0], r.y - s.truth[1]) <= THESIS_MAX_M
     # The history reaches the library as the CLI's --history-m does; a negative one is refused.
@@ -180,6 +180,13 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
         "--odometry", odo_file, "--window", "3", "--causal", "--json",
     )
     assert [r.report for r in causal] == expected["scans"] and expected["smoothed"] is False
+    # So does the pose graph's switch (--no-pose-graph).
+    chains = localizer.track([s.points for s, _ in scans], odometry, window=3, names=names, pose_graph=False)
+    expected = run_json(
+        cli, "localize", "track", "--map", map_path, "--scans", scans[0][1].parent,
+        "--odometry", odo_file, "--window", "3", "--no-pose-graph", "--json",
+    )
+    assert [r.report for r in chains] == expected["scans"] and expected["pose_graph"] is False
     with pytest.raises(ValueError, match="history_m"):
         localizer.track([s.points for s, _ in scans], odometry, window=3, history_m=-1.0)
     # 4 × 4 odometry matrices are read as the same (x, y, yaw) rows.

@@ -344,6 +344,7 @@ class Localizer:
         relative: bool = False,
         history_m: float = 300.0,
         causal: bool = False,
+        pose_graph: bool = True,
     ) -> List[TrackRow]:
         """Localizes every scan with the windows of ``window`` scans before and after it, tied
         by odometry: one pose per scan in any odometry frame, as (m, 3) ``x, y, yaw`` rows (the
@@ -352,7 +353,8 @@ class Localizer:
         row per scan, as ``urbansem localize track --json`` lists them. ``history_m``: the
         odometry distance before the window through which a chain's consistency still counts
         (``localize track --history-m``). ``causal``: rank each scan by the scans before it
-        only, as a robot driving would (``localize track --causal``)."""
+        only, as a robot driving would (``localize track --causal``). ``pose_graph``: refine
+        the smoothed answers together with the odometry (``False``: ``--no-pose-graph``)."""
         arrays = [_points(s, f"scans[{i}]") for i, s in enumerate(scans)]
         rows = self._native.track(
             arrays,
@@ -362,6 +364,7 @@ class Localizer:
             names=list(names) if names is not None else None,
             history_m=history_m,
             causal=causal,
+            pose_graph=pose_graph,
         )
         return [TrackRow.from_dict(_json(r), self.cost) for r in rows]
 

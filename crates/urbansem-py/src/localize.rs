@@ -328,7 +328,7 @@ impl PyLocalizer {
     /// Localizes a track: scans (each `(n, 3)` float64) tied by odometry (`(m, 3)` poses
     /// `x, y, yaw` in any odometry frame, one per scan); one dict per scan as the rows of
     /// `urbansem localize track --json`.
-    #[pyo3(signature = (scans, odometry, *, window = 5, top = 5, names = None, history_m = localize::track::TRACK_HISTORY_M, causal = false))]
+    #[pyo3(signature = (scans, odometry, *, window = 5, top = 5, names = None, history_m = localize::track::TRACK_HISTORY_M, causal = false, pose_graph = true))]
     #[allow(clippy::too_many_arguments)]
     fn track<'py>(
         &self,
@@ -340,6 +340,7 @@ impl PyLocalizer {
         names: Option<Vec<String>>,
         history_m: f64,
         causal: bool,
+        pose_graph: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         if window == 0 {
             return Err(PyValueError::new_err(
@@ -406,6 +407,7 @@ impl PyLocalizer {
                     window,
                     history_m,
                     smooth: !causal,
+                    refine_poses: pose_graph,
                     ..Default::default()
                 };
                 track_rows(localizer, &names, &extracted, &odo, &track, top)
