@@ -59,7 +59,7 @@ impl Default for GraphOptions {
 /// from `poses[i]` against `edges[i]` (the map edges visible there), `steps[i]` the odometry
 /// step from scan i to scan i + 1 (in scan i's frame; one fewer than the scans).
 pub fn refine_run(
-    scans: &[Vec<Segment>],
+    scans: &[&[Segment]],
     edges: &[Vec<Segment>],
     poses: &[Pose2],
     steps: &[Pose2],
@@ -263,7 +263,7 @@ mod tests {
         let to_scan = |t: &Pose2, s: &Segment| {
             Segment::new([s.a[0] - t.x, s.a[1] - t.y], [s.b[0] - t.x, s.b[1] - t.y])
         };
-        let scans: Vec<Vec<Segment>> = truth
+        let owned: Vec<Vec<Segment>> = truth
             .iter()
             .enumerate()
             .map(|(i, t)| {
@@ -278,6 +278,7 @@ mod tests {
                 v
             })
             .collect();
+        let scans: Vec<&[Segment]> = owned.iter().map(|v| v.as_slice()).collect();
         let edges = vec![map.clone(); 5];
         let steps: Vec<Pose2> = (0..4)
             .map(|_| Pose2 {

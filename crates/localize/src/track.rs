@@ -339,9 +339,10 @@ impl Localizer<'_> {
         while start < out.len() {
             let mut end = start + 1;
             while end < out.len() {
-                let step = odometry[end - 1].inverse().compose(&odometry[end]);
-                let linked = match (tops[end - 1], tops[end]) {
-                    (Some(a), Some(b)) => within_gates(&a.compose(&step), &b, &step, options),
+                let linked = match (tops[end - 1], tops[end], step_into(odometry, end)) {
+                    (Some(a), Some(b), Some(step)) => {
+                        within_gates(&a.compose(&step), &b, &step, options)
+                    }
                     _ => false,
                 };
                 if !linked {
@@ -351,16 +352,16 @@ impl Localizer<'_> {
             }
             if end - start >= 2 {
                 let poses: Vec<Pose2> = tops[start..end].iter().flatten().copied().collect();
-                let segments: Vec<Vec<Segment>> = scans[start..end]
+                let segments: Vec<&[Segment]> = scans[start..end]
                     .iter()
-                    .map(|s| s.segments.clone())
+                    .map(|s| s.segments.as_slice())
                     .collect();
                 let edges: Vec<Vec<Segment>> = poses
                     .iter()
                     .map(|p| self.visible_from_views(p, &[[0.0, 0.0]]))
                     .collect();
-                let steps: Vec<Pose2> = (start..end - 1)
-                    .map(|i| odometry[i].inverse().compose(&odometry[i + 1]))
+                let steps: Vec<Pose2> = (start + 1..end)
+                    .filter_map(|i| step_into(odometry, i))
                     .collect();
                 let refined = crate::graph::refine_run(
                     &segments,
@@ -409,7 +410,7 @@ impl Localizer<'_> {
                 .copied()
                 .collect();
             // The odometry step from the previous scan (none for the first).
-            let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
+            let step = step_into(odometry, i);
             if let Some(step) = step {
                 // The previous scan's states in its chain order, moved by the odometry: a
                 // long-followed place is carried even when its own cost on that scan was poor.
@@ -545,7 +546,7 @@ fn viterbi(
     let travelled = travelled_m(odometry);
     let mut out: Vec<Vec<Chain>> = Vec::with_capacity(states.len());
     for i in 0..states.len() {
-        let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
+        let step = step_into(odometry, i);
         let cap = chain_cap(&travelled, i, options);
         let prev: &[Chain] = out.last().map_or(&[], |v| v.as_slice());
         let next = extend_chains(states, prev, step, i, cap, kind, options, reversed);
@@ -575,11 +576,16 @@ fn smoothed_chains(
         .collect()
 }
 
+/// The odometry step from scan i − 1 to scan i, in scan i − 1's frame (none for the first).
+fn step_into(odometry: &[Pose2], i: usize) -> Option<Pose2> {
+    (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]))
+}
+
 /// Odometry distance travelled up to each scan, metres.
 fn travelled_m(odometry: &[Pose2]) -> Vec<f64> {
     std::iter::once(0.0)
-        .chain(odometry.windows(2).scan(0.0, |d, w| {
-            let step = w[0].inverse().compose(&w[1]);
+        .chain((1..odometry.len()).scan(0.0, |d, i| {
+            let step = step_into(odometry, i)?;
             *d += step.x.hypot(step.y);
             Some(*d)
         }))
@@ -788,7 +794,7 @@ mod tests {
                 here.push(cand(x, 50.0, 0.1));
             }
             states.push(here);
-            let step = (i > 0).then(|| odometry[i - 1].inverse().compose(&odometry[i]));
+            let step = step_into(&odometry, i);
             let cap = chain_cap(&travelled, i, &options);
             chains = extend_chains(
                 &states,
