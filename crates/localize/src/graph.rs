@@ -10,13 +10,23 @@
 //! (x, y, yaw) per scan; a run's system is block tridiagonal (each scan is tied to the next
 //! only), solved by block elimination in O(n) for n scans. Walls count as independent
 //! measurements every [`GraphOptions::wall_correlation_m`] of their length (a map error
-//! shifts a whole wall, not its samples one by one); odometry spreads grow with the step as
-//! the track's drift assumptions do ([`crate::ODOMETRY_SCALE_DRIFT`]).
+//! shifts a whole wall, not its samples one by one).
+//!
+//! The odometry's drift is mostly systematic: a wheel radius that is a little off scales
+//! every step alike, a gyro bias turns every metre alike. So each run also estimates one
+//! scale error and one heading bias per metre ([`GraphOptions::systematic_drift`], on by
+//! default), with the track's drift assumptions as their prior spreads
+//! ([`crate::ODOMETRY_SCALE_DRIFT`], [`crate::ODOMETRY_YAW_DRIFT_DEG_PER_50M`]); each step
+//! then keeps only a small random spread. A stretch whose walls pin the scans in both
+//! directions (a turn, cross walls at both ends) thereby calibrates the odometry for the
+//! stretches whose walls do not. The two global unknowns border the block-tridiagonal
+//! system; their 2 × 2 Schur complement keeps the solve O(n). Off, every step's spread grows
+//! with its length as the drift assumptions do, independently of the others.
 
 use crate::candidates::sample_segment_points;
 use crate::refine::{normal_equations, RefineOptions};
 use crate::{Pose2, Segment};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix2, Matrix3, Matrix3x2, Vector2, Vector3};
 use std::f64::consts::{PI, TAU};
 
 /// Options of the pose-graph refinement.
@@ -36,8 +46,20 @@ pub struct GraphOptions {
     pub odometry_floor_m: f64,
     /// Smallest odometry heading spread, radians.
     pub odometry_floor_rad: f64,
-    /// A pose moved farther than this keeps its start, metres.
+    /// A pose moved farther than this keeps its start, metres (with the systematic drift
+    /// estimated, plus `odometry_scale` times the run's odometry length: as far as the
+    /// odometry can have drifted over it).
     pub max_shift_m: f64,
+    /// Estimate the odometry's systematic drift (a scale error and a heading bias per metre,
+    /// one each per run, with `odometry_scale` and `odometry_yaw_rad_per_m` as their prior
+    /// spreads) beside the poses; each step then keeps only the random spreads below.
+    pub systematic_drift: bool,
+    /// Random odometry position spread per step beyond the floor (share of the step length),
+    /// when the systematic drift is estimated.
+    pub odometry_random_share: f64,
+    /// Random odometry heading spread per step beyond the floor, radians per metre, when the
+    /// systematic drift is estimated.
+    pub odometry_random_yaw_rad_per_m: f64,
 }
 
 impl Default for GraphOptions {
@@ -51,6 +73,9 @@ impl Default for GraphOptions {
             odometry_floor_m: 0.2,
             odometry_floor_rad: 0.5f64.to_radians(),
             max_shift_m: 5.0,
+            systematic_drift: true,
+            odometry_random_share: 0.005,
+            odometry_random_yaw_rad_per_m: 0.2f64.to_radians() / 50.0,
         }
     }
 }
@@ -81,12 +106,22 @@ pub fn refine_run(
     let wall_w = (refine.sample_m / options.wall_correlation_m.max(refine.sample_m))
         / options.wall_sigma_m.powi(2);
     let mut x: Vec<Pose2> = poses.to_vec();
+    // The systematic drift (scale error, heading bias per metre) and its prior weights.
+    let mut theta = Vector2::<f64>::zeros();
+    let sys = options.systematic_drift && n > 1;
+    let prior = Matrix2::from_diagonal(&Vector2::new(
+        1.0 / options.odometry_scale.max(1e-9).powi(2),
+        1.0 / options.odometry_yaw_rad_per_m.max(1e-12).powi(2),
+    ));
     let it_n = options.iterations.max(1);
     for it in 0..it_n {
         let radius = refine.radius_at(it, it_n);
         let mut d: Vec<Matrix3<f64>> = vec![Matrix3::zeros(); n];
         let mut b: Vec<Matrix3<f64>> = vec![Matrix3::zeros(); n.saturating_sub(1)];
         let mut g: Vec<Vector3<f64>> = vec![Vector3::zeros(); n];
+        let mut border: Vec<Matrix3x2<f64>> = vec![Matrix3x2::zeros(); n];
+        let mut corner = prior;
+        let mut g_theta = prior * theta;
         for i in 0..n {
             let (h, gi, used) = normal_equations(&samples[i], &edge_o[i], &x[i], radius, refine);
             if used >= 3 {
@@ -98,18 +133,34 @@ pub fn refine_run(
             let (a, c) = (x[i], x[i + 1]);
             let (s, co) = a.yaw_rad.sin_cos();
             let (dx, dy) = (c.x - a.x, c.y - a.y);
-            // The step predicted by the two poses, in scan i's frame, against the odometry's.
+            // The step predicted by the two poses, in scan i's frame, against the odometry's
+            // (with its systematic drift taken out when that is estimated).
             let pred = [co * dx + s * dy, -s * dx + co * dy];
-            let e = Vector3::new(
-                pred[0] - m.x,
-                pred[1] - m.y,
-                (c.yaw_rad - a.yaw_rad - m.yaw_rad + PI).rem_euclid(TAU) - PI,
-            );
             let len = m.x.hypot(m.y);
-            let sd_xy = options.odometry_floor_m
-                + options.odometry_scale * len
-                + 0.5 * len * options.odometry_yaw_rad_per_m * len;
-            let sd_yaw = options.odometry_floor_rad + options.odometry_yaw_rad_per_m * len;
+            let (scale, bias) = if sys {
+                (1.0 + theta[0], theta[1])
+            } else {
+                (1.0, 0.0)
+            };
+            let true_len = len / scale;
+            let e = Vector3::new(
+                pred[0] - m.x / scale,
+                pred[1] - m.y / scale,
+                (c.yaw_rad - a.yaw_rad - m.yaw_rad + bias * true_len + PI).rem_euclid(TAU) - PI,
+            );
+            let (sd_xy, sd_yaw) = if sys {
+                (
+                    options.odometry_floor_m + options.odometry_random_share * len,
+                    options.odometry_floor_rad + options.odometry_random_yaw_rad_per_m * len,
+                )
+            } else {
+                (
+                    options.odometry_floor_m
+                        + options.odometry_scale * len
+                        + 0.5 * len * options.odometry_yaw_rad_per_m * len,
+                    options.odometry_floor_rad + options.odometry_yaw_rad_per_m * len,
+                )
+            };
             let w = Matrix3::from_diagonal(&Vector3::new(
                 1.0 / (sd_xy * sd_xy),
                 1.0 / (sd_xy * sd_xy),
@@ -132,9 +183,33 @@ pub fn refine_run(
             b[i] += ji.transpose() * w * jj;
             g[i] += ji.transpose() * w * e;
             g[i + 1] += jj.transpose() * w * e;
+            if sys {
+                // ∂e/∂(scale error, heading bias).
+                let jt = Matrix3x2::new(
+                    m.x / (scale * scale),
+                    0.0,
+                    m.y / (scale * scale),
+                    0.0,
+                    0.0,
+                    true_len,
+                );
+                border[i] += ji.transpose() * w * jt;
+                border[i + 1] += jj.transpose() * w * jt;
+                corner += jt.transpose() * w * jt;
+                g_theta += jt.transpose() * w * e;
+            }
         }
-        let Some(delta) = solve_block_tridiagonal(d, &b, g) else {
-            break;
+        let delta = if sys {
+            let Some((delta, dt)) = solve_bordered(d, &b, g, &border, corner, g_theta) else {
+                break;
+            };
+            theta += dt;
+            delta
+        } else {
+            let Some(delta) = solve_block_tridiagonal(d, &b, g) else {
+                break;
+            };
+            delta
         };
         let mut largest = 0.0f64;
         for (p, dp) in x.iter_mut().zip(&delta) {
@@ -147,13 +222,21 @@ pub fn refine_run(
             break;
         }
     }
+    // With the drift estimated, a pose may move as far as the odometry can drift over the run.
+    let run_m: f64 = steps.iter().map(|m| m.x.hypot(m.y)).sum();
+    let shift_limit = options.max_shift_m
+        + if sys {
+            options.odometry_scale * run_m
+        } else {
+            0.0
+        };
     x.iter()
         .zip(poses)
         .map(|(r, p)| {
             if r.x.is_finite()
                 && r.y.is_finite()
                 && r.yaw_rad.is_finite()
-                && r.distance_to(p) <= options.max_shift_m
+                && r.distance_to(p) <= shift_limit
             {
                 Pose2 {
                     yaw_rad: r.yaw_rad.rem_euclid(TAU),
@@ -164,6 +247,42 @@ pub fn refine_run(
             }
         })
         .collect()
+}
+
+/// Solves [H B; Bᵀ C] (δ, δθ) = −(g, g_θ) for a symmetric block-tridiagonal H (blocks `d`,
+/// `b`, as [`solve_block_tridiagonal`]) bordered by the two global unknowns θ: their Schur
+/// complement, with H's solves by block elimination, so O(n). `None` when a pivot is singular.
+fn solve_bordered(
+    d: Vec<Matrix3<f64>>,
+    b: &[Matrix3<f64>],
+    g: Vec<Vector3<f64>>,
+    border: &[Matrix3x2<f64>],
+    corner: Matrix2<f64>,
+    g_theta: Vector2<f64>,
+) -> Option<(Vec<Vector3<f64>>, Vector2<f64>)> {
+    // u = H⁻¹(−g); y_k = H⁻¹ B_k (solve_block_tridiagonal solves H δ = −rhs).
+    let u = solve_block_tridiagonal(d.clone(), b, g)?;
+    let mut y = Vec::with_capacity(2);
+    for k in 0..2 {
+        let col: Vec<Vector3<f64>> = border.iter().map(|bk| -bk.column(k).into_owned()).collect();
+        y.push(solve_block_tridiagonal(d.clone(), b, col)?);
+    }
+    let mut schur = corner;
+    let mut rhs = -g_theta;
+    for (i, bi) in border.iter().enumerate() {
+        for k in 0..2 {
+            for l in 0..2 {
+                schur[(k, l)] -= bi.column(k).dot(&y[l][i]);
+            }
+            rhs[k] -= bi.column(k).dot(&u[i]);
+        }
+    }
+    schur += Matrix2::identity() * (1e-9 * (schur.trace().abs() + 1.0));
+    let dt = schur.try_inverse()? * rhs;
+    let delta = (0..u.len())
+        .map(|i| u[i] - y[0][i] * dt[0] - y[1][i] * dt[1])
+        .collect();
+    Some((delta, dt))
 }
 
 /// Solves H δ = −g for a symmetric block-tridiagonal H with diagonal blocks `d` and upper
@@ -204,6 +323,24 @@ fn solve_block_tridiagonal(
 mod tests {
     use super::*;
     use nalgebra::DMatrix;
+
+    /// [`refine_run`] with the default refinement options.
+    fn refined(
+        scans: &[&[Segment]],
+        edges: &[Vec<Segment>],
+        start: &[Pose2],
+        steps: &[Pose2],
+        options: &GraphOptions,
+    ) -> Vec<Pose2> {
+        refine_run(
+            scans,
+            edges,
+            start,
+            steps,
+            options,
+            &RefineOptions::default(),
+        )
+    }
 
     #[test]
     fn block_elimination_equals_a_dense_solve() {
@@ -295,26 +432,116 @@ mod tests {
                 ..*t
             })
             .collect();
-        let got = refine_run(
-            &scans,
-            &edges,
-            &start,
-            &steps,
-            &GraphOptions::default(),
-            &RefineOptions::default(),
-        );
+        let got = refined(&scans, &edges, &start, &steps, &GraphOptions::default());
         for (g, t) in got.iter().zip(&truth) {
             assert!(g.distance_to(t) < 0.3, "{got:?}");
         }
         // Without the odometry's pull (each scan alone), the along-street error stays.
-        let alone = refine_run(
+        let alone = refined(
             &scans[1..2],
             &edges[1..2],
             &start[1..2],
             &[],
             &GraphOptions::default(),
-            &RefineOptions::default(),
         );
         assert!(alone[0].distance_to(&truth[1]) > 2.5, "{alone:?}");
+    }
+
+    /// An L-shaped drive: four 40 m steps east along a street, a left turn, three steps north
+    /// along another; a cross wall pins the first scan along the first street, the second
+    /// street's walls pin the corner scan across it, and nothing pins the last scans along the
+    /// second street. The odometry overstates every step by 2 % and turns 1° per 50 m too
+    /// far, and the poses start where a chain coasting from the first scan would put them.
+    /// With the drift estimated, the first leg (pinned at both ends) gives the scale and the
+    /// bias, and the second leg comes back within 0.3 m; with independent step spreads (and
+    /// no move limit), its last scan stays 2.4 m off along the street.
+    #[test]
+    fn the_systematic_drift_learnt_on_one_street_corrects_the_next() {
+        let mut truth: Vec<Pose2> = (0..5)
+            .map(|i| Pose2 {
+                x: 10.0 + 40.0 * i as f64,
+                y: 0.0,
+                yaw_rad: 0.0,
+            })
+            .collect();
+        truth[4].yaw_rad = std::f64::consts::FRAC_PI_2;
+        truth.extend((1..4).map(|i| Pose2 {
+            x: 170.0,
+            y: 40.0 * i as f64,
+            yaw_rad: std::f64::consts::FRAC_PI_2,
+        }));
+        let map: Vec<Segment> = vec![
+            Segment::new([0.0, 8.0], [162.0, 8.0]),
+            Segment::new([0.0, -8.0], [178.0, -8.0]),
+            Segment::new([0.0, -8.0], [0.0, 8.0]),
+            Segment::new([162.0, 8.0], [162.0, 300.0]),
+            Segment::new([178.0, -8.0], [178.0, 300.0]),
+        ];
+        // What a scan sees of the map: each wall within 12 m of the sensor, clipped to 20 m
+        // around the sensor's nearest point on it, in the sensor frame.
+        let seen = |t: &Pose2| -> Vec<Segment> {
+            let inv = t.inverse();
+            map.iter()
+                .filter(|e| e.distance_to([t.x, t.y]) < 12.0)
+                .filter_map(|e| {
+                    let (l, d) = (
+                        e.length(),
+                        [
+                            (e.b[0] - e.a[0]) / e.length(),
+                            (e.b[1] - e.a[1]) / e.length(),
+                        ],
+                    );
+                    let u = (t.x - e.a[0]) * d[0] + (t.y - e.a[1]) * d[1];
+                    let (u0, u1) = ((u - 10.0).max(0.0), (u + 10.0).min(l));
+                    (u1 - u0 > 2.0).then(|| {
+                        Segment::new(
+                            inv.apply([e.a[0] + u0 * d[0], e.a[1] + u0 * d[1]]),
+                            inv.apply([e.a[0] + u1 * d[0], e.a[1] + u1 * d[1]]),
+                        )
+                    })
+                })
+                .collect()
+        };
+        let owned: Vec<Vec<Segment>> = truth.iter().map(seen).collect();
+        let scans: Vec<&[Segment]> = owned.iter().map(|v| v.as_slice()).collect();
+        let edges = vec![map.clone(); truth.len()];
+        let bias = 1f64.to_radians() / 50.0;
+        let steps: Vec<Pose2> = truth
+            .windows(2)
+            .map(|w| {
+                let rel = w[0].inverse().compose(&w[1]);
+                Pose2 {
+                    x: rel.x * 1.02,
+                    y: rel.y * 1.02,
+                    yaw_rad: rel.yaw_rad + bias * rel.x.hypot(rel.y),
+                }
+            })
+            .collect();
+        let mut start = vec![truth[0]];
+        for m in &steps {
+            let last = *start.last().unwrap();
+            start.push(last.compose(m));
+        }
+        assert!(start[7].distance_to(&truth[7]) > 5.0, "{:?}", start[7]);
+        assert!(owned.iter().all(|v| v.len() >= 2), "{owned:?}");
+        let got = refined(&scans, &edges, &start, &steps, &GraphOptions::default());
+        for (i, (g, t)) in got.iter().zip(&truth).enumerate() {
+            assert!(g.distance_to(t) < 0.3, "scan {i}: {g:?} against {t:?}");
+        }
+        let independent = refined(
+            &scans,
+            &edges,
+            &start,
+            &steps,
+            &GraphOptions {
+                systematic_drift: false,
+                max_shift_m: 100.0,
+                ..GraphOptions::default()
+            },
+        );
+        assert!(
+            independent[7].distance_to(&truth[7]) > 1.5,
+            "{independent:?}"
+        );
     }
 }
