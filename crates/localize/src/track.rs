@@ -34,7 +34,7 @@
 use crate::pipeline::{Candidate, Localization, Localizer, ScanSegments};
 use crate::rank::{confidence, CostKind};
 use crate::refine::refine_pose;
-use crate::{LocalizeError, Pose2, Result, Segment};
+use crate::{angle_diff, LocalizeError, Pose2, Result, Segment};
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -140,6 +140,13 @@ pub fn drifted_odometry(truth: &[Pose2], scale_error: f64, yaw_rad_per_m: f64) -
     }
     out
 }
+
+/// Most passes of the pose graph over a track's answers ([`TrackOptions::refine_poses`]).
+const GRAPH_PASSES: usize = 5;
+/// The graph's answers have settled when none moves more than this in a pass, metres…
+const GRAPH_SETTLED_M: f64 = 0.01;
+/// …and no more than this, radians.
+const GRAPH_SETTLED_RAD: f64 = 1e-4;
 
 /// Poses closer than this (and [`SAME_POSE_RAD`]) are one state of a scan, metres.
 const SAME_POSE_M: f64 = 1e-3;
@@ -311,7 +318,13 @@ impl Localizer<'_> {
             .collect();
         if options.refine_poses {
             let t = std::time::Instant::now();
-            self.refine_answers(scans, &mut out, odometry, options);
+            // Until the answers stop moving: moved answers see other map edges and may link
+            // into longer runs.
+            for _ in 0..GRAPH_PASSES {
+                if !self.refine_answers(scans, &mut out, odometry, options) {
+                    break;
+                }
+            }
             let per_scan = t.elapsed().as_secs_f64() / out.len().max(1) as f64;
             for r in &mut out {
                 r.seconds.refine += per_scan;
@@ -324,13 +337,15 @@ impl Localizer<'_> {
     /// Moves each run of linked answers (consecutive scans whose top candidates agree with
     /// the odometry within the gates) to fit their walls and the odometry together
     /// ([`crate::graph::refine_run`]); each moved top candidate is scored where it lands.
+    /// Returns whether a top candidate moved by more than [`GRAPH_SETTLED_M`].
     fn refine_answers(
         &self,
         scans: &[ScanSegments],
         out: &mut [Localization],
         odometry: &[Pose2],
         options: &TrackOptions,
-    ) {
+    ) -> bool {
+        let mut moved = false;
         let tops: Vec<Option<Pose2>> = out
             .iter()
             .map(|r| r.candidates.first().map(|c| c.pose))
@@ -375,6 +390,9 @@ impl Localizer<'_> {
                     let r = &mut out[start + k];
                     if let Some(first) = r.candidates.first_mut() {
                         if pose != first.pose && self.pose_allowed(&pose) {
+                            moved |= pose.distance_to(&first.pose) > GRAPH_SETTLED_M
+                                || angle_diff(pose.yaw_rad, first.pose.yaw_rad).abs()
+                                    > GRAPH_SETTLED_RAD;
                             first.costs =
                                 self.costs_at(&scans[start + k].segments, pose, first.costs.dcm);
                             first.pose = pose;
@@ -384,6 +402,7 @@ impl Localizer<'_> {
             }
             start = end;
         }
+        moved
     }
 
     /// The track pass of [`Localizer::localize_track`] on every scan's own search result

@@ -1985,14 +1985,15 @@ fn real_car_scans_localize_on_a_facade_map_of_the_others() {
 /// the default drifting odometry and default options. Measured top-1 after the first window
 /// (odd scans, even scans) and over every scan of both:
 /// - default (smoothed, answers refined as a pose graph that also estimates the odometry's
-///   systematic drift; 2026-12-01): 7 of 8, 7 of 9; 21 of 25 (the graph with independent
-///   step spreads, before: 6 of 8, 5 of 9; 17 of 25);
+///   systematic drift, run until the answers settle; 2026-12-01): 7 of 8, 9 of 9; 24 of 25
+///   (one pass: 7 of 8, 7 of 9; 21 of 25; one pass with independent step spreads: 6 of 8,
+///   5 of 9; 17 of 25);
 /// - `--no-pose-graph` (smoothed only): 5 of 8, 4 of 9; 14 of 25;
 /// - `--causal` (the ranking of before): 4 of 8, 3 of 9; 9 of 25 (0 of 9 for the even scans
 ///   before carried states coasted, and 0 of 8 and 1 of 9 while the acceptance gate emptied
 ///   the scans' candidate lists).
 ///
-/// Required, about one scan of margin each: default at least 6 and 6, and 19; smoothed only
+/// Required, about one scan of margin each: default at least 6 and 8, and 22; smoothed only
 /// at least 4 and 3, and 12; causal at least 3 and 2, and no more than smoothed over every scan.
 #[test]
 fn real_car_scans_as_tracks_on_facade_maps_of_the_other_half() {
@@ -2072,9 +2073,9 @@ fn real_car_scans_as_tracks_on_facade_maps_of_the_other_half() {
     );
     // Even scans (offset 0) first: 13 scans, 9 after the window; odd scans: 12, 8 after.
     assert_eq!((found[0].1, found[1].1), (9, 8), "{found:?}");
-    assert!(found[0].0 >= 6 && found[1].0 >= 6, "{found:?}");
+    assert!(found[0].0 >= 8 && found[1].0 >= 6, "{found:?}");
     let every: u64 = every_scan.iter().sum();
-    assert!(every >= 19, "{every_scan:?}");
+    assert!(every >= 22, "{every_scan:?}");
     assert!(
         chains_found[0].0 >= 3 && chains_found[1].0 >= 4,
         "{chains_found:?}"
