@@ -119,6 +119,12 @@ pub use crate::{ODOMETRY_SCALE_DRIFT, ODOMETRY_YAW_DRIFT_DEG_PER_50M};
 /// and its heading turned by `yaw_rad_per_m` per metre travelled (a systematic drift, the
 /// worst case of a random one), starting at the origin.
 pub fn drifted_odometry(truth: &[Pose2], scale_error: f64, yaw_rad_per_m: f64) -> Vec<Pose2> {
+    odometry_with(truth, || (scale_error, yaw_rad_per_m))
+}
+
+/// Odometry from true poses, each step scaled by 1 + s and turned by b per metre travelled,
+/// (s, b) from `drift` per step; starting at the origin.
+fn odometry_with(truth: &[Pose2], mut drift: impl FnMut() -> (f64, f64)) -> Vec<Pose2> {
     let mut out = Vec::with_capacity(truth.len());
     let mut odo = Pose2 {
         x: 0.0,
@@ -129,10 +135,11 @@ pub fn drifted_odometry(truth: &[Pose2], scale_error: f64, yaw_rad_per_m: f64) -
         if i > 0 {
             let rel = truth[i - 1].inverse().compose(t);
             let d = rel.x.hypot(rel.y);
+            let (scale, bias) = drift();
             let step = Pose2 {
-                x: rel.x * (1.0 + scale_error),
-                y: rel.y * (1.0 + scale_error),
-                yaw_rad: rel.yaw_rad + yaw_rad_per_m * d,
+                x: rel.x * (1.0 + scale),
+                y: rel.y * (1.0 + scale),
+                yaw_rad: rel.yaw_rad + bias * d,
             };
             odo = odo.compose(&step);
         }
@@ -147,6 +154,24 @@ const GRAPH_PASSES: usize = 5;
 const GRAPH_SETTLED_M: f64 = 0.01;
 /// …and no more than this, radians.
 const GRAPH_SETTLED_RAD: f64 = 1e-4;
+
+/// Odometry from true poses with a *random* drift: each step's scale error drawn uniformly
+/// within ±`scale_error` and its heading bias within ±`yaw_rad_per_m` (per metre of the
+/// step), independently per step from `seed` (the odometry frame starts at the origin, as
+/// [`drifted_odometry`]'s, whose drift is the same at every step: the worst case).
+pub fn randomly_drifted_odometry(
+    truth: &[Pose2],
+    scale_error: f64,
+    yaw_rad_per_m: f64,
+    seed: u64,
+) -> Vec<Pose2> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    odometry_with(truth, || {
+        let s = scale_error * rng.gen_range(-1.0..=1.0);
+        (s, yaw_rad_per_m * rng.gen_range(-1.0..=1.0))
+    })
+}
 
 /// Poses closer than this (and [`SAME_POSE_RAD`]) are one state of a scan, metres.
 const SAME_POSE_M: f64 = 1e-3;
@@ -951,5 +976,38 @@ mod tests {
         let fields = write("fields.txt", "0 0\n1 0 0\n");
         let e = read_odometry(&fields, &names).unwrap_err().to_string();
         assert!(e.contains("fields.txt:1") && e.contains("2 fields"), "{e}");
+    }
+
+    #[test]
+    fn random_odometry_drift_stays_within_its_bounds_and_repeats_with_its_seed() {
+        let truth: Vec<Pose2> = (0..30)
+            .map(|i| Pose2 {
+                x: 12.0 * i as f64,
+                y: (i as f64 * 0.3).sin() * 20.0,
+                yaw_rad: i as f64 * 0.05,
+            })
+            .collect();
+        let (scale, yaw) = (0.02, 1f64.to_radians() / 50.0);
+        let a = randomly_drifted_odometry(&truth, scale, yaw, 5);
+        assert_eq!(a, randomly_drifted_odometry(&truth, scale, yaw, 5));
+        assert_ne!(a, randomly_drifted_odometry(&truth, scale, yaw, 6));
+        let (mut larger, mut smaller) = (0, 0);
+        for i in 1..truth.len() {
+            let t = truth[i - 1].inverse().compose(&truth[i]);
+            let o = a[i - 1].inverse().compose(&a[i]);
+            let (dt, d_o) = (t.x.hypot(t.y), o.x.hypot(o.y));
+            assert!((d_o / dt - 1.0).abs() <= scale + 1e-9, "step {i}");
+            assert!(
+                angle_diff(o.yaw_rad, t.yaw_rad).abs() <= yaw * dt + 1e-9,
+                "step {i}"
+            );
+            if d_o > dt {
+                larger += 1;
+            } else {
+                smaller += 1;
+            }
+        }
+        // Drawn per step: some steps too long, some too short (a systematic drift: all alike).
+        assert!(larger > 3 && smaller > 3, "{larger} {smaller}");
     }
 }

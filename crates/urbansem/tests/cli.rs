@@ -502,6 +502,22 @@ fn track_mode_recovers_a_simulated_hdl64_drive() {
     // Measured 8/8 (and 36/36 on 40 scans); one miss allowed.
     assert!(t["top1_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
     assert!(t["top10_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
+    assert_eq!(t["odometry_drift_kind"], "systematic", "{t}");
+    assert_eq!(t["odometry_seed"], serde_json::Value::Null, "{t}");
+    // The same drive with a random drift (each step's drawn within the bounds): recorded,
+    // and the track still follows it (measured 8/8).
+    let stdout = stdout_of(
+        urbansem()
+            .args(["localize", "eval", "--track", "5", "--json"])
+            .args(["--odometry-drift-kind", "random", "--odometry-seed", "7"])
+            .arg("--dataset")
+            .arg(&data),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
+    let t = &v["track"];
+    assert_eq!(t["odometry_drift_kind"], "random", "{t}");
+    assert_eq!(t["odometry_seed"], 7, "{t}");
+    assert!(t["top1_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
 }
 
 /// Issue 15: in Helsinki's long straight street (scans 17–40 of the seed-1 drive), a parallel
@@ -1898,6 +1914,7 @@ fn facade_map_and_scan_selection_from_the_command_line() {
         (ev, &["--vehicle", "bicycle"][..], "--vehicle"),
         (ev, &["--causal"][..], "--track"),
         (ev, &["--no-pose-graph"][..], "--track"),
+        (ev, &["--odometry-drift-kind", "random"][..], "--track"),
     ] {
         let args = [&base[..], extra].concat();
         let err = usage_error(&args);

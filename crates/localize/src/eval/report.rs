@@ -260,6 +260,9 @@ pub struct TrackSetup {
     pub odometry_drift: f64,
     /// Heading drift, degrees per 50 m.
     pub odometry_yaw_drift_deg: f64,
+    /// `None`: the drift is the same at every step (the worst case); `Some(seed)`: drawn per
+    /// step within those bounds ([`crate::track::randomly_drifted_odometry`]).
+    pub odometry_random_seed: Option<u64>,
     /// Whether the scans after each scan count too ([`crate::track::TrackOptions::smooth`]).
     pub smooth: bool,
     /// Whether a smoothed track's answers are refined together
@@ -278,6 +281,10 @@ pub struct TrackCounts {
     pub odometry_drift: f64,
     /// Heading drift, degrees per 50 m.
     pub odometry_yaw_drift_deg_per_50m: f64,
+    /// `systematic` (the same drift at every step) or `random` (drawn per step).
+    pub odometry_drift_kind: &'static str,
+    /// The seed of a random drift (`null` for a systematic one).
+    pub odometry_seed: Option<u64>,
     /// Scans after the first window.
     pub scans_after_first_window: usize,
     /// Of them, with the top candidate within 2 m and 3°.
@@ -692,6 +699,12 @@ impl EvalReport {
                 history_m: t.history_m,
                 odometry_drift: t.odometry_drift,
                 odometry_yaw_drift_deg_per_50m: t.odometry_yaw_drift_deg,
+                odometry_drift_kind: if t.odometry_random_seed.is_some() {
+                    "random"
+                } else {
+                    "systematic"
+                },
+                odometry_seed: t.odometry_random_seed,
                 scans_after_first_window: after.len(),
                 top1_within_2m_3deg: after.iter().filter(|r| within(r, 1)).count(),
                 top10_within_2m_3deg: after.iter().filter(|r| within(r, 10)).count(),
@@ -1025,8 +1038,9 @@ impl EvalReport {
         if let Some(t) = &r.track {
             let _ = writeln!(
                 out,
-            "track mode (window {}, odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 ({}) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
+            "track mode (window {}, {} odometry drift {:.1} % and {:.1}°/50 m): after the first window, top-1 ({}) within 2 m and 3° for {}/{} scans, top 10 for {}/{}",
             t.window,
+            t.odometry_drift_kind,
             100.0 * t.odometry_drift,
             t.odometry_yaw_drift_deg_per_50m,
             t.cost,

@@ -197,11 +197,16 @@ fn track_results(
                 .context_with(|| format!("extracting walls from {}", scan.name))?,
         );
     }
-    let odometry = drifted_odometry(
-        &truths,
-        setup.odometry_drift,
-        setup.odometry_yaw_drift_deg.to_radians() / 50.0,
-    );
+    let yaw_rad_per_m = setup.odometry_yaw_drift_deg.to_radians() / 50.0;
+    let odometry = match setup.odometry_random_seed {
+        None => drifted_odometry(&truths, setup.odometry_drift, yaw_rad_per_m),
+        Some(seed) => crate::track::randomly_drifted_odometry(
+            &truths,
+            setup.odometry_drift,
+            yaw_rad_per_m,
+            seed,
+        ),
+    };
     let options = TrackOptions {
         window: setup.window,
         history_m: setup.history_m,

@@ -631,12 +631,28 @@ pub struct EvalArgs {
     /// Track mode: odometry heading drift, degrees per 50 m travelled.
     #[arg(long, default_value_t = localize::track::ODOMETRY_YAW_DRIFT_DEG_PER_50M)]
     pub odometry_yaw_drift_deg: f64,
+    /// Track mode: the same drift at every step (`systematic`, the worst case) or each step's
+    /// scale error and heading bias drawn within those bounds (`random`, from `--odometry-seed`).
+    #[arg(long, value_enum, default_value_t = DriftKind::Systematic)]
+    pub odometry_drift_kind: DriftKind,
+    /// Track mode: the seed of a random odometry drift.
+    #[arg(long, default_value_t = 1)]
+    pub odometry_seed: u64,
     /// Sensor profile and extraction knobs.
     #[command(flatten)]
     pub extract: ExtractArgs,
     /// When no pose explains the scan well.
     #[command(flatten)]
     pub gate: GateArgs,
+}
+
+/// How `localize eval --track` drifts the odometry it makes from the true poses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DriftKind {
+    /// The same scale error and heading bias at every step.
+    Systematic,
+    /// Each step's drawn within the bounds.
+    Random,
 }
 
 /// Runs `urbansem localize`.
@@ -1049,6 +1065,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     if args.no_pose_graph && args.track.is_none() {
         super::usage!("--no-pose-graph refines a track's answers: it needs --track K");
     }
+    if args.odometry_drift_kind == DriftKind::Random && args.track.is_none() {
+        super::usage!("--odometry-drift-kind random drifts a track's odometry: it needs --track K");
+    }
     every_nth(
         ("--scan-every", args.scan_every),
         ("--scan-offset", args.scan_offset),
@@ -1085,6 +1104,8 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             pose_graph: !args.no_pose_graph,
             odometry_drift: args.odometry_drift,
             odometry_yaw_drift_deg: args.odometry_yaw_drift_deg,
+            odometry_random_seed: (args.odometry_drift_kind == DriftKind::Random)
+                .then_some(args.odometry_seed),
         }),
         figures: args.figures.clone(),
     };
