@@ -354,7 +354,8 @@ class Localizer:
         odometry distance before the window through which a chain's consistency still counts
         (``localize track --history-m``). ``causal``: rank each scan by the scans before it
         only, as a robot driving would (``localize track --causal``). ``pose_graph``: refine
-        the smoothed answers together with the odometry (``False``: ``--no-pose-graph``)."""
+        the smoothed answers together with the odometry, whose scale error and heading bias
+        each run of linked answers estimates (``False``: ``--no-pose-graph``)."""
         arrays = [_points(s, f"scans[{i}]") for i, s in enumerate(scans)]
         rows = self._native.track(
             arrays,

@@ -173,7 +173,8 @@ pub struct TrackArgs {
     #[arg(long)]
     pub causal: bool,
     /// Keep the smoothed chains' states as they are (default: each run of linked answers is
-    /// moved to fit its walls and the odometry together, a pose graph).
+    /// moved to fit its walls and the odometry together, a pose graph that also estimates the
+    /// odometry's scale error and heading bias).
     #[arg(long)]
     pub no_pose_graph: bool,
     /// Candidates printed per scan.
@@ -622,7 +623,8 @@ pub struct EvalArgs {
     #[arg(long)]
     pub causal: bool,
     /// Track mode: keep the smoothed chains' states as they are (default: refined together
-    /// with the odometry, a pose graph).
+    /// with the odometry, a pose graph that also estimates the odometry's scale error and
+    /// heading bias).
     #[arg(long)]
     pub no_pose_graph: bool,
     /// Track mode: odometry scale error (0.02: 2 % of the distance travelled).
