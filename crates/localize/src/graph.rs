@@ -324,6 +324,30 @@ mod tests {
     use super::*;
     use nalgebra::DMatrix;
 
+    /// The dense form of a block-tridiagonal system (damped as the solver damps it), in the
+    /// top-left of a system `extra` unknowns larger, and its right-hand side −g.
+    fn dense(
+        d: &[Matrix3<f64>],
+        b: &[Matrix3<f64>],
+        g: &[Vector3<f64>],
+        extra: usize,
+    ) -> (DMatrix<f64>, nalgebra::DVector<f64>) {
+        let n = d.len();
+        let mut h = DMatrix::<f64>::zeros(3 * n + extra, 3 * n + extra);
+        let mut rhs = nalgebra::DVector::<f64>::zeros(3 * n + extra);
+        for i in 0..n {
+            let di = d[i] + Matrix3::identity() * (1e-6 * (d[i].trace() + 1.0));
+            h.fixed_view_mut::<3, 3>(3 * i, 3 * i).copy_from(&di);
+            rhs.fixed_rows_mut::<3>(3 * i).copy_from(&(-g[i]));
+            if i + 1 < n {
+                h.fixed_view_mut::<3, 3>(3 * i, 3 * i + 3).copy_from(&b[i]);
+                h.fixed_view_mut::<3, 3>(3 * i + 3, 3 * i)
+                    .copy_from(&b[i].transpose());
+            }
+        }
+        (h, rhs)
+    }
+
     /// [`refine_run`] with the default refinement options.
     fn refined(
         scans: &[&[Segment]],
@@ -358,18 +382,7 @@ mod tests {
             .map(|k| Vector3::new(k as f64, 1.0 - k as f64, 0.5))
             .collect();
         let got = solve_block_tridiagonal(d.clone(), &b, g.clone()).unwrap();
-        let mut h = DMatrix::<f64>::zeros(3 * n, 3 * n);
-        let mut rhs = nalgebra::DVector::<f64>::zeros(3 * n);
-        for i in 0..n {
-            let di = d[i] + Matrix3::identity() * (1e-6 * (d[i].trace() + 1.0));
-            h.fixed_view_mut::<3, 3>(3 * i, 3 * i).copy_from(&di);
-            rhs.fixed_rows_mut::<3>(3 * i).copy_from(&(-g[i]));
-            if i + 1 < n {
-                h.fixed_view_mut::<3, 3>(3 * i, 3 * i + 3).copy_from(&b[i]);
-                h.fixed_view_mut::<3, 3>(3 * i + 3, 3 * i)
-                    .copy_from(&b[i].transpose());
-            }
-        }
+        let (h, rhs) = dense(&d, &b, &g, 0);
         let want = h.lu().solve(&rhs).unwrap();
         for i in 0..n {
             for k in 0..3 {
@@ -543,5 +556,92 @@ mod tests {
             independent[7].distance_to(&truth[7]) > 1.5,
             "{independent:?}"
         );
+    }
+
+    /// A car standing still: zero steps leave the scale and the bias to their priors, and the
+    /// poses stay finite and where the walls put them.
+    #[test]
+    fn a_car_standing_still_keeps_finite_poses() {
+        let map = vec![
+            Segment::new([-20.0, 8.0], [20.0, 8.0]),
+            Segment::new([-20.0, -8.0], [20.0, -8.0]),
+            Segment::new([-20.0, -8.0], [-20.0, 8.0]),
+        ];
+        let truth = Pose2 {
+            x: 0.0,
+            y: 0.0,
+            yaw_rad: 0.0,
+        };
+        let scan: Vec<Segment> = map.clone();
+        let scans: Vec<&[Segment]> = vec![&scan; 3];
+        let edges = vec![map.clone(); 3];
+        let still = Pose2 {
+            x: 0.0,
+            y: 0.0,
+            yaw_rad: 0.0,
+        };
+        let start = vec![
+            Pose2 {
+                x: 0.4,
+                y: -0.3,
+                yaw_rad: 0.01,
+            };
+            3
+        ];
+        let got = refined(
+            &scans,
+            &edges,
+            &start,
+            &[still, still],
+            &GraphOptions::default(),
+        );
+        for g in &got {
+            assert!(
+                g.x.is_finite() && g.y.is_finite() && g.yaw_rad.is_finite(),
+                "{got:?}"
+            );
+            assert!(g.distance_to(&truth) < 0.1, "{got:?}");
+        }
+    }
+
+    #[test]
+    fn bordered_elimination_equals_a_dense_solve() {
+        let n = 6;
+        let m =
+            |k: usize| Matrix3::from_fn(|r, c| ((r * 5 + c * 7 + k * 3) % 11) as f64 / 11.0 - 0.45);
+        let b: Vec<Matrix3<f64>> = (0..n - 1).map(m).collect();
+        let d: Vec<Matrix3<f64>> = (0..n)
+            .map(|k| {
+                let a = m(k + 13);
+                a * a.transpose() + Matrix3::identity() * 5.0
+            })
+            .collect();
+        let g: Vec<Vector3<f64>> = (0..n)
+            .map(|k| Vector3::new(0.3 * k as f64, 1.0, -0.2 * k as f64))
+            .collect();
+        let border: Vec<Matrix3x2<f64>> = (0..n)
+            .map(|k| Matrix3x2::from_fn(|r, c| ((r + 2 * c + k) % 5) as f64 / 10.0 - 0.2))
+            .collect();
+        let corner = Matrix2::new(40.0, 1.0, 1.0, 30.0);
+        let g_theta = Vector2::new(0.5, -1.5);
+        let (got, got_t) =
+            solve_bordered(d.clone(), &b, g.clone(), &border, corner, g_theta).unwrap();
+        let (mut h, mut rhs) = dense(&d, &b, &g, 2);
+        for (i, bi) in border.iter().enumerate() {
+            h.fixed_view_mut::<3, 2>(3 * i, 3 * n).copy_from(bi);
+            h.fixed_view_mut::<2, 3>(3 * n, 3 * i)
+                .copy_from(&bi.transpose());
+        }
+        h.fixed_view_mut::<2, 2>(3 * n, 3 * n).copy_from(&corner);
+        rhs.fixed_rows_mut::<2>(3 * n).copy_from(&(-g_theta));
+        let want = h.lu().solve(&rhs).unwrap();
+        for i in 0..n {
+            for k in 0..3 {
+                assert!((got[i][k] - want[3 * i + k]).abs() < 1e-6, "{i} {k}");
+            }
+        }
+        for k in 0..2 {
+            assert!((got_t[k] - want[3 * n + k]).abs() < 1e-6, "theta {k}");
+        }
     }
 }
