@@ -251,7 +251,8 @@ pub fn refine_run(
 
 /// Solves [H B; Bᵀ C] (δ, δθ) = −(g, g_θ) for a symmetric block-tridiagonal H (blocks `d`,
 /// `b`, as [`solve_block_tridiagonal`]) bordered by the two global unknowns θ: their Schur
-/// complement, with H's solves by block elimination, so O(n). `None` when a pivot is singular.
+/// complement, with one block elimination of H for its three solves, so O(n). `None` when a
+/// pivot is singular.
 fn solve_bordered(
     d: Vec<Matrix3<f64>>,
     b: &[Matrix3<f64>],
@@ -260,13 +261,12 @@ fn solve_bordered(
     corner: Matrix2<f64>,
     g_theta: Vector2<f64>,
 ) -> Option<(Vec<Vector3<f64>>, Vector2<f64>)> {
-    // u = H⁻¹(−g); y_k = H⁻¹ B_k (solve_block_tridiagonal solves H δ = −rhs).
-    let u = solve_block_tridiagonal(d.clone(), b, g)?;
-    let mut y = Vec::with_capacity(2);
-    for k in 0..2 {
-        let col: Vec<Vector3<f64>> = border.iter().map(|bk| -bk.column(k).into_owned()).collect();
-        y.push(solve_block_tridiagonal(d.clone(), b, col)?);
-    }
+    // u = H⁻¹(−g); y_k = H⁻¹ B_k (one elimination of H; `solve` gives δ with H δ = −rhs).
+    let h = BlockElimination::factor(d, b)?;
+    let u = h.solve(g);
+    let y: Vec<Vec<Vector3<f64>>> = (0..2)
+        .map(|k| h.solve(border.iter().map(|bk| -bk.column(k).into_owned()).collect()))
+        .collect();
     let mut schur = corner;
     let mut rhs = -g_theta;
     for (i, bi) in border.iter().enumerate() {
@@ -289,34 +289,62 @@ fn solve_bordered(
 /// blocks `b` (H[i][i + 1] = b[i], H[i + 1][i] = b[i]ᵀ), with a small damping on the diagonal;
 /// `None` when a pivot block is singular.
 fn solve_block_tridiagonal(
-    mut d: Vec<Matrix3<f64>>,
+    d: Vec<Matrix3<f64>>,
     b: &[Matrix3<f64>],
     g: Vec<Vector3<f64>>,
 ) -> Option<Vec<Vector3<f64>>> {
-    let n = d.len();
-    let mut r: Vec<Vector3<f64>> = g.into_iter().map(|v| -v).collect();
-    let mut inv: Vec<Matrix3<f64>> = Vec::with_capacity(n);
-    for i in 0..n {
-        let damping = 1e-6 * (d[i].trace() + 1.0);
-        d[i] += Matrix3::identity() * damping;
-        if i > 0 {
-            let l = b[i - 1].transpose() * inv[i - 1];
-            let previous = r[i - 1];
-            d[i] -= l * b[i - 1];
-            r[i] -= l * previous;
+    Some(BlockElimination::factor(d, b)?.solve(g))
+}
+
+/// The block elimination of a damped symmetric block-tridiagonal H (as
+/// [`solve_block_tridiagonal`] takes it), kept to solve for several right-hand sides.
+struct BlockElimination<'a> {
+    /// The upper blocks of H.
+    b: &'a [Matrix3<f64>],
+    /// Inverses of the eliminated pivot blocks.
+    inv: Vec<Matrix3<f64>>,
+    /// The multipliers b[i − 1]ᵀ · inv[i − 1] of row i (one fewer than the blocks).
+    l: Vec<Matrix3<f64>>,
+}
+
+impl<'a> BlockElimination<'a> {
+    /// Eliminates H's lower blocks; `None` when a pivot block is singular.
+    fn factor(mut d: Vec<Matrix3<f64>>, b: &'a [Matrix3<f64>]) -> Option<BlockElimination<'a>> {
+        let n = d.len();
+        let mut inv: Vec<Matrix3<f64>> = Vec::with_capacity(n);
+        let mut l: Vec<Matrix3<f64>> = Vec::with_capacity(n.saturating_sub(1));
+        for i in 0..n {
+            let damping = 1e-6 * (d[i].trace() + 1.0);
+            d[i] += Matrix3::identity() * damping;
+            if i > 0 {
+                let li = b[i - 1].transpose() * inv[i - 1];
+                d[i] -= li * b[i - 1];
+                l.push(li);
+            }
+            inv.push(d[i].try_inverse()?);
         }
-        inv.push(d[i].try_inverse()?);
+        Some(BlockElimination { b, inv, l })
     }
-    let mut delta = vec![Vector3::zeros(); n];
-    for i in (0..n).rev() {
-        let rhs = if i + 1 < n {
-            r[i] - b[i] * delta[i + 1]
-        } else {
-            r[i]
-        };
-        delta[i] = inv[i] * rhs;
+
+    /// δ with H δ = −g.
+    fn solve(&self, g: Vec<Vector3<f64>>) -> Vec<Vector3<f64>> {
+        let n = self.inv.len();
+        let mut r: Vec<Vector3<f64>> = g.into_iter().map(|v| -v).collect();
+        for i in 1..n {
+            let previous = r[i - 1];
+            r[i] -= self.l[i - 1] * previous;
+        }
+        let mut delta = vec![Vector3::zeros(); n];
+        for i in (0..n).rev() {
+            let rhs = if i + 1 < n {
+                r[i] - self.b[i] * delta[i + 1]
+            } else {
+                r[i]
+            };
+            delta[i] = self.inv[i] * rhs;
+        }
+        delta
     }
-    Some(delta)
 }
 
 #[cfg(test)]
@@ -366,9 +394,11 @@ mod tests {
         )
     }
 
-    #[test]
-    fn block_elimination_equals_a_dense_solve() {
-        let n = 5;
+    /// A block-tridiagonal system: diagonal blocks, upper blocks, right-hand side.
+    type System = (Vec<Matrix3<f64>>, Vec<Matrix3<f64>>, Vec<Vector3<f64>>);
+
+    /// A well-conditioned block-tridiagonal test system of `n` blocks.
+    fn test_system(n: usize) -> System {
         let m =
             |k: usize| Matrix3::from_fn(|r, c| ((r * 7 + c * 3 + k * 11) % 13) as f64 / 13.0 - 0.4);
         let b: Vec<Matrix3<f64>> = (0..n - 1).map(m).collect();
@@ -381,6 +411,13 @@ mod tests {
         let g: Vec<Vector3<f64>> = (0..n)
             .map(|k| Vector3::new(k as f64, 1.0 - k as f64, 0.5))
             .collect();
+        (d, b, g)
+    }
+
+    #[test]
+    fn block_elimination_equals_a_dense_solve() {
+        let n = 5;
+        let (d, b, g) = test_system(n);
         let got = solve_block_tridiagonal(d.clone(), &b, g.clone()).unwrap();
         let (h, rhs) = dense(&d, &b, &g, 0);
         let want = h.lu().solve(&rhs).unwrap();
@@ -607,18 +644,7 @@ mod tests {
     #[test]
     fn bordered_elimination_equals_a_dense_solve() {
         let n = 6;
-        let m =
-            |k: usize| Matrix3::from_fn(|r, c| ((r * 5 + c * 7 + k * 3) % 11) as f64 / 11.0 - 0.45);
-        let b: Vec<Matrix3<f64>> = (0..n - 1).map(m).collect();
-        let d: Vec<Matrix3<f64>> = (0..n)
-            .map(|k| {
-                let a = m(k + 13);
-                a * a.transpose() + Matrix3::identity() * 5.0
-            })
-            .collect();
-        let g: Vec<Vector3<f64>> = (0..n)
-            .map(|k| Vector3::new(0.3 * k as f64, 1.0, -0.2 * k as f64))
-            .collect();
+        let (d, b, g) = test_system(n);
         let border: Vec<Matrix3x2<f64>> = (0..n)
             .map(|k| Matrix3x2::from_fn(|r, c| ((r + 2 * c + k) % 5) as f64 / 10.0 - 0.2))
             .collect();

@@ -131,9 +131,8 @@ fn odometry_with(truth: &[Pose2], mut drift: impl FnMut() -> (f64, f64)) -> Vec<
         y: 0.0,
         yaw_rad: 0.0,
     };
-    for (i, t) in truth.iter().enumerate() {
-        if i > 0 {
-            let rel = truth[i - 1].inverse().compose(t);
+    for i in 0..truth.len() {
+        if let Some(rel) = step_into(truth, i) {
             let d = rel.x.hypot(rel.y);
             let (scale, bias) = drift();
             let step = Pose2 {
@@ -147,13 +146,6 @@ fn odometry_with(truth: &[Pose2], mut drift: impl FnMut() -> (f64, f64)) -> Vec<
     }
     out
 }
-
-/// Most passes of the pose graph over a track's answers ([`TrackOptions::refine_poses`]).
-const GRAPH_PASSES: usize = 5;
-/// The graph's answers have settled when none moves more than this in a pass, metres…
-const GRAPH_SETTLED_M: f64 = 0.01;
-/// …and no more than this, radians.
-const GRAPH_SETTLED_RAD: f64 = 1e-4;
 
 /// Odometry from true poses with a *random* drift: each step's scale error drawn uniformly
 /// within ±`scale_error` and its heading bias within ±`yaw_rad_per_m` (per metre of the
@@ -172,6 +164,13 @@ pub fn randomly_drifted_odometry(
         (s, yaw_rad_per_m * rng.gen_range(-1.0..=1.0))
     })
 }
+
+/// Most passes of the pose graph over a track's answers ([`TrackOptions::refine_poses`]).
+const GRAPH_PASSES: usize = 5;
+/// The graph's answers have settled when none moves more than this in a pass, metres…
+const GRAPH_SETTLED_M: f64 = 0.01;
+/// …and no more than this, radians.
+const GRAPH_SETTLED_RAD: f64 = 1e-4;
 
 /// Poses closer than this (and [`SAME_POSE_RAD`]) are one state of a scan, metres.
 const SAME_POSE_M: f64 = 1e-3;
@@ -993,8 +992,7 @@ mod tests {
         assert_ne!(a, randomly_drifted_odometry(&truth, scale, yaw, 6));
         let (mut larger, mut smaller) = (0, 0);
         for i in 1..truth.len() {
-            let t = truth[i - 1].inverse().compose(&truth[i]);
-            let o = a[i - 1].inverse().compose(&a[i]);
+            let (t, o) = (step_into(&truth, i).unwrap(), step_into(&a, i).unwrap());
             let (dt, d_o) = (t.x.hypot(t.y), o.x.hypot(o.y));
             assert!((d_o / dt - 1.0).abs() <= scale + 1e-9, "step {i}");
             assert!(
