@@ -564,10 +564,17 @@ pub fn search_capped(
         {
             break;
         }
+        // The batch takes up to BATCH nodes from the lowest buckets within the cut (a flat
+        // cost landscape spreads its boxes thinly over the buckets: one bucket at a time made
+        // batches of ~100 nodes, whose hand-over to the thread pool cost more than their work).
         batch.clear();
-        let bucket = &mut buckets[cursor];
-        let take = bucket.len().min(BATCH);
-        batch.extend(bucket.drain(bucket.len() - take..).filter(|n| n.0 <= cut));
+        let mut b = cursor;
+        while batch.len() < BATCH && b < buckets.len() && (b as u64).saturating_mul(width) <= cut {
+            let bucket = &mut buckets[b];
+            let take = bucket.len().min(BATCH - batch.len());
+            batch.extend(bucket.drain(bucket.len() - take..).filter(|n| n.0 <= cut));
+            b += 1;
+        }
         let expanded: Vec<(u64, u64, Vec<Node>)> = batch
             .par_chunks(BATCH / 8)
             .map(|chunk| {
