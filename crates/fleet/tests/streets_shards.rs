@@ -59,7 +59,7 @@ fn sharded_streets_equal_the_whole_map_estimate_and_survive_reruns() {
             .position(|t| t.owned.contains(&s))
             .unwrap()
     };
-    let crossing = network_edges(&map, &observed, model.geometry.max_turn_deg)
+    let crossing = network_edges(&map, &observed, &model.geometry)
         .iter()
         .filter(|e| owner(observed[e.s1]) != owner(observed[e.s2]))
         .count();

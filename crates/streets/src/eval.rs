@@ -307,7 +307,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
     let street_m: f64 = eval_ids.iter().map(|&s| segs[s].length_m).sum();
     let grid = options.geometry.theta_grid();
     let lambda = (options.geometry.corridor.bin_m / options.geometry.sigma_m).powi(2) / 2.0;
-    let edges = network_edges(&ds.map, &eval_ids, options.geometry.max_turn_deg);
+    let edges = network_edges(&ds.map, &eval_ids, &options.geometry);
     let tags: Vec<SegmentTags> = eval_ids
         .iter()
         .map(|&s| SegmentTags::of(&ds.map, s))

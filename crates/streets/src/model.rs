@@ -205,6 +205,11 @@ pub struct GeometryOptions {
     /// Couple neighbours only when their directions differ by less than this, degrees
     /// (180: every pair of N, as the thesis).
     pub max_turn_deg: f64,
+    /// Couple neighbours also where the tags that set a street's width prior change
+    /// ([`SegmentTags`]: `highway` class, `width`, `lanes`, `sidewalk`), as the thesis does;
+    /// false: a tag change ends the coupling (a mapper splits a way where its width changes).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub couple_across_tag_changes: bool,
     /// Tempering of the segment likelihood, prior weight and coupling cap used by
     /// [`StreetModel::estimate`] (`urbansem streets eval` selects them per fold instead).
     #[serde(default)]
@@ -219,6 +224,7 @@ impl Default for GeometryOptions {
             max_width_m: 30.0,
             sigma_m: 0.5,
             max_turn_deg: 45.0,
+            couple_across_tag_changes: false,
             tempering: Tempering {
                 tau: 128.0,
                 floor_nats: 8.0,
@@ -317,11 +323,13 @@ pub fn segment_bins(
 }
 
 /// Whether neighbours `s1` and `s2` of the map are coupled when both are observed: `None`
-/// when their directions differ by more than `max_turn_deg`, else `Some(flipped)` (they run
-/// in opposite directions, left of one is right of the other).
-pub fn coupling(map: &OsmMap, s1: usize, s2: usize, max_turn_deg: f64) -> Option<bool> {
+/// when their directions differ by more than [`GeometryOptions::max_turn_deg`] or (unless
+/// [`GeometryOptions::couple_across_tag_changes`]) their width-prior tags differ, else
+/// `Some(flipped)` (they run in opposite directions, left of one is right of the other).
+pub fn coupling(map: &OsmMap, s1: usize, s2: usize, geometry: &GeometryOptions) -> Option<bool> {
     let segs = &map.streets.segments;
     let (a, b) = (segs.get(s1)?, segs.get(s2)?);
+    let max_turn_deg = geometry.max_turn_deg;
     // Same direction when one ends where the other starts.
     let flipped = !(a.to_node == b.from_node || a.from_node == b.to_node);
     let da = [a.b[0] - a.a[0], a.b[1] - a.a[1]];
@@ -331,12 +339,15 @@ pub fn coupling(map: &OsmMap, s1: usize, s2: usize, max_turn_deg: f64) -> Option
     if max_turn_deg < 180.0 && cos < max_turn_deg.to_radians().cos() {
         return None;
     }
+    if !geometry.couple_across_tag_changes && SegmentTags::of(map, s1) != SegmentTags::of(map, s2) {
+        return None;
+    }
     Some(flipped)
 }
 
 /// Coupled pairs among `which` (indices into `which` in the result), with orientation, in
 /// the order of the map's neighbour pairs.
-pub fn network_edges(map: &OsmMap, which: &[usize], max_turn_deg: f64) -> Vec<Edge> {
+pub fn network_edges(map: &OsmMap, which: &[usize], geometry: &GeometryOptions) -> Vec<Edge> {
     let pos: std::collections::HashMap<usize, usize> =
         which.iter().enumerate().map(|(k, &s)| (s, k)).collect();
     let mut edges = Vec::new();
@@ -344,7 +355,7 @@ pub fn network_edges(map: &OsmMap, which: &[usize], max_turn_deg: f64) -> Vec<Ed
         let (Some(&k1), Some(&k2)) = (pos.get(&s1), pos.get(&s2)) else {
             continue;
         };
-        if let Some(flipped) = coupling(map, s1, s2, max_turn_deg) {
+        if let Some(flipped) = coupling(map, s1, s2, geometry) {
             edges.push(Edge {
                 s1: k1,
                 s2: k2,
@@ -1283,7 +1294,7 @@ impl StreetModel {
         }
         let net = Network {
             potentials,
-            edges: network_edges(map, &ids, self.geometry.max_turn_deg),
+            edges: network_edges(map, &ids, &self.geometry),
             lambda: (self.geometry.corridor.bin_m / self.geometry.sigma_m).powi(2) / 2.0,
             truncation: self.geometry.tempering.coupling_cap_nats,
         };
@@ -1436,5 +1447,42 @@ mod tests {
         value.as_object_mut().unwrap().remove("tag_prior");
         let old = StreetModel::from_json(&serde_json::to_vec(&value).unwrap(), path).unwrap();
         assert_eq!(old.tag_prior, None);
+    }
+
+    #[test]
+    fn coupling_ends_where_the_width_tags_change() {
+        // One straight street north: way 10 (nodes 1–3) and way 11 (3–4) with two lanes,
+        // way 12 (4–5) with one lane.
+        let xml = r#"<?xml version="1.0"?><osm version="0.6">
+<node id="1" lat="48.0000" lon="11.0"/><node id="2" lat="48.0005" lon="11.0"/>
+<node id="3" lat="48.0010" lon="11.0"/><node id="4" lat="48.0015" lon="11.0"/>
+<node id="5" lat="48.0020" lon="11.0"/>
+<way id="10"><nd ref="1"/><nd ref="2"/><nd ref="3"/><tag k="highway" v="residential"/><tag k="lanes" v="2"/></way>
+<way id="11"><nd ref="3"/><nd ref="4"/><tag k="highway" v="residential"/><tag k="lanes" v="2"/></way>
+<way id="12"><nd ref="4"/><nd ref="5"/><tag k="highway" v="residential"/><tag k="lanes" v="1"/></way>
+</osm>"#;
+        let map = OsmMap::from_xml_str(xml).expect("map");
+        let seg = |from: i64| {
+            map.streets
+                .segments
+                .iter()
+                .position(|s| s.from_node == from)
+                .expect("segment")
+        };
+        let (s12, s23, s34, s45) = (seg(1), seg(2), seg(3), seg(4));
+        let mut geometry = GeometryOptions::default();
+        // One way; two ways with the same tags; a change of `lanes`.
+        assert_eq!(coupling(&map, s12, s23, &geometry), Some(false));
+        assert_eq!(coupling(&map, s23, s34, &geometry), Some(false));
+        assert_eq!(coupling(&map, s34, s45, &geometry), None);
+        let all = [s12, s23, s34, s45];
+        assert_eq!(network_edges(&map, &all, &geometry).len(), 2);
+        geometry.couple_across_tag_changes = true;
+        assert_eq!(coupling(&map, s34, s45, &geometry), Some(false));
+        assert_eq!(network_edges(&map, &all, &geometry).len(), 3);
+        // The thesis' coupling is written into a model file; the default is not.
+        let json = |g: &GeometryOptions| serde_json::to_string(g).expect("json");
+        assert!(json(&geometry).contains("couple_across_tag_changes"));
+        assert!(!json(&GeometryOptions::default()).contains("couple_across_tag_changes"));
     }
 }

@@ -216,13 +216,12 @@ impl StreetModel {
             .iter()
             .map(|s| geodata::osm::tags::is_drivable(&s.highway))
             .collect();
-        let max_turn_deg = self.geometry.max_turn_deg;
         // Candidate couplings: a pair is an edge of the network iff both ends are observed.
         let mut candidates: Vec<Vec<usize>> = vec![Vec::new(); segs.len()];
         for &[s1, s2] in &map.streets.neighbour_pairs {
             let ok = drivable.get(s1).copied().unwrap_or(false)
                 && drivable.get(s2).copied().unwrap_or(false)
-                && coupling(map, s1, s2, max_turn_deg).is_some();
+                && coupling(map, s1, s2, &self.geometry).is_some();
             if ok {
                 candidates[s1].push(s2);
                 candidates[s2].push(s1);

@@ -11,7 +11,9 @@ use std::path::{Path, PathBuf};
 use streets::corridor::CorridorOptions;
 use streets::dataset::SegmentTruth;
 use streets::inference::{Edge, Network};
-use streets::model::{network_edges, ClassifierOptions, Estimates, StreetModel, Target};
+use streets::model::{
+    network_edges, ClassifierOptions, Estimates, GeometryOptions, StreetModel, Target,
+};
 use streets::potentials::SegmentPotential;
 use streets::tiles::{merge_tiles, plan_tiles, TileGrid};
 use streets::StreetsError;
@@ -55,7 +57,7 @@ fn kitti360_drive_0009_on_its_roads() -> streets::real::RealDataset {
 fn components_by_union_find(
     map: &OsmMap,
     observed: &[usize],
-    max_turn_deg: f64,
+    geometry: &GeometryOptions,
 ) -> Vec<(usize, usize)> {
     let mut parent: Vec<usize> = (0..observed.len()).collect();
     fn find(p: &mut [usize], mut x: usize) -> usize {
@@ -64,7 +66,7 @@ fn components_by_union_find(
         }
         x
     }
-    for e in network_edges(map, observed, max_turn_deg) {
+    for e in network_edges(map, observed, geometry) {
         let (a, b) = (find(&mut parent, e.s1), find(&mut parent, e.s2));
         parent[a] = b;
     }
@@ -102,7 +104,7 @@ fn check_tiles(
         }
     }
     let observed: Vec<usize> = whole.segments.iter().map(|e| e.segment).collect();
-    let component = components_by_union_find(map, &observed, model.geometry.max_turn_deg);
+    let component = components_by_union_find(map, &observed, &model.geometry);
     let tile_of_segment = |s: usize| plan.iter().position(|t| t.owned.contains(&s)).unwrap();
     let mut crossing = BTreeSet::new();
     for &(s, c) in &component {

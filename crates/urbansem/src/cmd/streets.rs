@@ -83,6 +83,10 @@ pub struct EvalArgs {
     /// Couple neighbouring segments only below this turn angle (180: all pairs of N).
     #[arg(long, default_value_t = 45.0)]
     max_turn_deg: f64,
+    /// Couple neighbouring segments also where their width-prior tags (`highway` class,
+    /// `width`, `lanes`, `sidewalk`) change, as the thesis does.
+    #[arg(long)]
+    couple_across_tag_changes: bool,
     /// One width prior for every segment (thesis §4.4.2) instead of one per OSM tag group
     /// (`width`, `lanes`, `highway` class).
     #[arg(long)]
@@ -105,6 +109,7 @@ impl EvalArgs {
             ..EvalOptions::default()
         };
         options.geometry.max_turn_deg = self.max_turn_deg;
+        options.geometry.couple_across_tag_changes = self.couple_across_tag_changes;
         options.tag_prior = !self.no_tag_prior;
         options.sidewalk_prior = !self.no_sidewalk_prior;
         options.mcmc.chains = self.chains;
