@@ -166,6 +166,14 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
     assert expected["history_m"] == 300.0 and expected["smoothed"] is True and expected["pose_graph"] is True
     for r, (s, _) in zip(rows, scans):
         assert r.x is not None and math.hypot(r.x - s.truth[0], r.y - s.truth[1]) <= THESIS_MAX_M
+    # The runs the pose graph refined carry the drift it estimated; this odometry is the truth.
+    runs = [r.odometry_run for r in rows if r.odometry_run is not None]
+    assert runs, "no run of linked answers"
+    for run in runs:
+        drift = run["drift"]
+        assert run["scans"] >= 2 and run["length_m"] > 0.0
+        assert abs(drift["scale_error"]) < 0.02 and drift["scale_error_sd"] > 0.0
+        assert abs(drift["heading_bias_deg_per_100m"]) < 2.0
     # The history reaches the library as the CLI's --history-m does; a negative one is refused.
     short = localizer.track([s.points for s, _ in scans], odometry, window=3, names=names, history_m=0.0)
     expected = run_json(
@@ -187,6 +195,7 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
         "--odometry", odo_file, "--window", "3", "--no-pose-graph", "--json",
     )
     assert [r.report for r in chains] == expected["scans"] and expected["pose_graph"] is False
+    assert all(r.odometry_run is None for r in chains)
     with pytest.raises(ValueError, match="history_m"):
         localizer.track([s.points for s, _ in scans], odometry, window=3, history_m=-1.0)
     # 4 × 4 odometry matrices are read as the same (x, y, yaw) rows.

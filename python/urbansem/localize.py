@@ -188,6 +188,10 @@ class TrackRow:
     sensor: Optional[Sensor]
     #: Why the scan could not be localized, if so.
     message: Optional[str]
+    #: The run of scans the pose graph refined with this one (``first_scan``, ``scans``,
+    #: ``length_m``) and the odometry drift it estimated over it (``drift``:
+    #: ``scale_error``, ``heading_bias_deg_per_100m`` and their ``_sd``); ``None`` outside a run.
+    odometry_run: Optional[Dict[str, Any]]
     #: The row as ``urbansem localize track --json`` prints it.
     report: Dict[str, Any] = field(repr=False, compare=False)
 
@@ -206,6 +210,7 @@ class TrackRow:
             segments=d["segments"],
             sensor=Sensor.from_dict(d["sensor"]),
             message=d["message"],
+            odometry_run=d.get("odometry_run"),
             report=d,
         )
 

@@ -79,6 +79,8 @@ pub struct TrackSummary {
     pub top10_within_2m_3deg: usize,
     /// Per scan.
     pub per_scan: Vec<TrackRow>,
+    /// The longest run the pose graph refined together and the odometry drift it estimated.
+    pub odometry_run: Option<localize::graph::OdometryRun>,
     /// Seconds simulating the drive.
     pub simulate_seconds: f64,
     /// Seconds localizing the track.
@@ -347,6 +349,24 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
     let track_geojson = localize::geojson::track_collection(&report);
     geodata::geojson::validate(&track_geojson).map_err(|e| anyhow::anyhow!("internal: {e}"))?;
     let poses = localize::poses::track_poses(&report);
+    let longest_run = results
+        .iter()
+        .filter_map(|r| r.odometry_run)
+        .max_by_key(|run| (run.scans, std::cmp::Reverse(run.first_scan)));
+    let drift_text = match longest_run.and_then(|run| run.drift.map(|d| (run, d))) {
+        Some((run, d)) => format!(
+            " Over its longest run of linked answers ({} scans, {:.0} m) the pose graph estimated the \
+             odometry's drift as {:+.2} ± {:.2} % of the distance and {:+.2} ± {:.2}° per 100 m (applied: \
+             +2 % and +2° per 100 m).",
+            run.scans,
+            run.length_m,
+            100.0 * d.scale_error,
+            100.0 * d.scale_error_sd,
+            d.heading_bias_deg_per_100m,
+            d.heading_bias_sd_deg_per_100m
+        ),
+        None => String::new(),
+    };
     let table = rows_table(
         &rows,
         &[
@@ -367,6 +387,7 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             top1_within_2m_3deg: top1,
             top10_within_2m_3deg: top10,
             per_scan: rows,
+            odometry_run: longest_run,
             simulate_seconds: simulate_s,
             track_seconds: track_s,
         })?,
@@ -375,7 +396,7 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
             "{} simulated HDL-64 scans (1.73 m above the road, heading along it) of a drive through the default city, \
              OSM map-error model on, localized on the whole map in track mode (window {WINDOW}, odometry drifting 2 % \
              and 1° per 50 m). After the first window, {top1} of {after_window} scans have an accurate top-1 pose \
-             (2 m, 3°) and {top10} an accurate pose among the top 10. Figure: true track (green), each scan's next 9 \
+             (2 m, 3°) and {top10} an accurate pose among the top 10.{drift_text} Figure: true track (green), each scan's next 9 \
              candidates where the track keeps any (light blue), its chosen pose (dark blue when accurate, red when not; the first window's \
              scans ringed), a thin line from the chosen pose to the truth.{table}",
             truths.len()
@@ -473,5 +494,10 @@ mod tests {
         assert!(stage.figures[0].starts_with("<svg"));
         let top1 = stage.summary["top1_within_2m_3deg"].as_u64().unwrap();
         assert!(top1 >= 6, "{}", stage.summary);
+        // The page states the odometry drift the graph estimated over its longest run.
+        let run = &stage.summary["odometry_run"];
+        assert!(run["scans"].as_u64().unwrap() >= 2, "{run}");
+        assert!(run["drift"]["scale_error"].as_f64().is_some(), "{run}");
+        assert!(stage.text_html.contains("the pose graph estimated"));
     }
 }

@@ -224,6 +224,7 @@ pub(crate) mod tests {
             segments: 10,
             sensor: None,
             message: None,
+            odometry_run: None,
         };
         TrackReport {
             map: "m.osm".into(),

@@ -80,9 +80,40 @@ impl Default for GraphOptions {
     }
 }
 
+/// The odometry's systematic drift over a run, as the graph estimated it: the odometry's
+/// steps are the true ones scaled by 1 + `scale_error` and turned by `heading_bias` per metre
+/// travelled (counter-clockwise positive), with their posterior standard deviations.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct OdometryDrift {
+    /// Scale error of the odometry's distances (0.02: it reads 2 % long).
+    pub scale_error: f64,
+    /// Posterior standard deviation of the scale error.
+    pub scale_error_sd: f64,
+    /// Heading bias, degrees per 100 m travelled.
+    pub heading_bias_deg_per_100m: f64,
+    /// Posterior standard deviation of the heading bias, degrees per 100 m.
+    pub heading_bias_sd_deg_per_100m: f64,
+}
+
+/// A run of consecutive scans of a track whose answers the graph refined together, and the
+/// odometry drift estimated over it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct OdometryRun {
+    /// Index of the run's first scan in the track.
+    pub first_scan: usize,
+    /// Scans in the run.
+    pub scans: usize,
+    /// Distance the odometry travelled over the run, metres.
+    pub length_m: f64,
+    /// The drift estimated over the run (`None`: not estimated).
+    pub drift: Option<OdometryDrift>,
+}
+
 /// The refined poses of a run of scans linked by odometry: `scans[i]` (sensor frame) seen
 /// from `poses[i]` against `edges[i]` (the map edges visible there), `steps[i]` the odometry
-/// step from scan i to scan i + 1 (in scan i's frame; one fewer than the scans).
+/// step from scan i to scan i + 1 (in scan i's frame; one fewer than the scans), and the
+/// odometry drift estimated over the run (`None` unless [`GraphOptions::systematic_drift`]
+/// is on and the run has two scans or more).
 pub fn refine_run(
     scans: &[&[Segment]],
     edges: &[Vec<Segment>],
@@ -90,10 +121,10 @@ pub fn refine_run(
     steps: &[Pose2],
     options: &GraphOptions,
     refine: &RefineOptions,
-) -> Vec<Pose2> {
+) -> (Vec<Pose2>, Option<OdometryDrift>) {
     let n = poses.len();
     if n == 0 || scans.len() != n || edges.len() != n || steps.len() + 1 != n {
-        return poses.to_vec();
+        return (poses.to_vec(), None);
     }
     let samples: Vec<Vec<([f64; 2], f64)>> = scans
         .iter()
@@ -114,6 +145,8 @@ pub fn refine_run(
         1.0 / options.odometry_yaw_rad_per_m.max(1e-12).powi(2),
     ));
     let it_n = options.iterations.max(1);
+    // The posterior covariance of the drift at the last step taken.
+    let mut theta_cov: Option<Matrix2<f64>> = None;
     for it in 0..it_n {
         let radius = refine.radius_at(it, it_n);
         let mut d: Vec<Matrix3<f64>> = vec![Matrix3::zeros(); n];
@@ -200,10 +233,11 @@ pub fn refine_run(
             }
         }
         let delta = if sys {
-            let Some((delta, dt)) = solve_bordered(d, &b, g, &border, corner, g_theta) else {
+            let Some((delta, dt, cov)) = solve_bordered(d, &b, g, &border, corner, g_theta) else {
                 break;
             };
             theta += dt;
+            theta_cov = Some(cov);
             delta
         } else {
             let Some(delta) = solve_block_tridiagonal(d, &b, g) else {
@@ -230,7 +264,8 @@ pub fn refine_run(
         } else {
             0.0
         };
-    x.iter()
+    let refined = x
+        .iter()
         .zip(poses)
         .map(|(r, p)| {
             if r.x.is_finite()
@@ -246,13 +281,26 @@ pub fn refine_run(
                 *p
             }
         })
-        .collect()
+        .collect();
+    let per_100m = 100f64.to_degrees();
+    let drift = theta_cov
+        .filter(|c| theta.iter().chain(c.iter()).all(|v| v.is_finite()))
+        .map(|c| OdometryDrift {
+            scale_error: theta[0],
+            scale_error_sd: c[(0, 0)].max(0.0).sqrt(),
+            heading_bias_deg_per_100m: theta[1] * per_100m,
+            heading_bias_sd_deg_per_100m: c[(1, 1)].max(0.0).sqrt() * per_100m,
+        });
+    (refined, drift)
 }
+
+/// The steps of the poses and of θ, and θ's covariance.
+type BorderedSolution = (Vec<Vector3<f64>>, Vector2<f64>, Matrix2<f64>);
 
 /// Solves [H B; Bᵀ C] (δ, δθ) = −(g, g_θ) for a symmetric block-tridiagonal H (blocks `d`,
 /// `b`, as [`solve_block_tridiagonal`]) bordered by the two global unknowns θ: their Schur
-/// complement, with one block elimination of H for its three solves, so O(n). `None` when a
-/// pivot is singular.
+/// complement, with one block elimination of H for its three solves, so O(n); also the
+/// inverse of that complement (θ's posterior covariance). `None` when a pivot is singular.
 fn solve_bordered(
     d: Vec<Matrix3<f64>>,
     b: &[Matrix3<f64>],
@@ -260,7 +308,7 @@ fn solve_bordered(
     border: &[Matrix3x2<f64>],
     corner: Matrix2<f64>,
     g_theta: Vector2<f64>,
-) -> Option<(Vec<Vector3<f64>>, Vector2<f64>)> {
+) -> Option<BorderedSolution> {
     // u = H⁻¹(−g); y_k = H⁻¹ B_k (one elimination of H; `solve` gives δ with H δ = −rhs).
     let h = BlockElimination::factor(d, b)?;
     let u = h.solve(g);
@@ -278,11 +326,12 @@ fn solve_bordered(
         }
     }
     schur += Matrix2::identity() * (1e-9 * (schur.trace().abs() + 1.0));
-    let dt = schur.try_inverse()? * rhs;
+    let cov = schur.try_inverse()?;
+    let dt = cov * rhs;
     let delta = (0..u.len())
         .map(|i| u[i] - y[0][i] * dt[0] - y[1][i] * dt[1])
         .collect();
-    Some((delta, dt))
+    Some((delta, dt, cov))
 }
 
 /// Solves H δ = −g for a symmetric block-tridiagonal H with diagonal blocks `d` and upper
@@ -392,6 +441,7 @@ mod tests {
             options,
             &RefineOptions::default(),
         )
+        .0
     }
 
     /// A block-tridiagonal system: diagonal blocks, upper blocks, right-hand side.
@@ -578,6 +628,26 @@ mod tests {
         for (i, (g, t)) in got.iter().zip(&truth).enumerate() {
             assert!(g.distance_to(t) < 0.3, "scan {i}: {g:?} against {t:?}");
         }
+        // The drift it reports is the one applied: 2 % and 1° per 50 m (2° per 100 m).
+        let (_, drift) = refine_run(
+            &scans,
+            &edges,
+            &start,
+            &steps,
+            &GraphOptions::default(),
+            &RefineOptions::default(),
+        );
+        let drift = drift.expect("the drift of a run");
+        assert!((drift.scale_error - 0.02).abs() < 0.005, "{drift:?}");
+        assert!(
+            (drift.heading_bias_deg_per_100m - 2.0).abs() < 0.5,
+            "{drift:?}"
+        );
+        assert!(
+            drift.scale_error_sd > 0.0 && drift.scale_error_sd < 0.02,
+            "{drift:?}"
+        );
+        assert!(drift.heading_bias_sd_deg_per_100m > 0.0, "{drift:?}");
         let independent = refined(
             &scans,
             &edges,
@@ -650,7 +720,7 @@ mod tests {
             .collect();
         let corner = Matrix2::new(40.0, 1.0, 1.0, 30.0);
         let g_theta = Vector2::new(0.5, -1.5);
-        let (got, got_t) =
+        let (got, got_t, got_cov) =
             solve_bordered(d.clone(), &b, g.clone(), &border, corner, g_theta).unwrap();
         let (mut h, mut rhs) = dense(&d, &b, &g, 2);
         for (i, bi) in border.iter().enumerate() {
@@ -660,7 +730,7 @@ mod tests {
         }
         h.fixed_view_mut::<2, 2>(3 * n, 3 * n).copy_from(&corner);
         rhs.fixed_rows_mut::<2>(3 * n).copy_from(&(-g_theta));
-        let want = h.lu().solve(&rhs).unwrap();
+        let want = h.clone().lu().solve(&rhs).unwrap();
         for i in 0..n {
             for k in 0..3 {
                 assert!((got[i][k] - want[3 * i + k]).abs() < 1e-6, "{i} {k}");
@@ -668,6 +738,17 @@ mod tests {
         }
         for k in 0..2 {
             assert!((got_t[k] - want[3 * n + k]).abs() < 1e-6, "theta {k}");
+        }
+        // θ's covariance: the corner block of the whole system's inverse.
+        let inverse = h.try_inverse().unwrap();
+        for k in 0..2 {
+            for l in 0..2 {
+                let want = inverse[(3 * n + k, 3 * n + l)];
+                assert!(
+                    (got_cov[(k, l)] - want).abs() < 1e-6 * (1.0 + want.abs()),
+                    "cov {k} {l}"
+                );
+            }
         }
     }
 }

@@ -717,6 +717,35 @@ impl TrackReport {
                 row.confidence
             );
         }
+        // Each run the pose graph refined, once, with the odometry drift it estimated.
+        let mut last = None;
+        for run in self.scans.iter().filter_map(|r| r.odometry_run) {
+            if last == Some(run.first_scan) {
+                continue;
+            }
+            last = Some(run.first_scan);
+            let first = self.scans.get(run.first_scan).map_or("?", |r| &r.scan);
+            let _ = write!(
+                out,
+                "run of {} scans from {first} ({:.0} m of odometry)",
+                run.scans, run.length_m
+            );
+            match run.drift {
+                Some(d) => {
+                    let _ = writeln!(
+                        out,
+                        ": odometry scale error {:+.2} ± {:.2} %, heading bias {:+.2} ± {:.2}° per 100 m",
+                        100.0 * d.scale_error,
+                        100.0 * d.scale_error_sd,
+                        d.heading_bias_deg_per_100m,
+                        d.heading_bias_sd_deg_per_100m
+                    );
+                }
+                None => {
+                    let _ = writeln!(out);
+                }
+            }
+        }
         out
     }
 }

@@ -219,6 +219,10 @@ pub struct Localization {
     pub accepted: bool,
     /// Seconds per stage.
     pub seconds: StageSeconds,
+    /// In a track: the run of scans whose answers were refined with this one, and the
+    /// odometry drift estimated over it (`None` outside a run).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub odometry_run: Option<crate::graph::OdometryRun>,
 }
 
 impl Localization {
@@ -240,6 +244,7 @@ impl Localization {
             message: None,
             accepted: false,
             seconds: StageSeconds::default(),
+            odometry_run: None,
         }
     }
 

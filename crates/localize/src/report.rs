@@ -244,6 +244,9 @@ pub struct TrackRow {
     pub sensor: Option<SensorReport>,
     /// Why the scan could not be localized, or that the odometry alone placed it (no walls).
     pub message: Option<String>,
+    /// The run of scans whose answers the pose graph refined with this one, and the odometry
+    /// drift estimated over it (`null` outside a run, or without the graph).
+    pub odometry_run: Option<crate::graph::OdometryRun>,
 }
 
 impl TrackRow {
@@ -271,6 +274,7 @@ impl TrackRow {
             segments: extracted.segments.len(),
             sensor: extracted.sensor,
             message: result.message.clone(),
+            odometry_run: result.odometry_run,
         }
     }
 }

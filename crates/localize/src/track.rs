@@ -370,6 +370,9 @@ impl Localizer<'_> {
         options: &TrackOptions,
     ) -> bool {
         let mut moved = false;
+        for r in out.iter_mut() {
+            r.odometry_run = None;
+        }
         let tops: Vec<Option<Pose2>> = out
             .iter()
             .map(|r| r.candidates.first().map(|c| c.pose))
@@ -402,7 +405,7 @@ impl Localizer<'_> {
                 let steps: Vec<Pose2> = (start + 1..end)
                     .filter_map(|i| step_into(odometry, i))
                     .collect();
-                let refined = crate::graph::refine_run(
+                let (refined, drift) = crate::graph::refine_run(
                     &segments,
                     &edges,
                     &poses,
@@ -410,8 +413,15 @@ impl Localizer<'_> {
                     &crate::graph::GraphOptions::default(),
                     &self.options.refine,
                 );
+                let run = crate::graph::OdometryRun {
+                    first_scan: start,
+                    scans: end - start,
+                    length_m: steps.iter().map(|m| m.x.hypot(m.y)).sum(),
+                    drift,
+                };
                 for (k, pose) in refined.into_iter().enumerate() {
                     let r = &mut out[start + k];
+                    r.odometry_run = Some(run);
                     if let Some(first) = r.candidates.first_mut() {
                         if pose != first.pose && self.pose_allowed(&pose) {
                             moved |= pose.distance_to(&first.pose) > GRAPH_SETTLED_M

@@ -504,6 +504,27 @@ fn track_mode_recovers_a_simulated_hdl64_drive() {
     assert!(t["top10_within_2m_3deg"].as_u64().unwrap() >= 7, "{t}");
     assert_eq!(t["odometry_drift_kind"], "systematic", "{t}");
     assert_eq!(t["odometry_seed"], serde_json::Value::Null, "{t}");
+    // Every scan names its run and the drift estimated over it: 2 % long and 1° per 50 m
+    // were applied (the run's scale error within 1 %, its bias within 1° per 100 m).
+    let scans = v["per_scan"].as_array().unwrap();
+    let runs: Vec<&serde_json::Value> = scans
+        .iter()
+        .map(|r| &r["odometry_run"])
+        .filter(|r| !r.is_null())
+        .collect();
+    assert!(runs.len() >= 8, "{runs:?}");
+    let longest = runs
+        .iter()
+        .max_by_key(|r| r["scans"].as_u64().unwrap())
+        .unwrap();
+    let drift = &longest["drift"];
+    assert!(longest["scans"].as_u64().unwrap() >= 5, "{longest}");
+    assert!(
+        (drift["scale_error"].as_f64().unwrap() - 0.02).abs() < 0.01,
+        "{longest}"
+    );
+    let bias = drift["heading_bias_deg_per_100m"].as_f64().unwrap();
+    assert!((bias - 2.0).abs() < 1.0, "{longest}");
     // The same drive with a random drift (each step's drawn within the bounds): recorded,
     // and the track still follows it (measured 8/8).
     let stdout = stdout_of(

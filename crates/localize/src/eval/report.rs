@@ -415,6 +415,10 @@ pub struct ScanRow {
     pub seconds: StageSeconds,
     /// Seconds of the hashing baseline.
     pub hashing_seconds: f64,
+    /// Track mode: the run of scans the pose graph refined with this one and the odometry
+    /// drift estimated over it (absent outside track mode, `null` outside a run).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub odometry_run: Option<Option<crate::graph::OdometryRun>>,
 }
 
 impl ScanRow {
@@ -452,6 +456,7 @@ impl ScanRow {
             accepted: r.result.accepted,
             seconds: r.result.seconds,
             hashing_seconds: r.hashing_seconds,
+            odometry_run: None,
         }
     }
 }
@@ -813,7 +818,13 @@ impl EvalReport {
             },
             stage_seconds,
             threads: rayon::current_num_threads(),
-            per_scan: records.iter().map(ScanRow::new).collect(),
+            per_scan: records
+                .iter()
+                .map(|r| ScanRow {
+                    odometry_run: setup.track.map(|_| r.result.odometry_run),
+                    ..ScanRow::new(r)
+                })
+                .collect(),
             methods: setup.methods,
             domain_cells,
             yaws_per_cell: records
