@@ -414,6 +414,10 @@ fn expand(
 /// Nodes expanded together in the best-first phase.
 const BATCH: usize = 1024;
 
+/// Queue buckets a batch takes its nodes from, at most (so that a sparse queue is not
+/// scanned far ahead for every batch).
+const BATCH_SPAN: usize = 4096;
+
 /// Number of buckets of width `width` for bounds up to `max_bound`.
 fn buckets_len(max_bound: u64, width: u64) -> usize {
     (max_bound / width) as usize + 1
@@ -564,12 +568,13 @@ pub fn search_capped(
         {
             break;
         }
-        // The batch takes up to BATCH nodes from the lowest buckets within the cut (a flat
+        // The batch takes up to BATCH nodes from the lowest BATCH_SPAN buckets within the cut (a flat
         // cost landscape spreads its boxes thinly over the buckets: one bucket at a time made
         // batches of ~100 nodes, whose hand-over to the thread pool cost more than their work).
         batch.clear();
         let mut b = cursor;
-        while batch.len() < BATCH && b < buckets.len() && (b as u64).saturating_mul(width) <= cut {
+        let end = buckets.len().min(cursor.saturating_add(BATCH_SPAN));
+        while batch.len() < BATCH && b < end && (b as u64).saturating_mul(width) <= cut {
             let bucket = &mut buckets[b];
             let take = bucket.len().min(BATCH - batch.len());
             batch.extend(bucket.drain(bucket.len() - take..).filter(|n| n.0 <= cut));
