@@ -357,13 +357,15 @@ pub fn track_stage(args: &DemoArgs) -> anyhow::Result<StageOutput> {
         Some((run, d)) => format!(
             " Over its longest run of linked answers ({} scans, {:.0} m) the pose graph estimated the \
              odometry's drift as {:+.2} ± {:.2} % of the distance and {:+.2} ± {:.2}° per 100 m (applied: \
-             +2 % and +2° per 100 m).",
+             {:+} % and {:+}° per 100 m).",
             run.scans,
             run.length_m,
             100.0 * d.scale_error,
             100.0 * d.scale_error_sd,
             d.heading_bias_deg_per_100m,
-            d.heading_bias_sd_deg_per_100m
+            d.heading_bias_sd_deg_per_100m,
+            100.0 * localize::track::ODOMETRY_SCALE_DRIFT,
+            2.0 * localize::track::ODOMETRY_YAW_DRIFT_DEG_PER_50M,
         ),
         None => String::new(),
     };

@@ -624,12 +624,7 @@ mod tests {
         }
         assert!(start[7].distance_to(&truth[7]) > 5.0, "{:?}", start[7]);
         assert!(owned.iter().all(|v| v.len() >= 2), "{owned:?}");
-        let got = refined(&scans, &edges, &start, &steps, &GraphOptions::default());
-        for (i, (g, t)) in got.iter().zip(&truth).enumerate() {
-            assert!(g.distance_to(t) < 0.3, "scan {i}: {g:?} against {t:?}");
-        }
-        // The drift it reports is the one applied: 2 % and 1° per 50 m (2° per 100 m).
-        let (_, drift) = refine_run(
+        let (got, drift) = refine_run(
             &scans,
             &edges,
             &start,
@@ -637,6 +632,10 @@ mod tests {
             &GraphOptions::default(),
             &RefineOptions::default(),
         );
+        for (i, (g, t)) in got.iter().zip(&truth).enumerate() {
+            assert!(g.distance_to(t) < 0.3, "scan {i}: {g:?} against {t:?}");
+        }
+        // The drift it reports is the one applied: 2 % and 1° per 50 m (2° per 100 m).
         let drift = drift.expect("the drift of a run");
         assert!((drift.scale_error - 0.02).abs() < 0.005, "{drift:?}");
         assert!(
