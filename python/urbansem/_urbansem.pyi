@@ -365,7 +365,7 @@ class _Localizer:
         min_segment_m: Optional[float] = None,
         level: str = "off",
         vehicle: str = "auto",
-        max_raw_poses: int = 5000,
+        max_raw_poses: int = 20000,
     ) -> None:
         """Prepares an OsmMap, an .osm/.osm.pbf map or a .uloc index with the CLI's options."""
     def localize(self, points: np.ndarray, *, top: int = 10, name: str = "<array>") -> Dict[str, Any]:

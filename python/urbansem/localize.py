@@ -304,7 +304,7 @@ class Localizer:
         min_segment_m: Optional[float] = None,
         level: str = "off",
         vehicle: str = "auto",
-        max_raw_poses: int = 5000,
+        max_raw_poses: int = 20000,
     ) -> None:
         """Prepares the map (the expensive part, done once)."""
         if not isinstance(map, OsmMap):

@@ -58,10 +58,11 @@ pub struct SearchOptions {
 }
 
 /// Default of [`SearchOptions::max_raw_poses`]: a scan with few walls (a car's) has a flat
-/// cost landscape with millions of poses within the keep factor, and keeping 5 000 of them
-/// brings real car scans within the time target without changing any simulated or MCD result
-/// (README, *The search keeps the cheapest poses*); it was 2 000 000 until 2026-11-30.
-pub const MAX_RAW_POSES: usize = 5_000;
+/// cost landscape with millions of poses within the keep factor, and keeping 20 000 of them
+/// keeps real car scans within the time target without changing any simulated or MCD result
+/// (README, *The search keeps the cheapest poses*); it was 2 000 000 until 2026-11-30 and
+/// 5 000 until 2026-12-01, when the faster best-first batches made room for 20 000.
+pub const MAX_RAW_POSES: usize = 20_000;
 
 impl Default for SearchOptions {
     fn default() -> Self {
