@@ -164,6 +164,20 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
     )
     assert [r.report for r in rows] == expected["scans"]
     assert expected["history_m"] == 300.0 and expected["smoothed"] is True and expected["pose_graph"] is True
+    # The same odometry as a LiDAR odometry tool writes it (TUM: time, position, quaternion).
+    tum_file = tmp_path / "odometry.tum"
+    tum_file.write_text("".join(
+        f"{k * 0.1!r} {float(x)!r} {float(y)!r} 0.5 0 0 {math.sin(yaw / 2)!r} {math.cos(yaw / 2)!r}\n"
+        for k, (x, y, yaw) in enumerate(odometry)
+    ))
+    tum = run_json(
+        cli, "localize", "track", "--map", map_path, "--scans", scans[0][1].parent,
+        "--odometry", tum_file, "--window", "3", "--json",
+    )
+    assert [t["scan"] for t in tum["scans"]] == names
+    for t, e in zip(tum["scans"], expected["scans"]):
+        assert abs(t["lat"] - e["lat"]) < 1e-9 and abs(t["lon"] - e["lon"]) < 1e-9, (t, e)
+        assert abs(t["yaw"] - e["yaw"]) < 1e-6, (t, e)
     for r, (s, _) in zip(rows, scans):
         assert r.x is not None and math.hypot(r.x - s.truth[0], r.y - s.truth[1]) <= THESIS_MAX_M
     # The runs the pose graph refined carry the drift it estimated; this odometry is the truth.

@@ -29,7 +29,9 @@
 //! [`TrackOptions::refine_poses`]): the walls and the odometry place the scans together.
 //!
 //! Odometry files have one line per scan, `x_m y_m yaw_rad` (optionally preceded by the scan
-//! file name, which must then match), in any local frame; `#` starts a comment.
+//! file name, which must then match), in any local frame; `#` starts a comment. The sensor's
+//! 3-D poses as LiDAR odometry writes them (TUM or KITTI lines, z up) are read too
+//! ([`read_odometry`]).
 
 use crate::pipeline::{Candidate, Localization, Localizer, ScanSegments};
 use crate::rank::{confidence, CostKind};
@@ -38,7 +40,68 @@ use crate::{angle_diff, LocalizeError, Pose2, Result, Segment};
 use rayon::prelude::*;
 use std::path::Path;
 
-/// Reads an odometry file for scans named `names` (in order): one pose per scan.
+/// The line layouts of an odometry file, told apart by their number of fields (every line of
+/// a file has the same layout).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OdometryLayout {
+    /// `x_m y_m yaw_rad`.
+    Planar,
+    /// `scan x_m y_m yaw_rad`.
+    Named,
+    /// TUM: `timestamp tx ty tz qx qy qz qw` (the sensor's pose, z up).
+    Tum,
+    /// KITTI: the 3 × 4 pose `r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz` row by row.
+    Kitti,
+}
+
+impl OdometryLayout {
+    fn of(fields: usize) -> Option<OdometryLayout> {
+        match fields {
+            3 => Some(OdometryLayout::Planar),
+            4 => Some(OdometryLayout::Named),
+            8 => Some(OdometryLayout::Tum),
+            12 => Some(OdometryLayout::Kitti),
+            _ => None,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            OdometryLayout::Planar => "`x_m y_m yaw_rad`",
+            OdometryLayout::Named => "`scan x_m y_m yaw_rad`",
+            OdometryLayout::Tum => "TUM `timestamp tx ty tz qx qy qz qw`",
+            OdometryLayout::Kitti => "KITTI 3 × 4 pose (12 numbers)",
+        }
+    }
+}
+
+/// The layouts an odometry line may have, for error messages.
+const ODOMETRY_LAYOUTS: &str = "`x_m y_m yaw_rad`, `scan x_m y_m yaw_rad`, TUM `timestamp tx ty tz qx qy qz qw` or a KITTI 3 × 4 pose (12 numbers)";
+
+/// A unit quaternion's norm may be off by this much (rounding in the file).
+const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+
+/// The planar pose of a 3-D pose: its position's x and y, and the heading of its x axis
+/// projected on the x–y plane.
+fn planar(t: [f64; 3], x_axis: [f64; 3]) -> std::result::Result<Pose2, String> {
+    if x_axis[0].hypot(x_axis[1]) < 0.1 {
+        return Err(format!(
+            "the pose's x axis points along z ({:.2}, {:.2}, {:.2}); the poses must be of a frame whose z axis points up",
+            x_axis[0], x_axis[1], x_axis[2]
+        ));
+    }
+    Ok(Pose2 {
+        x: t[0],
+        y: t[1],
+        yaw_rad: x_axis[1].atan2(x_axis[0]),
+    })
+}
+
+/// Reads an odometry file for scans named `names` (in order): one pose per scan, as `x_m
+/// y_m yaw_rad`, `scan x_m y_m yaw_rad` (the name must match), a TUM line `timestamp tx ty
+/// tz qx qy qz qw` or a KITTI 3 × 4 pose (12 numbers); the 3-D layouts are poses of the
+/// sensor in a frame whose z axis points up (LiDAR odometry such as KISS-ICP writes both),
+/// taken as their x, y and the heading of their x axis.
 pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
     let text = std::fs::read_to_string(path).map_err(|e| LocalizeError::Dataset {
         path: path.to_path_buf(),
@@ -50,6 +113,8 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
         message,
     };
     let mut poses = Vec::new();
+    let mut positions: Vec<[f64; 3]> = Vec::new();
+    let mut layout: Option<(OdometryLayout, usize)> = None;
     let mut last_line = 0;
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
@@ -59,18 +124,45 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
         }
         last_line = line_no;
         let fields: Vec<&str> = line.split_whitespace().collect();
-        let (name, numbers) = match fields.len() {
-            3 => (None, &fields[..]),
-            4 => (Some(fields[0]), &fields[1..]),
-            n => {
+        let this = OdometryLayout::of(fields.len()).ok_or_else(|| {
+            err(
+                line_no,
+                format!("{} fields; expected {ODOMETRY_LAYOUTS}", fields.len()),
+            )
+        })?;
+        match layout {
+            None => layout = Some((this, line_no)),
+            Some((first, first_line)) if first != this => {
                 return Err(err(
                     line_no,
-                    format!("{n} fields; expected `x_m y_m yaw_rad` or `scan x_m y_m yaw_rad`"),
+                    format!(
+                        "{} fields, a {} line, but line {first_line} is a {} line; every line of an odometry file has the same layout",
+                        fields.len(),
+                        this.name(),
+                        first.name()
+                    ),
                 ))
             }
+            Some(_) => {}
+        }
+        let (name, numbers, what): (Option<&str>, &[&str], &[&str]) = match this {
+            OdometryLayout::Planar => (None, &fields[..], &["x_m", "y_m", "yaw_rad"]),
+            OdometryLayout::Named => (Some(fields[0]), &fields[1..], &["x_m", "y_m", "yaw_rad"]),
+            OdometryLayout::Tum => (
+                None,
+                &fields[..],
+                &["timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw"],
+            ),
+            OdometryLayout::Kitti => (
+                None,
+                &fields[..],
+                &[
+                    "r11", "r12", "r13", "tx", "r21", "r22", "r23", "ty", "r31", "r32", "r33", "tz",
+                ],
+            ),
         };
-        let mut v = [0.0; 3];
-        for (k, (f, what)) in numbers.iter().zip(["x_m", "y_m", "yaw_rad"]).enumerate() {
+        let mut v = [0.0; 12];
+        for (k, (f, what)) in numbers.iter().zip(what).enumerate() {
             v[k] = f
                 .parse::<f64>()
                 .ok()
@@ -94,11 +186,46 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
                 None => {}
             }
         }
-        poses.push(Pose2 {
-            x: v[0],
-            y: v[1],
-            yaw_rad: v[2],
-        });
+        let pose = match this {
+            OdometryLayout::Planar | OdometryLayout::Named => Pose2 {
+                x: v[0],
+                y: v[1],
+                yaw_rad: v[2],
+            },
+            OdometryLayout::Tum => {
+                let [qx, qy, qz, qw] = [v[4], v[5], v[6], v[7]];
+                let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+                if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                    return Err(err(
+                        line_no,
+                        format!("the quaternion (qx qy qz qw) has norm {norm:.4}, not 1"),
+                    ));
+                }
+                let x_axis = [
+                    1.0 - 2.0 * (qy * qy + qz * qz),
+                    2.0 * (qx * qy + qw * qz),
+                    2.0 * (qx * qz - qw * qy),
+                ];
+                positions.push([v[1], v[2], v[3]]);
+                planar([v[1], v[2], v[3]], x_axis).map_err(|m| err(line_no, m))?
+            }
+            OdometryLayout::Kitti => {
+                let r = [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]];
+                let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+                    - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+                    + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+                if (det - 1.0).abs() > QUATERNION_NORM_TOLERANCE * 3.0 {
+                    return Err(err(
+                        line_no,
+                        format!("the 3 × 3 rotation has determinant {det:.4}, not 1"),
+                    ));
+                }
+                positions.push([v[3], v[7], v[11]]);
+                planar([v[3], v[7], v[11]], [r[0][0], r[1][0], r[2][0]])
+                    .map_err(|m| err(line_no, m))?
+            }
+        };
+        poses.push(pose);
     }
     if poses.len() != names.len() {
         return Err(err(
@@ -110,7 +237,24 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
             ),
         ));
     }
+    check_up_axis(&positions).map_err(|m| err(last_line, m))?;
     Ok(poses)
+}
+
+/// A 3-D track that moves more along z than across x–y over at least 10 m was written in a
+/// frame whose z axis is not up (a camera's: KITTI's odometry ground truth has z forward).
+fn check_up_axis(positions: &[[f64; 3]]) -> std::result::Result<(), String> {
+    let (mut along_z, mut across) = (0.0, 0.0);
+    for w in positions.windows(2) {
+        along_z += (w[1][2] - w[0][2]).abs();
+        across += (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+    }
+    if along_z > 10.0 && along_z > across {
+        return Err(format!(
+            "the poses move {along_z:.0} m along z and {across:.0} m across x–y: a frame whose z axis is not up (a camera's?); give the sensor's poses in a frame with z up"
+        ));
+    }
+    Ok(())
 }
 
 pub use crate::{ODOMETRY_SCALE_DRIFT, ODOMETRY_YAW_DRIFT_DEG_PER_50M};
@@ -985,6 +1129,86 @@ mod tests {
         let fields = write("fields.txt", "0 0\n1 0 0\n");
         let e = read_odometry(&fields, &names).unwrap_err().to_string();
         assert!(e.contains("fields.txt:1") && e.contains("2 fields"), "{e}");
+    }
+
+    #[test]
+    fn tum_and_kitti_odometry_read_as_the_planar_layout() {
+        let names: Vec<String> = (0..4).map(|i| format!("{i}.ply")).collect();
+        let poses = [
+            (0.0, 0.0, 0.1),
+            (5.0, 1.0, 0.3),
+            (9.0, 4.0, 1.2),
+            (10.0, 9.0, -2.9),
+        ];
+        // A tilted sensor: its heading is that of its x axis on the ground plane.
+        let (roll, pitch) = (-0.03, 0.05);
+        let (mut plane, mut tum, mut kitti) = (String::new(), String::new(), String::new());
+        for (i, &(x, y, yaw)) in poses.iter().enumerate() {
+            plane += &format!("{x} {y} {yaw}\n");
+            let r = nalgebra::Rotation3::from_euler_angles(roll, pitch, yaw);
+            let q = nalgebra::UnitQuaternion::from_rotation_matrix(&r);
+            tum += &format!("{i}.5 {x} {y} 0.3 {} {} {} {}\n", q.i, q.j, q.k, q.w);
+            let m = r.matrix();
+            kitti += &format!(
+                "{} {} {} {x} {} {} {} {y} {} {} {} 0.3\n",
+                m[(0, 0)],
+                m[(0, 1)],
+                m[(0, 2)],
+                m[(1, 0)],
+                m[(1, 1)],
+                m[(1, 2)],
+                m[(2, 0)],
+                m[(2, 1)],
+                m[(2, 2)]
+            );
+        }
+        let want = read_odometry(&write("plane.txt", &plane), &names).unwrap();
+        for (file, text) in [("tum.txt", &tum), ("kitti.txt", &kitti)] {
+            let got = read_odometry(&write(file, text), &names).unwrap();
+            for (g, w) in got.iter().zip(&want) {
+                assert!(g.distance_to(w) < 1e-9, "{file}: {g:?} {w:?}");
+                assert!(angle_diff(g.yaw_rad, w.yaw_rad).abs() < 1e-9, "{file}");
+            }
+        }
+    }
+
+    #[test]
+    fn odometry_layouts_are_checked() {
+        let names: Vec<String> = (0..3).map(|i| format!("{i}.ply")).collect();
+        let e = |name: &str, text: &str| {
+            read_odometry(&write(name, text), &names)
+                .unwrap_err()
+                .to_string()
+        };
+        let mixed = e("mixed.txt", "0 0 0\n0.1 1 0 0 0 0 0 1\n2 0 0\n");
+        assert!(
+            mixed.contains("mixed.txt:2") && mixed.contains("same layout"),
+            "{mixed}"
+        );
+        let norm = e(
+            "norm.txt",
+            "0 0 0 0 0 0 0 2\n1 1 0 0 0 0 0 1\n2 2 0 0 0 0 0 1\n",
+        );
+        assert!(
+            norm.contains("norm.txt:1") && norm.contains("norm 2.0000"),
+            "{norm}"
+        );
+        // KITTI's camera convention: the track runs along z.
+        let camera: String = (0..3)
+            .map(|k| format!("1 0 0 0 0 1 0 0 0 0 1 {}\n", 6 * k))
+            .collect();
+        let camera = e("camera.txt", &camera);
+        assert!(
+            camera.contains("camera.txt:3") && camera.contains("along z"),
+            "{camera}"
+        );
+        let up = e("up.txt", "0 0 -1 0 0 1 0 0 1 0 0 0\n");
+        assert!(
+            up.contains("up.txt:1") && up.contains("x axis points along z"),
+            "{up}"
+        );
+        let bad = e("bad.txt", "0 0 0 0 0 0 0 x\n");
+        assert!(bad.contains("bad.txt:1") && bad.contains("qw `x`"), "{bad}");
     }
 
     #[test]

@@ -139,7 +139,9 @@ pub struct TrackArgs {
     #[arg(long, required_unless_present = "bag", conflicts_with = "bag")]
     pub scans: Option<PathBuf>,
     /// One line per scan, `x_m y_m yaw_rad` (optionally `scan x_m y_m yaw_rad`), in any
-    /// local odometry frame; `#` starts a comment.
+    /// local odometry frame; `#` starts a comment. The sensor's 3-D poses as LiDAR odometry
+    /// writes them are read too: TUM lines `timestamp tx ty tz qx qy qz qw` or KITTI 3 × 4
+    /// poses (12 numbers), in a frame whose z axis points up.
     #[arg(long, required_unless_present = "bag", conflicts_with = "bag")]
     pub odometry: Option<PathBuf>,
     /// A ROS 2 bag (.mcap) instead of --scans/--odometry: the scans of --topic, levelled and
