@@ -665,7 +665,16 @@ impl FileLocalization {
                 c.symmetric
             );
         }
-        let _ = writeln!(out, "confidence {:.3}", r.confidence);
+        if r.candidate_count > 1 && r.confidence < crate::rank::AMBIGUOUS_CONFIDENCE {
+            let _ = writeln!(
+                out,
+                "confidence {:.3}: ambiguous, another place fits the scan within {:.1} % of the best cost; consecutive scans tied by odometry (`urbansem localize track`) can tell such places apart",
+                r.confidence,
+                100.0 * r.confidence
+            );
+        } else {
+            let _ = writeln!(out, "confidence {:.3}", r.confidence);
+        }
         let _ = writeln!(
             out,
             "seconds: map load {:.2}, edges {:.3}, DT tensor {:.3}, pyramid {:.3}, scan read {:.3}, surfaces {:.3}, segments {:.3}, templates {:.3}, search {:.3}, filter {:.3}, visibility+costs {:.3}, refine {:.3}, total {:.3}",

@@ -152,6 +152,11 @@ pub fn rank_order(costs: &[Costs], poses: &[crate::Pose2], kind: CostKind) -> Ve
     order
 }
 
+/// Below this [`confidence`] a scan's answer is called ambiguous in the text output: another
+/// place fits within 2 % of the best cost (none of the 7 such answers on the simulated
+/// Helsinki HDL-64 scans is right, 1 of 12 on the real KITTI-360 car scans; README).
+pub const AMBIGUOUS_CONFIDENCE: f64 = 0.02;
+
 /// Confidence of the best of ranked costs: (c₂ − c₁)/c₂ with c₂ the best cost of a pose
 /// distinct from the best (farther than `distinct_m` or `distinct_rad`); 1 when none, in [0, 1].
 pub fn confidence(

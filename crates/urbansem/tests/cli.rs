@@ -1919,6 +1919,23 @@ fn facade_map_and_scan_selection_from_the_command_line() {
         "{car}"
     );
     assert_eq!(free["filtered"]["across_streets"], 0, "{free}");
+    // The text output calls a low-confidence answer ambiguous and points to track mode.
+    let text = String::from_utf8(stdout_of(urbansem().args([
+        "localize",
+        "--map",
+        map_s,
+        "--scan",
+        &scan,
+        "--max-accept-cost-m",
+        "inf",
+    ])))
+    .unwrap();
+    let ambiguous = car["confidence"].as_f64().unwrap() < localize::rank::AMBIGUOUS_CONFIDENCE;
+    assert_eq!(
+        text.contains("ambiguous") && text.contains("localize track"),
+        ambiguous,
+        "{text}"
+    );
     let fm = ["localize", "facade-map", "--dataset", kitti, "--out", map_s];
     let ev = ["localize", "eval", "--dataset", kitti, "--map", map_s];
     for (base, extra, needle) in [
