@@ -1897,8 +1897,8 @@ fn facade_map_and_scan_selection_from_the_command_line() {
     // The same scan alone: detected as an HDL-64, it is a car's (`--vehicle auto`), and
     // candidates heading across every street near them are dropped; `free` keeps them.
     let scan = format!("{kitti}/velodyne_points/0000002000.bin");
-    let one = |vehicle: &str| -> serde_json::Value {
-        serde_json::from_slice(&stdout_of(urbansem().args([
+    let run = |extra: &[&str]| -> Vec<u8> {
+        let base = [
             "localize",
             "--map",
             map_s,
@@ -1906,11 +1906,11 @@ fn facade_map_and_scan_selection_from_the_command_line() {
             &scan,
             "--max-accept-cost-m",
             "inf",
-            "--vehicle",
-            vehicle,
-            "--json",
-        ])))
-        .unwrap()
+        ];
+        stdout_of(urbansem().args(base).args(extra))
+    };
+    let one = |vehicle: &str| -> serde_json::Value {
+        serde_json::from_slice(&run(&["--vehicle", vehicle, "--json"])).unwrap()
     };
     let (car, free) = (one("auto"), one("free"));
     assert_eq!(car["sensor"]["profile"], "hdl64", "{car}");
@@ -1920,16 +1920,7 @@ fn facade_map_and_scan_selection_from_the_command_line() {
     );
     assert_eq!(free["filtered"]["across_streets"], 0, "{free}");
     // The text output calls a low-confidence answer ambiguous and points to track mode.
-    let text = String::from_utf8(stdout_of(urbansem().args([
-        "localize",
-        "--map",
-        map_s,
-        "--scan",
-        &scan,
-        "--max-accept-cost-m",
-        "inf",
-    ])))
-    .unwrap();
+    let text = String::from_utf8(run(&[])).unwrap();
     let ambiguous = car["confidence"].as_f64().unwrap() < localize::rank::AMBIGUOUS_CONFIDENCE;
     assert_eq!(
         text.contains("ambiguous") && text.contains("localize track"),
