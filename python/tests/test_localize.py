@@ -175,6 +175,13 @@ def test_track_rows_equal_the_cli_json(cli, map_path, localizer, scans, tmp_path
         "--odometry", tum_file, "--window", "3", "--json",
     )
     assert [t["scan"] for t in tum["scans"]] == names
+    # Python reads the file as the CLI does.
+    read = urbansem.read_odometry(tum_file, names)
+    assert read.shape == (len(names), 3)
+    np.testing.assert_allclose(read[:, :2], odometry[:, :2], atol=1e-9)
+    np.testing.assert_allclose(np.cos(read[:, 2] - odometry[:, 2]), 1.0, atol=1e-12)
+    with pytest.raises(urbansem.LocalizeError, match=f"odometry.tum:{len(names)}: .* poses for"):
+        urbansem.read_odometry(tum_file, names + ["extra.ply"])
     for t, e in zip(tum["scans"], expected["scans"]):
         assert abs(t["lat"] - e["lat"]) < 1e-9 and abs(t["lon"] - e["lon"]) < 1e-9, (t, e)
         assert abs(t["yaw"] - e["yaw"]) < 1e-6, (t, e)

@@ -26,7 +26,7 @@ from ._urbansem import (
     read_cloud,
     write_cloud,
 )
-from .localize import Candidate, LocalizeResult, Localizer, McdScan, Sensor, TrackRow
+from .localize import Candidate, LocalizeResult, Localizer, McdScan, Sensor, TrackRow, read_odometry
 
 __all__ = [
     "Candidate",
@@ -54,6 +54,7 @@ __all__ = [
     "mln",
     "pbo",
     "read_cloud",
+    "read_odometry",
     "streets",
     "write_cloud",
 ]

@@ -405,6 +405,9 @@ class _Localizer:
 def localize_mcd_frames(folder: _Path) -> List[int]:
     """The frame numbers of an MCD sequence folder that have a scan, sorted."""
 
+def localize_read_odometry(path: _Path, names: List[str]) -> np.ndarray:
+    """An odometry file as ``localize track --odometry`` reads it: (m, 3) x, y, yaw."""
+
 def localize_mcd_scan(folder: _Path, map: OsmMap, frame: int) -> Dict[str, Any]:
     """An MCD scan levelled as the evaluation does: ``name``, ``frame``, ``points`` (n, 3),
     ``truth`` (x, y, yaw) and ``levelling`` (3, 3)."""

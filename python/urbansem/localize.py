@@ -22,6 +22,7 @@ from ._urbansem import OsmMap
 from ._urbansem import _Localizer
 from ._urbansem import localize_mcd_frames as _mcd_frames
 from ._urbansem import localize_mcd_scan as _mcd_scan
+from ._urbansem import localize_read_odometry as _read_odometry
 
 __all__ = [
     "Candidate",
@@ -32,6 +33,7 @@ __all__ = [
     "TrackRow",
     "load_mcd_scan",
     "mcd_frames",
+    "read_odometry",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -408,6 +410,18 @@ class Localizer:
     def __repr__(self) -> str:
         """The map and the preparation, in one line."""
         return repr(self._native)
+
+
+def read_odometry(path: PathLike, names: Sequence[str]) -> np.ndarray:
+    """The odometry file of ``localize track --odometry`` for the scans ``names`` (in order):
+    an (m, 3) array of x, y (metres) and yaw (radians), to pass to ``Localizer.track``.
+
+    Lines are ``x y yaw``, ``scan x y yaw`` (the name must match), TUM ``timestamp tx ty tz
+    qx qy qz qw`` or a KITTI 3 × 4 pose (12 numbers); the 3-D layouts are the sensor's poses
+    in a frame whose z axis points up (as LiDAR odometry writes them). Raises
+    ``LocalizeError`` naming the file and line of a malformed one.
+    """
+    return _read_odometry(os.fspath(path), [str(n) for n in names])
 
 
 def mcd_frames(folder: PathLike) -> List[int]:

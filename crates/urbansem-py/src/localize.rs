@@ -2,7 +2,7 @@
 //! map (distance-transform tensor, pyramid, feasible mask) is prepared once, from an `OsmMap`,
 //! an `.osm`/`.osm.pbf` file or a `.uloc` index, and reused by every call; each call returns
 //! the dicts `urbansem localize --json` / `localize track --json` print. Also the MCD
-//! helpers that level a real scan as the evaluation does.
+//! helpers that level a real scan as the evaluation does, and the odometry file reader.
 
 use crate::arrays::{rows, to_rows};
 use crate::error::raise;
@@ -15,6 +15,7 @@ use localize::pipeline::{LocalizeOptions, Localizer};
 use localize::rank::CostKind;
 use localize::report::LocalizeReport;
 use localize::sensor::{ExtractOverrides, SensorChoice, SensorKind};
+use localize::track::read_odometry;
 use localize::{Pose2, WithContext};
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyValueError;
@@ -24,12 +25,30 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Adds `_Localizer` and the MCD helpers to the module.
+/// Adds `_Localizer`, the MCD helpers and the odometry reader to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLocalizer>()?;
     m.add_function(wrap_pyfunction!(localize_mcd_frames, m)?)?;
     m.add_function(wrap_pyfunction!(localize_mcd_scan, m)?)?;
+    m.add_function(wrap_pyfunction!(localize_read_odometry, m)?)?;
     Ok(())
+}
+
+/// An odometry file read as `localize track --odometry` reads it (planar, TUM or KITTI lines)
+/// for the scans `names`, in order: an (m, 3) array of x, y (metres) and yaw (radians).
+#[pyfunction]
+fn localize_read_odometry<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    names: Vec<String>,
+) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+    let poses = py
+        .detach(|| read_odometry(&path, &names))
+        .map_err(raise!(LocalizeError))?;
+    Ok(to_rows(
+        py,
+        poses.iter().map(|p| [p.x, p.y, p.yaw_rad]).collect(),
+    ))
 }
 
 /// A localizer that owns its map.
