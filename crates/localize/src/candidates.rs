@@ -569,9 +569,10 @@ pub fn search_capped(
         {
             break;
         }
-        // The batch takes up to BATCH nodes from the lowest BATCH_SPAN buckets within the cut (a flat
-        // cost landscape spreads its boxes thinly over the buckets: one bucket at a time made
-        // batches of ~100 nodes, whose hand-over to the thread pool cost more than their work).
+        // The batch takes up to BATCH nodes from the lowest BATCH_SPAN buckets within the cut
+        // (a flat cost landscape spreads its boxes thinly over the buckets: one bucket at a
+        // time made batches of ~100 nodes, whose hand-over to the thread pool cost more than
+        // their work).
         batch.clear();
         let mut b = cursor;
         let end = buckets.len().min(cursor.saturating_add(BATCH_SPAN));

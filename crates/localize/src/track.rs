@@ -37,6 +37,7 @@ use crate::pipeline::{Candidate, Localization, Localizer, ScanSegments};
 use crate::rank::{confidence, CostKind};
 use crate::refine::refine_pose;
 use crate::{angle_diff, LocalizeError, Pose2, Result, Segment};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -81,9 +82,13 @@ const ODOMETRY_LAYOUTS: &str = "`x_m y_m yaw_rad`, `scan x_m y_m yaw_rad`, TUM `
 /// A unit quaternion's norm may be off by this much (rounding in the file).
 const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
+/// A rotation matrix's determinant may be off by this much: a rotation scaled by 1 ± the
+/// quaternion tolerance has determinant 1 ± three times it.
+const ROTATION_DETERMINANT_TOLERANCE: f64 = 3.0 * QUATERNION_NORM_TOLERANCE;
+
 /// The planar pose of a 3-D pose: its position's x and y, and the heading of its x axis
 /// projected on the x–y plane.
-fn planar(t: [f64; 3], x_axis: [f64; 3]) -> std::result::Result<Pose2, String> {
+fn planar(t: [f64; 3], x_axis: Vector3<f64>) -> std::result::Result<Pose2, String> {
     if x_axis[0].hypot(x_axis[1]) < 0.1 {
         return Err(format!(
             "the pose's x axis points along z ({:.2}, {:.2}, {:.2}); the poses must be of a frame whose z axis points up",
@@ -193,35 +198,29 @@ pub fn read_odometry(path: &Path, names: &[String]) -> Result<Vec<Pose2>> {
                 yaw_rad: v[2],
             },
             OdometryLayout::Tum => {
-                let [qx, qy, qz, qw] = [v[4], v[5], v[6], v[7]];
-                let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+                let q = Quaternion::new(v[7], v[4], v[5], v[6]);
+                let norm = q.norm();
                 if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
                     return Err(err(
                         line_no,
                         format!("the quaternion (qx qy qz qw) has norm {norm:.4}, not 1"),
                     ));
                 }
-                let x_axis = [
-                    1.0 - 2.0 * (qy * qy + qz * qz),
-                    2.0 * (qx * qy + qw * qz),
-                    2.0 * (qx * qz - qw * qy),
-                ];
+                let x_axis = UnitQuaternion::new_unchecked(q) * Vector3::x();
                 positions.push([v[1], v[2], v[3]]);
                 planar([v[1], v[2], v[3]], x_axis).map_err(|m| err(line_no, m))?
             }
             OdometryLayout::Kitti => {
-                let r = [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]];
-                let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
-                    - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
-                    + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
-                if (det - 1.0).abs() > QUATERNION_NORM_TOLERANCE * 3.0 {
+                let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
+                let det = r.determinant();
+                if (det - 1.0).abs() > ROTATION_DETERMINANT_TOLERANCE {
                     return Err(err(
                         line_no,
                         format!("the 3 × 3 rotation has determinant {det:.4}, not 1"),
                     ));
                 }
                 positions.push([v[3], v[7], v[11]]);
-                planar([v[3], v[7], v[11]], [r[0][0], r[1][0], r[2][0]])
+                planar([v[3], v[7], v[11]], r.column(0).into_owned())
                     .map_err(|m| err(line_no, m))?
             }
         };
