@@ -11,22 +11,6 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
-/// mimalloc's `mi_option_purge_delay` (the same index in its v2 and v3 headers).
-const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
-
-/// Makes the allocator keep freed memory (purge delay −1; the default returns it to the OS
-/// 10 ms after it is freed), so the repeated reads of every size run on pages the process
-/// already has. Otherwise a small input's output pages stay in the allocator between reads
-/// while a 100 MB output is returned and faulted in afresh on each read: on this 2-core VM
-/// that made the largest size up to 1.7× slower per byte (KITTI `.bin`), a cost of page
-/// faults and not of the reader. (Returning memory at once instead, purge delay 0, evens the
-/// sizes too but makes every growing hash table fault its pages in again.)
-fn keep_freed_memory() {
-    // SAFETY: sets one integer option of the global allocator; mimalloc documents
-    // `mi_option_set` as callable at any time.
-    unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, -1) };
-}
-
 /// Options of `urbansem bench parsers`.
 #[derive(Args)]
 pub struct ParsersBenchArgs {
@@ -71,7 +55,6 @@ pub fn run(args: &ParsersBenchArgs) -> anyhow::Result<()> {
         crate::usage!("--sizes-mb {:?}: expected positive sizes", args.sizes_mb);
     }
     let sizes: Vec<u64> = args.sizes_mb.iter().map(|s| (s * 1e6) as u64).collect();
-    keep_freed_memory();
     let mut rows: Vec<Measurement> = Vec::new();
     for format in all
         .iter()
