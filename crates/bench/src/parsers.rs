@@ -1,6 +1,9 @@
 //! `urbansem bench parsers`: every reader on generated inputs of three sizes (linear growth),
 //! and the 512² OPB grid end to end (`urbansem pbo solve` as a user runs it) beside
-//! Kolmogorov's QPBO (`thinqpbo`) on the same grid (issue 16).
+//! Kolmogorov's QPBO (`thinqpbo`) on the same grid (issue 16). Its timings assume the
+//! allocator keeps freed memory, which the `urbansem` binary sets for every command
+//! (`keep_freed_memory` in `crates/urbansem/src/main.rs`), so that no size is timed on pages
+//! faulted in afresh.
 
 use anyhow::Context;
 use clap::Args;

@@ -21,8 +21,7 @@ const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 /// (80 scans, d_s) 0.378 s mean per scan against 0.349 s kept (three runs each, alternating;
 /// system time 4.8–9.1 s against 3.6–4.4 s; peak RSS +2 %); the readers' benchmark
 /// (`bench parsers`) ran the largest inputs up to 1.7× slower per byte (KITTI `.bin`) on pages
-/// faulted in afresh on every read. A command's peak memory is unchanged; it is simply not
-/// handed back before the process ends.
+/// faulted in afresh on every read. Freed memory is not handed back before the process ends.
 fn keep_freed_memory() {
     // SAFETY: sets one integer option of the global allocator; mimalloc documents
     // `mi_option_set` as callable at any time.
