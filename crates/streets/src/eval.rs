@@ -119,6 +119,29 @@ pub struct TargetScores {
     pub true_geometry: Scores,
     /// The full model on the segments it is confident about.
     pub confident: Confident,
+    /// The raw classifier near the true strips' edges, by band and true class.
+    pub edges: Vec<EdgeBand>,
+}
+
+/// Bands beside a true strip's edge, metres from the edge (inside: negative).
+pub const EDGE_BANDS: [(&str, f64, f64); 3] = [
+    ("inside 0-2 m", -2.0, 0.0),
+    ("outside 0-2 m", 0.0, 2.0),
+    ("outside 2-5 m", 2.0, 5.0),
+];
+
+/// How the raw classifier labels the bins of one true class in one band beside the true
+/// strips' edges (segments with a truth): where the edge is visible to it and where not.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EdgeBand {
+    /// The band ([`EDGE_BANDS`]).
+    pub band: &'static str,
+    /// The bins' true class (`unlabelled`: a car, pole, trunk or wall is lowest).
+    pub class: &'static str,
+    /// Usable bins.
+    pub bins: u64,
+    /// Share of them the classifier calls the target.
+    pub predicted_positive: f64,
 }
 
 /// Largest posterior width spread (standard deviation, metres) of a confident estimate.
@@ -198,12 +221,16 @@ pub struct EvalReport {
 pub struct SegmentGeometry {
     /// Segment index in the map.
     pub segment: usize,
+    /// Segment length, metres (the weight of its width error in RMSE_w).
+    pub length_m: f64,
     /// Full-model (offset, width), metres.
     pub estimate: (f64, f64),
     /// Single-segment (offset, width), metres.
     pub single: (f64, f64),
     /// True (offset, width), metres.
     pub truth: (f64, f64),
+    /// The segment model fitted to the true bin labels (offset, width), metres.
+    pub opt_on_truth: (f64, f64),
 }
 
 #[derive(Default, Clone, Copy)]
@@ -595,6 +622,42 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             }
             c.scores()
         };
+        // The raw classifier beside the true edges, by band and true class.
+        let mut bands: BTreeMap<(usize, &'static str), [u64; 2]> = BTreeMap::new();
+        for k in (0..eval_ids.len()).filter(|&k| has_truth(ds, eval_ids[k], target)) {
+            let (d, w) = true_geometry(ds, eval_ids[k], target);
+            let (lo, hi) = (d - 0.5 * w, d + 0.5 * w);
+            for (j, (bin, cls)) in eval_bins[k].usable().zip(&classes[k]).enumerate() {
+                let col = bin % grid.cols;
+                let u = grid.geometry(col, col).0;
+                // Signed distance from the nearer edge, positive outside the strip.
+                let out = if u < lo {
+                    lo - u
+                } else if u > hi {
+                    u - hi
+                } else {
+                    -(u - lo).min(hi - u)
+                };
+                let Some(band) = EDGE_BANDS.iter().position(|&(_, a, b)| out > a && out <= b)
+                else {
+                    continue;
+                };
+                let e = bands
+                    .entry((band, cls.map_or("unlabelled", |c| c.name())))
+                    .or_default();
+                e[0] += 1;
+                e[1] += u64::from(predicted[k][j]);
+            }
+        }
+        let edges = bands
+            .into_iter()
+            .map(|((band, class), [n, p])| EdgeBand {
+                band: EDGE_BANDS[band].0,
+                class,
+                bins: n,
+                predicted_positive: p as f64 / n.max(1) as f64,
+            })
+            .collect();
         let scores = TargetScores {
             raw: score(None),
             single_segment: score(Some(&single.states)),
@@ -630,6 +693,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                     rmse_d: s.rmse_d.filter(|_| n > 0),
                 }
             },
+            edges,
         };
         details.insert(
             target.key(),
@@ -651,9 +715,11 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 .filter(|&k| has_truth(ds, eval_ids[k], target))
                 .map(|k| SegmentGeometry {
                     segment: eval_ids[k],
+                    length_m: segs[eval_ids[k]].length_m,
                     estimate: grid.geometry(full_states[k].0, full_states[k].1),
                     single: grid.geometry(single.states[k].0, single.states[k].1),
                     truth: true_geometry(ds, eval_ids[k], target),
+                    opt_on_truth: grid.geometry(truth_states[k].0, truth_states[k].1),
                 })
                 .collect(),
         );
@@ -821,6 +887,20 @@ impl EvalReport {
                 m(c.rmse_w),
                 m(c.rmse_d)
             );
+            for &(band, _, _) in &EDGE_BANDS {
+                let cells: Vec<String> = t
+                    .edges
+                    .iter()
+                    .filter(|e| e.band == band)
+                    .map(|e| format!("{} {:.2} of {}", e.class, e.predicted_positive, e.bins))
+                    .collect();
+                if !cells.is_empty() {
+                    out += &format!(
+                        "  raw classifier {band} of the true edges, share called the target: {}\n",
+                        cells.join(", ")
+                    );
+                }
+            }
         }
         out += "seconds:";
         for (k, v) in &r.seconds {

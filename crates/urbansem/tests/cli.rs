@@ -1397,9 +1397,65 @@ fn simulated_streets_hold_the_readme_numbers() {
         );
         serde_json::from_slice(&stdout).unwrap()
     };
-    let tags = eval(&[]);
+    let per_segment = dir.path().join("segments.json");
+    let tags = eval(&["--segments-out", per_segment.to_str().unwrap()]);
     let rmse =
         |v: &serde_json::Value, target: &str| v[target]["full_model"]["rmse_w"].as_f64().unwrap();
+    // The per-segment file: one row per segment with a truth, each with the full-model,
+    // single-segment, true and fitted-on-true-labels geometry.
+    let rows: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&per_segment).unwrap()).unwrap();
+    for target in ["driving_area", "with_sidewalk"] {
+        let rows = rows[target].as_array().unwrap();
+        assert_eq!(
+            rows.len() as u64,
+            tags[target]["confident"]["of_segments"].as_u64().unwrap()
+        );
+        let (mut sq, mut len) = (0.0, 0.0);
+        for row in rows {
+            for key in ["estimate", "single", "truth", "opt_on_truth"] {
+                assert!(row[key][1].as_f64().unwrap() > 0.0, "{key}: {row}");
+            }
+            let l = row["length_m"].as_f64().unwrap();
+            let e = row["estimate"][1].as_f64().unwrap() - row["truth"][1].as_f64().unwrap();
+            sq += l * e * e;
+            len += l;
+        }
+        // The rows reproduce the full model's RMSE_w.
+        let from_rows = (sq / len).sqrt();
+        assert!(
+            (from_rows - rmse(&tags, target)).abs() < 1e-9,
+            "{from_rows}"
+        );
+        // Beside the true edges the classifier calls most of the target inside the strip the
+        // target, and little of the grass beyond it.
+        let share = |band: &str, class: &str| -> Option<f64> {
+            tags[target]["edges"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|e| e["band"] == band && e["class"] == class)
+                .map(|e| {
+                    assert!(e["bins"].as_u64().unwrap() > 0, "{e}");
+                    e["predicted_positive"].as_f64().unwrap()
+                })
+        };
+        let inside = if target == "driving_area" {
+            "street"
+        } else {
+            "sidewalk"
+        };
+        assert!(
+            share("inside 0-2 m", inside).unwrap() > 0.5,
+            "{}",
+            tags[target]
+        );
+        assert!(
+            share("outside 2-5 m", "grass").unwrap() < 0.5,
+            "{}",
+            tags[target]
+        );
+    }
     eprintln!(
         "tag priors: {} / {}",
         rmse(&tags, "driving_area"),

@@ -133,7 +133,7 @@ pub enum StreetsCommand {
         /// Mask only near intersections, as the thesis (not bins nearer to another street).
         #[arg(long)]
         thesis_mask: bool,
-        /// Write per-segment estimated and true geometry (JSON) here.
+        /// Write per-segment length, estimated, true and fitted-on-true-labels geometry (JSON) here.
         #[arg(long)]
         segments_out: Option<PathBuf>,
         /// Evaluation options.
