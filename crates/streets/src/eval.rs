@@ -88,6 +88,77 @@ impl Default for EvalOptions {
     }
 }
 
+/// One line per band: the share of each true class the classifier calls the target.
+pub fn edges_text(edges: &[EdgeBand]) -> String {
+    let mut out = String::new();
+    for &(band, _, _) in &EDGE_BANDS {
+        let cells: Vec<String> = edges
+            .iter()
+            .filter(|e| e.band == band)
+            .map(|e| format!("{} {:.2} of {}", e.class, e.predicted_positive, e.bins))
+            .collect();
+        if !cells.is_empty() {
+            out += &format!(
+                "  raw classifier {band} of the true edges, share called the target: {}\n",
+                cells.join(", ")
+            );
+        }
+    }
+    out
+}
+
+/// Counts behind [`EdgeBand`]s, segment by segment.
+#[derive(Debug, Clone, Default)]
+pub struct EdgeCounts {
+    counts: BTreeMap<(usize, &'static str), [u64; 2]>,
+}
+
+impl EdgeCounts {
+    /// Adds a segment's usable bins (labelled `predicted`, in [`SegmentBins::usable`] order)
+    /// beside its true strip `truth` (offset, width), metres.
+    pub fn add(
+        &mut self,
+        bins: &SegmentBins,
+        truth: (f64, f64),
+        predicted: &[bool],
+        grid: &crate::potentials::ThetaGrid,
+    ) {
+        let (lo, hi) = (truth.0 - 0.5 * truth.1, truth.0 + 0.5 * truth.1);
+        for (k, &p) in bins.usable().zip(predicted) {
+            let col = k % grid.cols;
+            let u = grid.geometry(col, col).0;
+            // Signed distance from the nearer edge, positive outside the strip.
+            let out = if u < lo {
+                lo - u
+            } else if u > hi {
+                u - hi
+            } else {
+                -(u - lo).min(hi - u)
+            };
+            let Some(band) = EDGE_BANDS.iter().position(|&(_, a, b)| out > a && out <= b) else {
+                continue;
+            };
+            let class = bins.features.truth[k].map_or("unlabelled", |c| c.name());
+            let e = self.counts.entry((band, class)).or_default();
+            e[0] += 1;
+            e[1] += u64::from(p);
+        }
+    }
+
+    /// The bands, in [`EDGE_BANDS`] order, classes by name.
+    pub fn bands(self) -> Vec<EdgeBand> {
+        self.counts
+            .into_iter()
+            .map(|((band, class), [n, p])| EdgeBand {
+                band: EDGE_BANDS[band].0,
+                class,
+                bins: n,
+                predicted_positive: p as f64 / n.max(1) as f64,
+            })
+            .collect()
+    }
+}
+
 /// Precision, recall, F1 and width RMSE of one method.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Scores {
@@ -623,41 +694,16 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             c.scores()
         };
         // The raw classifier beside the true edges, by band and true class.
-        let mut bands: BTreeMap<(usize, &'static str), [u64; 2]> = BTreeMap::new();
+        let mut edge_counts = EdgeCounts::default();
         for k in (0..eval_ids.len()).filter(|&k| has_truth(ds, eval_ids[k], target)) {
-            let (d, w) = true_geometry(ds, eval_ids[k], target);
-            let (lo, hi) = (d - 0.5 * w, d + 0.5 * w);
-            for (j, (bin, cls)) in eval_bins[k].usable().zip(&classes[k]).enumerate() {
-                let col = bin % grid.cols;
-                let u = grid.geometry(col, col).0;
-                // Signed distance from the nearer edge, positive outside the strip.
-                let out = if u < lo {
-                    lo - u
-                } else if u > hi {
-                    u - hi
-                } else {
-                    -(u - lo).min(hi - u)
-                };
-                let Some(band) = EDGE_BANDS.iter().position(|&(_, a, b)| out > a && out <= b)
-                else {
-                    continue;
-                };
-                let e = bands
-                    .entry((band, cls.map_or("unlabelled", |c| c.name())))
-                    .or_default();
-                e[0] += 1;
-                e[1] += u64::from(predicted[k][j]);
-            }
+            edge_counts.add(
+                &eval_bins[k],
+                true_geometry(ds, eval_ids[k], target),
+                &predicted[k],
+                &grid,
+            );
         }
-        let edges = bands
-            .into_iter()
-            .map(|((band, class), [n, p])| EdgeBand {
-                band: EDGE_BANDS[band].0,
-                class,
-                bins: n,
-                predicted_positive: p as f64 / n.max(1) as f64,
-            })
-            .collect();
+        let edges = edge_counts.bands();
         let scores = TargetScores {
             raw: score(None),
             single_segment: score(Some(&single.states)),
@@ -887,20 +933,7 @@ impl EvalReport {
                 m(c.rmse_w),
                 m(c.rmse_d)
             );
-            for &(band, _, _) in &EDGE_BANDS {
-                let cells: Vec<String> = t
-                    .edges
-                    .iter()
-                    .filter(|e| e.band == band)
-                    .map(|e| format!("{} {:.2} of {}", e.class, e.predicted_positive, e.bins))
-                    .collect();
-                if !cells.is_empty() {
-                    out += &format!(
-                        "  raw classifier {band} of the true edges, share called the target: {}\n",
-                        cells.join(", ")
-                    );
-                }
-            }
+            out += &edges_text(&t.edges);
         }
         out += "seconds:";
         for (k, v) in &r.seconds {

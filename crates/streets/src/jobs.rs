@@ -153,6 +153,9 @@ pub struct ModelRealReport {
     /// With sidewalk: whether each segment's prior was centred on a driving-area estimate
     /// of the same cloud plus the model's sidewalk margins.
     pub driving_area_prior: bool,
+    /// The bin classifier beside the true strips' edges of the segments with a truth, by
+    /// band and true class ([`crate::eval::EdgeBand`]).
+    pub edges: Vec<crate::eval::EdgeBand>,
     /// Wall time of reading and registering the sequence and of the estimate, seconds.
     pub seconds: std::collections::BTreeMap<String, f64>,
 }
@@ -274,7 +277,10 @@ fn score_model(
     seconds.insert("estimate".to_string(), t.elapsed().as_secs_f64());
     let (mut predicted, mut truth) = (Vec::new(), Vec::new());
     let bins = crate::model::segment_bins(osm, cloud, which, &model.geometry);
-    for b in bins.iter().flatten() {
+    let grid = model.geometry.theta_grid();
+    let mut edges = crate::eval::EdgeCounts::default();
+    for (b, segment_truth) in bins.iter().zip(truths) {
+        let Some(b) = b else { continue };
         let usable: Vec<usize> = b.usable().collect();
         let labels = model.classifier.predict(&b.usable_rows())?;
         for (&k, &p) in usable.iter().zip(&labels) {
@@ -282,6 +288,9 @@ fn score_model(
                 predicted.push(p);
                 truth.push(model.target.positive(c));
             }
+        }
+        if let Some(t) = segment_truth {
+            edges.add(b, *t, &labels, &grid);
         }
     }
     let segs = &osm.streets.segments;
@@ -321,6 +330,7 @@ fn score_model(
         rmse_d: (len > 0.0).then(|| (d2 / len).sqrt()),
         segments: rows,
         driving_area_prior,
+        edges: edges.bands(),
         seconds,
     })
 }

@@ -255,6 +255,25 @@ fn a_model_trained_on_simulation_scores_on_kitti360_without_retraining() {
         "{sim:?}"
     );
     assert!(sim.raw.f1 >= 0.8, "{sim:?}");
+    // Beside the true edges most of the street inside is called street and little of the
+    // grass beyond; the bands hold labelled and unlabelled bins alike.
+    let share = |band: &str, class: &str| {
+        sim.edges
+            .iter()
+            .find(|e| e.band == band && e.class == class)
+            .map(|e| e.predicted_positive)
+    };
+    assert!(
+        share("inside 0-2 m", "street").unwrap() > 0.5,
+        "{:?}",
+        sim.edges
+    );
+    assert!(
+        share("outside 2-5 m", "grass").is_none_or(|v| v < 0.5),
+        "{:?}",
+        sim.edges
+    );
+    assert!(sim.edges.iter().all(|e| e.bins > 0), "{:?}", sim.edges);
     assert!(sim.rmse_w.unwrap().is_finite(), "{sim:?}");
     assert!(!model.classifier.scaler.mean.is_empty());
     let kitti = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -743,5 +743,6 @@ fn print_model_report(
     if r.driving_area_prior {
         println!("with-sidewalk priors centred on the driving area estimated first, plus the model's sidewalk margins");
     }
+    print!("{}", streets::eval::edges_text(&r.edges));
     Ok(())
 }
