@@ -440,7 +440,7 @@ impl<'m> Localizer<'m> {
     /// Every pose of this map's domain (feasible ones only when the search is restricted,
     /// and only those `heading` allows when given: a car's scan) whose cost is within the
     /// factor of the minimum over them, sorted, in this tensor's cells, the first
-    /// `max_raw_poses` of them ([`search_capped`]).
+    /// `max_raw_poses` of them ([`search_capped`]; within `max_boxes`, the cheapest found).
     pub fn search_masked(
         &self,
         templates: &[Template],
@@ -448,6 +448,7 @@ impl<'m> Localizer<'m> {
     ) -> (Vec<RawPose>, SearchStats) {
         let cap = Cap {
             count: self.options.search.max_raw_poses,
+            max_boxes: self.options.search.max_boxes,
             ..Cap::NONE
         };
         let (raw, stats, _) = search_capped(

@@ -317,6 +317,11 @@ pub struct GateArgs {
     /// of the minimum).
     #[arg(long, default_value_t = LocalizeOptions::default().search.max_raw_poses)]
     pub max_raw_poses: usize,
+    /// Box budget of the search: once the minimum is known, stop after bounding this many
+    /// boxes and keep the cheapest poses found (0: search until the poses are proved the
+    /// cheapest; `"truncated"` in the JSON search statistics says when the budget stopped it).
+    #[arg(long, default_value_t = LocalizeOptions::default().search.max_boxes)]
+    pub max_boxes: u64,
 }
 
 impl Default for GateArgs {
@@ -326,6 +331,7 @@ impl Default for GateArgs {
             max_accept_cost_m: o.max_accept_cost_m,
             max_accept_dcm_m: o.max_accept_dcm_m,
             max_raw_poses: o.search.max_raw_poses,
+            max_boxes: o.search.max_boxes,
         }
     }
 }
@@ -707,6 +713,7 @@ fn options(
     o.chamfer.grid_m = grid_m;
     o.search.yaw_step_deg = yaw_step_deg;
     o.search.max_raw_poses = gate.max_raw_poses;
+    o.search.max_boxes = gate.max_boxes;
     if let Some(d) = extract.along_street_deg {
         o.search.along_street_deg = d;
     }
