@@ -88,77 +88,6 @@ impl Default for EvalOptions {
     }
 }
 
-/// One line per band: the share of each true class the classifier calls the target.
-pub fn edges_text(edges: &[EdgeBand]) -> String {
-    let mut out = String::new();
-    for &(band, _, _) in &EDGE_BANDS {
-        let cells: Vec<String> = edges
-            .iter()
-            .filter(|e| e.band == band)
-            .map(|e| format!("{} {:.2} of {}", e.class, e.predicted_positive, e.bins))
-            .collect();
-        if !cells.is_empty() {
-            out += &format!(
-                "  raw classifier {band} of the true edges, share called the target: {}\n",
-                cells.join(", ")
-            );
-        }
-    }
-    out
-}
-
-/// Counts behind [`EdgeBand`]s, segment by segment.
-#[derive(Debug, Clone, Default)]
-pub struct EdgeCounts {
-    counts: BTreeMap<(usize, &'static str), [u64; 2]>,
-}
-
-impl EdgeCounts {
-    /// Adds a segment's usable bins (labelled `predicted`, in [`SegmentBins::usable`] order)
-    /// beside its true strip `truth` (offset, width), metres.
-    pub fn add(
-        &mut self,
-        bins: &SegmentBins,
-        truth: (f64, f64),
-        predicted: &[bool],
-        grid: &crate::potentials::ThetaGrid,
-    ) {
-        let (lo, hi) = (truth.0 - 0.5 * truth.1, truth.0 + 0.5 * truth.1);
-        for (k, &p) in bins.usable().zip(predicted) {
-            let col = k % grid.cols;
-            let u = grid.geometry(col, col).0;
-            // Signed distance from the nearer edge, positive outside the strip.
-            let out = if u < lo {
-                lo - u
-            } else if u > hi {
-                u - hi
-            } else {
-                -(u - lo).min(hi - u)
-            };
-            let Some(band) = EDGE_BANDS.iter().position(|&(_, a, b)| out > a && out <= b) else {
-                continue;
-            };
-            let class = bins.features.truth[k].map_or("unlabelled", |c| c.name());
-            let e = self.counts.entry((band, class)).or_default();
-            e[0] += 1;
-            e[1] += u64::from(p);
-        }
-    }
-
-    /// The bands, in [`EDGE_BANDS`] order, classes by name.
-    pub fn bands(self) -> Vec<EdgeBand> {
-        self.counts
-            .into_iter()
-            .map(|((band, class), [n, p])| EdgeBand {
-                band: EDGE_BANDS[band].0,
-                class,
-                bins: n,
-                predicted_positive: p as f64 / n.max(1) as f64,
-            })
-            .collect()
-    }
-}
-
 /// Precision, recall, F1 and width RMSE of one method.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Scores {
@@ -213,6 +142,71 @@ pub struct EdgeBand {
     pub bins: u64,
     /// Share of them the classifier calls the target.
     pub predicted_positive: f64,
+}
+
+/// One line per band: the share of each true class the classifier calls the target.
+pub fn edges_text(edges: &[EdgeBand]) -> String {
+    let mut out = String::new();
+    for &(band, _, _) in &EDGE_BANDS {
+        let cells: Vec<String> = edges
+            .iter()
+            .filter(|e| e.band == band)
+            .map(|e| format!("{} {:.2} of {}", e.class, e.predicted_positive, e.bins))
+            .collect();
+        if !cells.is_empty() {
+            out += &format!(
+                "  raw classifier {band} of the true edges, share called the target: {}\n",
+                cells.join(", ")
+            );
+        }
+    }
+    out
+}
+
+/// Counts behind [`EdgeBand`]s, segment by segment.
+#[derive(Debug, Clone, Default)]
+pub struct EdgeCounts {
+    counts: BTreeMap<(usize, &'static str), [u64; 2]>,
+}
+
+impl EdgeCounts {
+    /// Adds a segment's usable bins (labelled `predicted`, in [`SegmentBins::usable`] order)
+    /// beside its true strip `truth` (offset, width), metres.
+    pub fn add(
+        &mut self,
+        bins: &SegmentBins,
+        truth: (f64, f64),
+        predicted: &[bool],
+        grid: &crate::potentials::ThetaGrid,
+    ) {
+        let (lo, hi) = (truth.0 - 0.5 * truth.1, truth.0 + 0.5 * truth.1);
+        for (k, &p) in bins.usable().zip(predicted) {
+            let col = k % grid.cols;
+            let u = grid.geometry(col, col).0;
+            // Signed distance from the nearer edge, positive outside the strip.
+            let out = (lo - u).max(u - hi);
+            let Some(band) = EDGE_BANDS.iter().position(|&(_, a, b)| out > a && out <= b) else {
+                continue;
+            };
+            let class = bins.features.truth[k].map_or("unlabelled", |c| c.name());
+            let e = self.counts.entry((band, class)).or_default();
+            e[0] += 1;
+            e[1] += u64::from(p);
+        }
+    }
+
+    /// The bands, in [`EDGE_BANDS`] order, classes by name.
+    pub fn bands(self) -> Vec<EdgeBand> {
+        self.counts
+            .into_iter()
+            .map(|((band, class), [n, p])| EdgeBand {
+                band: EDGE_BANDS[band].0,
+                class,
+                bins: n,
+                predicted_positive: p as f64 / n.max(1) as f64,
+            })
+            .collect()
+    }
 }
 
 /// Largest posterior width spread (standard deviation, metres) of a confident estimate.
