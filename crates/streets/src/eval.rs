@@ -5,6 +5,7 @@
 
 use crate::dataset::StreetsDataset;
 use crate::inference::{McmcOptions, Network};
+use crate::kitti::Prf;
 use crate::model::{
     has_truth, margin_sample, network_edges, segment_bins, true_geometry, BinClassifier,
     ClassifierOptions, GeometryOptions, SegmentBins, Target,
@@ -102,6 +103,16 @@ pub struct Scores {
     /// Length-weighted RMSE of the offsets (strip centre from the OSM centre line), metres
     /// (`None` for the raw classifier).
     pub rmse_d: Option<f64>,
+    /// Precision, recall and F1 of both classes (street, not street) averaged, weighted by
+    /// each class's bins: how the thesis' Table 4.1 reports them (see the README).
+    pub weighted: Prf,
+    /// The same, each class weighing the same.
+    #[serde(rename = "macro")]
+    pub macro_avg: Prf,
+    /// Share of the scored bins labelled correctly.
+    pub accuracy: f64,
+    /// Share of the scored bins whose true class is the target.
+    pub positive_share: f64,
 }
 
 /// Table 4.1 rows of one target.
@@ -303,6 +314,7 @@ struct Counts {
     tp: u64,
     fp: u64,
     fn_: u64,
+    tn: u64,
     w_err2: f64,
     d_err2: f64,
     w_len: f64,
@@ -311,16 +323,28 @@ struct Counts {
 
 impl Counts {
     fn scores(&self) -> Scores {
-        let p = self.tp as f64 / (self.tp + self.fp).max(1) as f64;
-        let r = self.tp as f64 / (self.tp + self.fn_).max(1) as f64;
+        let pos = Prf::from_counts(self.tp, self.fp, self.fn_);
+        // The negative class: its true positives are the true negatives.
+        let neg = Prf::from_counts(self.tn, self.fn_, self.fp);
+        let (n1, n0) = ((self.tp + self.fn_) as f64, (self.tn + self.fp) as f64);
+        let n = (n1 + n0).max(1.0);
+        let average = |w1: f64, w0: f64| Prf {
+            precision: (w1 * pos.precision + w0 * neg.precision) / (w1 + w0),
+            recall: (w1 * pos.recall + w0 * neg.recall) / (w1 + w0),
+            f1: (w1 * pos.f1 + w0 * neg.f1) / (w1 + w0),
+        };
         Scores {
-            precision: p,
-            recall: r,
-            f1: if p + r > 0.0 {
-                2.0 * p * r / (p + r)
+            precision: pos.precision,
+            recall: pos.recall,
+            f1: pos.f1,
+            weighted: if n1 + n0 > 0.0 {
+                average(n1, n0)
             } else {
-                0.0
+                average(1.0, 1.0)
             },
+            macro_avg: average(1.0, 1.0),
+            accuracy: (self.tp + self.tn) as f64 / n,
+            positive_share: n1 / n,
             rmse_w: self
                 .with_width
                 .then(|| (self.w_err2 / self.w_len.max(1e-12)).sqrt()),
@@ -343,7 +367,7 @@ impl Counts {
             (true, true) => self.tp += 1,
             (true, false) => self.fp += 1,
             (false, true) => self.fn_ += 1,
-            _ => {}
+            (false, false) => self.tn += 1,
         }
     }
 }
@@ -916,6 +940,23 @@ impl EvalReport {
             out += &(scores_row("full model", &t.full_model) + "\n");
             out += &(scores_row("opt. on truth", &t.opt_on_truth) + "\n");
             out += &(scores_row("true geometry", &t.true_geometry) + "\n");
+            out += &format!(
+                "  both classes averaged, weighted by their bins (as Table 4.1; {:.0} % of the bins are the target), P/R/F1:\n",
+                100.0 * t.raw.positive_share
+            );
+            for (method, s) in [
+                ("raw", &t.raw),
+                ("single segment", &t.single_segment),
+                ("full model", &t.full_model),
+                ("opt. on truth", &t.opt_on_truth),
+                ("true geometry", &t.true_geometry),
+            ] {
+                let w = &s.weighted;
+                out += &format!(
+                    "  {method:<16} {:>6.3} {:>6.3} {:>6.3}\n",
+                    w.precision, w.recall, w.f1
+                );
+            }
             let c = &t.confident;
             let m = |v: Option<f64>| v.map_or("n/a".to_string(), |r| format!("{r:.2}"));
             out += &format!(
@@ -970,5 +1011,75 @@ impl EvalReport {
         );
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    /// Class-averaged scores recomputed bin by bin, per class, from the definitions.
+    fn by_definition(bins: &[(bool, bool)]) -> (Prf, Prf, f64) {
+        let class = |c: bool| {
+            let tp = bins.iter().filter(|&&(p, t)| p == c && t == c).count() as f64;
+            let predicted = bins.iter().filter(|&&(p, _)| p == c).count() as f64;
+            let support = bins.iter().filter(|&&(_, t)| t == c).count() as f64;
+            let p = if predicted > 0.0 { tp / predicted } else { 0.0 };
+            let r = if support > 0.0 { tp / support } else { 0.0 };
+            let f = if p + r > 0.0 {
+                2.0 * p * r / (p + r)
+            } else {
+                0.0
+            };
+            (p, r, f, support)
+        };
+        let (a, b) = (class(true), class(false));
+        let n = a.3 + b.3;
+        let w = |x: f64, y: f64| (a.3 * x + b.3 * y) / n;
+        let weighted = Prf {
+            precision: w(a.0, b.0),
+            recall: w(a.1, b.1),
+            f1: w(a.2, b.2),
+        };
+        let macro_avg = Prf {
+            precision: (a.0 + b.0) / 2.0,
+            recall: (a.1 + b.1) / 2.0,
+            f1: (a.2 + b.2) / 2.0,
+        };
+        let correct = bins.iter().filter(|&&(p, t)| p == t).count() as f64;
+        (weighted, macro_avg, correct / n)
+    }
+
+    #[test]
+    fn class_averaged_scores_follow_their_definitions() {
+        // Every bin list of up to 6 bins over the four (predicted, true) outcomes.
+        let outcomes = [(true, true), (true, false), (false, true), (false, false)];
+        let close = |a: &Prf, b: &Prf| {
+            (a.precision - b.precision).abs() < 1e-12
+                && (a.recall - b.recall).abs() < 1e-12
+                && (a.f1 - b.f1).abs() < 1e-12
+        };
+        let mut checked = 0;
+        for len in 1..=6u32 {
+            for code in 0..4usize.pow(len) {
+                let bins: Vec<(bool, bool)> = (0..len)
+                    .map(|i| outcomes[code / 4usize.pow(i) % 4])
+                    .collect();
+                let mut c = Counts::default();
+                for &(p, t) in &bins {
+                    c.add_bin(p, t);
+                }
+                let s = c.scores();
+                let (weighted, macro_avg, accuracy) = by_definition(&bins);
+                assert!(close(&s.weighted, &weighted), "{bins:?}: {s:?}");
+                assert!(close(&s.macro_avg, &macro_avg), "{bins:?}: {s:?}");
+                assert!((s.accuracy - accuracy).abs() < 1e-12);
+                // The support-weighted recall is the accuracy.
+                assert!((s.weighted.recall - accuracy).abs() < 1e-12);
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 5460);
     }
 }

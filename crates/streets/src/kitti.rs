@@ -61,17 +61,25 @@ pub fn prf(predicted: &[bool], truth: &[bool]) -> Prf {
             _ => {}
         }
     }
-    let precision = tp as f64 / (tp + fp).max(1) as f64;
-    let recall = tp as f64 / (tp + fn_).max(1) as f64;
-    let f1 = if precision + recall > 0.0 {
-        2.0 * precision * recall / (precision + recall)
-    } else {
-        0.0
-    };
-    Prf {
-        precision,
-        recall,
-        f1,
+    Prf::from_counts(tp, fp, fn_)
+}
+
+impl Prf {
+    /// Precision, recall and F1 of one class from its true positives, false positives and
+    /// false negatives (0 where undefined).
+    pub fn from_counts(tp: u64, fp: u64, fn_: u64) -> Prf {
+        let precision = tp as f64 / (tp + fp).max(1) as f64;
+        let recall = tp as f64 / (tp + fn_).max(1) as f64;
+        let f1 = if precision + recall > 0.0 {
+            2.0 * precision * recall / (precision + recall)
+        } else {
+            0.0
+        };
+        Prf {
+            precision,
+            recall,
+            f1,
+        }
     }
 }
 
