@@ -26,7 +26,7 @@ use crate::segments::{extract_segments, SegmentOptions};
 use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport, Vehicle};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::visibility::{visible_segments, EdgeGrid, VisibilityOptions};
-use crate::{LocalizeError, Pose2, Result, Segment, WithContext};
+use crate::{angle_diff, LocalizeError, Pose2, Result, Segment, WithContext};
 use geodata::osm::index::MapIndex;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;
@@ -207,6 +207,8 @@ pub struct Localization {
     pub raw_poses: usize,
     /// Candidates after suppression.
     pub after_suppression: usize,
+    /// Candidates dropped after refinement, for having converged on a better-ranked one.
+    pub refined_duplicates: usize,
     /// Candidates dropped by the filters.
     pub filtered: FilterCounts,
     /// Branch-and-bound statistics.
@@ -239,6 +241,7 @@ impl Localization {
             vertical_cells: 0,
             raw_poses: 0,
             after_suppression: 0,
+            refined_duplicates: 0,
             filtered: FilterCounts::default(),
             search: SearchStats::default(),
             message: None,
@@ -675,6 +678,28 @@ pub(crate) struct Scan<'a> {
     pub along_streets: bool,
 }
 
+/// Ranked candidates without those that refinement brought within the suppression radius and
+/// yaw of a better-ranked one (two starting poses that converge are one candidate).
+fn without_refined_duplicates(
+    ranked: Vec<Candidate>,
+    radius_m: f64,
+    yaw_rad: f64,
+) -> Vec<Candidate> {
+    let mut kept: Vec<Candidate> = Vec::with_capacity(ranked.len());
+    for c in ranked {
+        // Unrefined candidates were suppressed against each other already.
+        let duplicate = kept.iter().any(|k| {
+            (k.refined || c.refined)
+                && k.pose.distance_to(&c.pose) < radius_m
+                && angle_diff(k.pose.yaw_rad, c.pose.yaw_rad) < yaw_rad
+        });
+        if !duplicate {
+            kept.push(c);
+        }
+    }
+    kept
+}
+
 /// The stages after the search: raw poses (sorted, in the cells of `lattice`, within the
 /// factor of the minimum) → truncation → suppression → filters → costs → ranking →
 /// refinement → confidence, into `out`; `place` gives the map around a pose.
@@ -742,6 +767,9 @@ pub(crate) fn finish<'p>(
         c.refined = true;
     });
     sort_candidates(&mut cands, o.rank_by);
+    let before = cands.len();
+    cands = without_refined_duplicates(cands, o.search.nms_radius_m, o.search.nms_yaw_rad);
+    out.refined_duplicates = before - cands.len();
     out.seconds.refine = t.elapsed().as_secs_f64();
     let ranked_costs: Vec<f64> = cands.iter().map(|c| c.costs.get(o.rank_by)).collect();
     let ranked_poses: Vec<Pose2> = cands.iter().map(|c| c.pose).collect();
@@ -866,6 +894,56 @@ mod tests {
             .map(|v| Segment::new(to_scan(v.a), to_scan(v.b)))
             .collect();
         wall_points(&in_sensor)
+    }
+
+    #[test]
+    fn candidates_that_refinement_brought_together_are_one() {
+        let cand = |x: f64, yaw_rad: f64, refined: bool| Candidate {
+            pose: Pose2 { x, y: 0.0, yaw_rad },
+            costs: Costs {
+                dcm: 0.0,
+                forward: 0.0,
+                reverse: 0.0,
+                symmetric: x,
+            },
+            refined,
+            confidence: 0.0,
+        };
+        let cases: [(Vec<Candidate>, &[f64]); 3] = [
+            // A refined candidate 0.5 m from a better refined one goes; one 3 m away stays.
+            (
+                vec![
+                    cand(0.0, 0.0, true),
+                    cand(0.5, 0.0, true),
+                    cand(3.0, 0.0, true),
+                ],
+                &[0.0, 3.0],
+            ),
+            // An unrefined candidate next to a refined one that moved onto it goes too...
+            (
+                vec![
+                    cand(10.0, 0.0, true),
+                    cand(10.4, 0.01, false),
+                    cand(12.5, 0.0, false),
+                ],
+                &[10.0, 12.5],
+            ),
+            // ...but two unrefined ones are never compared (suppression kept them apart), and
+            // a candidate at the same place heading another way is another candidate.
+            (
+                vec![
+                    cand(20.0, 0.0, false),
+                    cand(20.5, 0.0, false),
+                    cand(20.2, 0.5, true),
+                ],
+                &[20.0, 20.5, 20.2],
+            ),
+        ];
+        for (ranked, expected) in cases {
+            let kept = without_refined_duplicates(ranked, 2.0, 10f64.to_radians());
+            let xs: Vec<f64> = kept.iter().map(|c| c.pose.x).collect();
+            assert_eq!(xs, expected);
+        }
     }
 
     #[test]

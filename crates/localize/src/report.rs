@@ -123,6 +123,8 @@ pub struct LocalizeReport {
     pub raw_poses: usize,
     /// Poses after non-maximum suppression.
     pub after_suppression: usize,
+    /// Candidates dropped after refinement, for having converged on a better-ranked one.
+    pub refined_duplicates: usize,
     /// Why candidates were dropped.
     pub filtered: FilterCounts,
     /// Search statistics.
@@ -201,6 +203,7 @@ impl LocalizeReport {
             vertical_cells: result.vertical_cells,
             raw_poses: result.raw_poses,
             after_suppression: result.after_suppression,
+            refined_duplicates: result.refined_duplicates,
             filtered: result.filtered,
             search: result.search,
             message: result.message.clone(),
