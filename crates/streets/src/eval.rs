@@ -5,7 +5,7 @@
 
 use crate::dataset::StreetsDataset;
 use crate::inference::{McmcOptions, Network};
-use crate::kitti::Prf;
+use crate::kitti::{ClassScores, Prf};
 use crate::model::{
     has_truth, margin_sample, network_edges, segment_bins, true_geometry, BinClassifier,
     ClassifierOptions, GeometryOptions, SegmentBins, Target,
@@ -323,28 +323,15 @@ struct Counts {
 
 impl Counts {
     fn scores(&self) -> Scores {
-        let pos = Prf::from_counts(self.tp, self.fp, self.fn_);
-        // The negative class: its true positives are the true negatives.
-        let neg = Prf::from_counts(self.tn, self.fn_, self.fp);
-        let (n1, n0) = ((self.tp + self.fn_) as f64, (self.tn + self.fp) as f64);
-        let n = (n1 + n0).max(1.0);
-        let average = |w1: f64, w0: f64| Prf {
-            precision: (w1 * pos.precision + w0 * neg.precision) / (w1 + w0),
-            recall: (w1 * pos.recall + w0 * neg.recall) / (w1 + w0),
-            f1: (w1 * pos.f1 + w0 * neg.f1) / (w1 + w0),
-        };
+        let c = ClassScores::from_counts(self.tp, self.fp, self.fn_, self.tn);
         Scores {
-            precision: pos.precision,
-            recall: pos.recall,
-            f1: pos.f1,
-            weighted: if n1 + n0 > 0.0 {
-                average(n1, n0)
-            } else {
-                average(1.0, 1.0)
-            },
-            macro_avg: average(1.0, 1.0),
-            accuracy: (self.tp + self.tn) as f64 / n,
-            positive_share: n1 / n,
+            precision: c.target.precision,
+            recall: c.target.recall,
+            f1: c.target.f1,
+            weighted: c.weighted,
+            macro_avg: c.macro_avg,
+            accuracy: c.accuracy,
+            positive_share: c.positive_share,
             rmse_w: self
                 .with_width
                 .then(|| (self.w_err2 / self.w_len.max(1e-12)).sqrt()),
@@ -1071,6 +1058,11 @@ mod tests {
                     c.add_bin(p, t);
                 }
                 let s = c.scores();
+                let (predicted, truth): (Vec<bool>, Vec<bool>) = bins.iter().copied().unzip();
+                assert_eq!(
+                    ClassScores::of(&predicted, &truth),
+                    ClassScores::from_counts(c.tp, c.fp, c.fn_, c.tn)
+                );
                 let (weighted, macro_avg, accuracy) = by_definition(&bins);
                 assert!(close(&s.weighted, &weighted), "{bins:?}: {s:?}");
                 assert!(close(&s.macro_avg, &macro_avg), "{bins:?}: {s:?}");

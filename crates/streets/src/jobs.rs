@@ -142,6 +142,9 @@ pub struct ModelRealReport {
     /// The bin classifier on the labelled usable bins of the passed segments' corridors (the
     /// "raw" row of Table 4.1).
     pub raw: crate::kitti::Prf,
+    /// The same bins' precision, recall and F1 of both classes averaged, weighted by their
+    /// bins (as the thesis' Table 4.1 counts them).
+    pub raw_weighted: crate::kitti::Prf,
     /// Labelled usable bins scored in `raw`.
     pub raw_bins: usize,
     /// Length-weighted RMSE of the width over the covered segments, metres.
@@ -325,6 +328,7 @@ fn score_model(
         with_truth: rows.iter().filter(|r| r.truth_m.is_some()).count(),
         covered,
         raw: crate::kitti::prf(&predicted, &truth),
+        raw_weighted: crate::kitti::ClassScores::of(&predicted, &truth).weighted,
         raw_bins: truth.len(),
         rmse_w: (len > 0.0).then(|| (w2 / len).sqrt()),
         rmse_d: (len > 0.0).then(|| (d2 / len).sqrt()),

@@ -50,6 +50,58 @@ pub struct Prf {
     pub f1: f64,
 }
 
+/// Per-bin scores of binary predictions: the target class's, and both classes' averaged.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ClassScores {
+    /// The target class's precision, recall and F1.
+    pub target: Prf,
+    /// Both classes (target, not target) averaged, each weighted by its bins: how the
+    /// thesis' Table 4.1 reports them.
+    pub weighted: Prf,
+    /// Both classes averaged, each weighing the same.
+    pub macro_avg: Prf,
+    /// Share of the bins labelled correctly.
+    pub accuracy: f64,
+    /// Share of the bins whose true class is the target.
+    pub positive_share: f64,
+}
+
+impl ClassScores {
+    /// Scores from the counts of true and false positives and negatives.
+    pub fn from_counts(tp: u64, fp: u64, fn_: u64, tn: u64) -> ClassScores {
+        let pos = Prf::from_counts(tp, fp, fn_);
+        // The other class: its true positives are the true negatives.
+        let neg = Prf::from_counts(tn, fn_, fp);
+        let (n1, n0) = ((tp + fn_) as f64, (tn + fp) as f64);
+        let n = (n1 + n0).max(1.0);
+        let average = |w1: f64, w0: f64| Prf {
+            precision: (w1 * pos.precision + w0 * neg.precision) / (w1 + w0),
+            recall: (w1 * pos.recall + w0 * neg.recall) / (w1 + w0),
+            f1: (w1 * pos.f1 + w0 * neg.f1) / (w1 + w0),
+        };
+        ClassScores {
+            target: pos,
+            weighted: if n1 + n0 > 0.0 {
+                average(n1, n0)
+            } else {
+                average(1.0, 1.0)
+            },
+            macro_avg: average(1.0, 1.0),
+            accuracy: (tp + tn) as f64 / n,
+            positive_share: n1 / n,
+        }
+    }
+
+    /// Scores of predictions against truths.
+    pub fn of(predicted: &[bool], truth: &[bool]) -> ClassScores {
+        let mut c = [[0u64; 2]; 2];
+        for (&p, &t) in predicted.iter().zip(truth) {
+            c[usize::from(p)][usize::from(t)] += 1;
+        }
+        ClassScores::from_counts(c[1][1], c[1][0], c[0][1], c[0][0])
+    }
+}
+
 /// Precision/recall/F1 of predictions against truths.
 pub fn prf(predicted: &[bool], truth: &[bool]) -> Prf {
     let (mut tp, mut fp, mut fn_) = (0u64, 0u64, 0u64);

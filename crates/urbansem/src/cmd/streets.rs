@@ -728,7 +728,7 @@ fn print_model_report(
     }
     let m = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.2} m"));
     println!(
-        "{} on {what} (the model as trained, not retrained on the data): {} segments, {} with a truth, {} covered; raw bins P/R/F1 {:.3}/{:.3}/{:.3} ({} bins); RMSE_w {}, RMSE_d {}",
+        "{} on {what} (the model as trained, not retrained on the data): {} segments, {} with a truth, {} covered; raw bins P/R/F1 {:.3}/{:.3}/{:.3}, both classes weighted by their bins {:.3}/{:.3}/{:.3} ({} bins); RMSE_w {}, RMSE_d {}",
         model.display(),
         r.passed,
         r.with_truth,
@@ -736,6 +736,9 @@ fn print_model_report(
         r.raw.precision,
         r.raw.recall,
         r.raw.f1,
+        r.raw_weighted.precision,
+        r.raw_weighted.recall,
+        r.raw_weighted.f1,
         r.raw_bins,
         m(r.rmse_w),
         m(r.rmse_d)
