@@ -827,6 +827,12 @@ pub struct SearchCandidate {
     pub dcm: f64,
 }
 
+/// Whether non-maximum suppression drops `pose` for the better `kept`: within `radius_m`
+/// and `yaw_rad` of it.
+pub(crate) fn suppresses(kept: &Pose2, pose: &Pose2, radius_m: f64, yaw_rad: f64) -> bool {
+    kept.distance_to(pose) < radius_m && angle_diff(kept.yaw_rad, pose.yaw_rad) < yaw_rad
+}
+
 /// Raw poses → candidates with non-maximum suppression: in cost order, a pose is dropped when
 /// a kept one lies within `radius_m` and `yaw_rad`. O(n) with a hash grid.
 pub fn suppress(
@@ -855,10 +861,7 @@ pub fn suppress(
             for dy in -1..=1 {
                 if let Some(ids) = grid.get(&(key.0 + dx, key.1 + dy)) {
                     for &id in ids {
-                        let k = &kept[id].pose;
-                        if k.distance_to(&pose) < radius_m
-                            && angle_diff(k.yaw_rad, pose.yaw_rad) < yaw_rad
-                        {
+                        if suppresses(&kept[id].pose, &pose, radius_m, yaw_rad) {
                             suppressed = true;
                             break 'n;
                         }

@@ -12,8 +12,8 @@
 //! ```
 
 use crate::candidates::{
-    build_template, filter, search_capped, suppress, Cap, Domain, FilterCounts, Masks, RawPose,
-    SearchOptions, SearchStats, StreetFilter, Template,
+    build_template, filter, search_capped, suppress, suppresses, Cap, Domain, FilterCounts, Masks,
+    RawPose, SearchOptions, SearchStats, StreetFilter, Template,
 };
 use crate::chamfer::{BoundPyramid, ChamferOptions, DtTensor};
 use crate::feasible::FeasibleMask;
@@ -26,7 +26,7 @@ use crate::segments::{extract_segments, SegmentOptions};
 use crate::sensor::{options_for_scan, ExtractOverrides, SensorChoice, SensorReport, Vehicle};
 use crate::surfaces::{vertical_cells, SurfaceOptions};
 use crate::visibility::{visible_segments, EdgeGrid, VisibilityOptions};
-use crate::{angle_diff, LocalizeError, Pose2, Result, Segment, WithContext};
+use crate::{LocalizeError, Pose2, Result, Segment, WithContext};
 use geodata::osm::index::MapIndex;
 use geodata::osm::OsmMap;
 use rayon::prelude::*;
@@ -688,11 +688,9 @@ fn without_refined_duplicates(
     let mut kept: Vec<Candidate> = Vec::with_capacity(ranked.len());
     for c in ranked {
         // Unrefined candidates were suppressed against each other already.
-        let duplicate = kept.iter().any(|k| {
-            (k.refined || c.refined)
-                && k.pose.distance_to(&c.pose) < radius_m
-                && angle_diff(k.pose.yaw_rad, c.pose.yaw_rad) < yaw_rad
-        });
+        let duplicate = kept
+            .iter()
+            .any(|k| (k.refined || c.refined) && suppresses(&k.pose, &c.pose, radius_m, yaw_rad));
         if !duplicate {
             kept.push(c);
         }

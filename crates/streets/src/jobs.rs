@@ -322,13 +322,14 @@ fn score_model(
         .iter()
         .filter(|r| r.truth_m.is_some() && r.estimate_m.is_some())
         .count();
+    let raw = crate::kitti::ClassScores::of(&predicted, &truth);
     Ok(ModelRealReport {
         target: model.target,
         passed: which.len(),
         with_truth: rows.iter().filter(|r| r.truth_m.is_some()).count(),
         covered,
-        raw: crate::kitti::prf(&predicted, &truth),
-        raw_weighted: crate::kitti::ClassScores::of(&predicted, &truth).weighted,
+        raw: raw.target,
+        raw_weighted: raw.weighted,
         raw_bins: truth.len(),
         rmse_w: (len > 0.0).then(|| (w2 / len).sqrt()),
         rmse_d: (len > 0.0).then(|| (d2 / len).sqrt()),

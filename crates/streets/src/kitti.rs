@@ -104,16 +104,7 @@ impl ClassScores {
 
 /// Precision/recall/F1 of predictions against truths.
 pub fn prf(predicted: &[bool], truth: &[bool]) -> Prf {
-    let (mut tp, mut fp, mut fn_) = (0u64, 0u64, 0u64);
-    for (&p, &t) in predicted.iter().zip(truth) {
-        match (p, t) {
-            (true, true) => tp += 1,
-            (true, false) => fp += 1,
-            (false, true) => fn_ += 1,
-            _ => {}
-        }
-    }
-    Prf::from_counts(tp, fp, fn_)
+    ClassScores::of(predicted, truth).target
 }
 
 impl Prf {
