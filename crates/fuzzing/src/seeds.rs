@@ -590,6 +590,7 @@ fn street_model_json() -> Option<Vec<u8>> {
                         width_m: None,
                         lanes: Some(2),
                         no_sidewalk: false,
+                        mapped_sidewalk_m: None,
                     };
                     (tags, g)
                 })

@@ -12,9 +12,17 @@
 //! Widths come from the `width` tag when present (then constant along the way), else from
 //! `lanes`, else from the highway type, seeded per way; both width and offset follow a
 //! seeded AR(1) walk along the way, so neighbouring segments of one way vary smoothly.
-//! Drivable ways have a seeded sidewalk width by type unless tagged `sidewalk=no|none|separate`
-//! (`separate`: the sidewalk is its own footway in the map, paved where the map draws it and
-//! labelled as other paved ground, not as this road's sidewalk; see [`super::scene`]).
+//! Drivable ways have a seeded sidewalk width by type unless tagged `sidewalk=no|none`.
+//!
+//! **Sidewalks mapped as ways of their own.** Many cities draw a street's sidewalks as
+//! separate footways (`footway=sidewalk`, and the road tagged `sidewalk=separate`) rather than
+//! as a tag of the road. Such a footway *is* the street's sidewalk: for a drivable way with
+//! mapped sidewalks ([`geodata::osm::sidewalks`]: their distance d from the centre line), the
+//! sidewalk reaches from the kerb to the footways' mean outer edge, d − wₛ/2 + 1.125 m (half
+//! a simulated footway's mean width; clamped to 1–7 m), so the world has one sidewalk there,
+//! labelled sidewalk, not a sidewalk and a second paved strip beside it. A road tagged
+//! `sidewalk=separate` without mapped sidewalks has none of its own (its footway, where the
+//! map draws it, is paved as other ground; see [`super::scene`]).
 
 use super::{normal, purpose, stream_rng, SimError};
 use geodata::osm::model::StreetSegment;
@@ -131,8 +139,8 @@ pub fn street_truth(
             }
             _ => way_rng.gen_range(width_range[0]..=width_range[1]),
         };
-        // `separate`: the sidewalk is mapped as its own footway, which the scene paves where
-        // the map draws it (as other paved ground); the road itself has none beside it.
+        // `separate`: the sidewalk is mapped as its own footway; [`mapped_sidewalks`] finds
+        // it, and without one the road has no sidewalk beside it.
         let sidewalk_tag_none = matches!(way.sidewalk.as_deref(), Some("no" | "none" | "separate"));
         let sidewalk_m = if sidewalk_tag_none || sidewalk_range[1] <= 0.0 {
             0.0
@@ -169,7 +177,27 @@ pub fn street_truth(
         }
         i = j;
     }
+    mapped_sidewalks(map, &mut truth);
     Ok(truth)
+}
+
+/// Range of a sidewalk that reaches to mapped footways, metres.
+const MAPPED_SIDEWALK_RANGE_M: [f64; 2] = [1.0, 7.0];
+
+/// Widens every drivable way's sidewalk to the footways mapped beside it (module docs).
+fn mapped_sidewalks(map: &OsmMap, truth: &mut [StreetTruth]) {
+    // Half the mean width of a simulated footway (`type_ranges`: 1.5–3 m).
+    let footway_half_m = 0.25 * (1.5 + 3.0);
+    for (seg, t) in map.streets.segments.iter().zip(truth.iter_mut()) {
+        let mapped = map
+            .highways
+            .get(seg.way_index)
+            .and_then(|w| w.mapped_sidewalk_m);
+        if let (true, Some(d)) = (t.drivable, mapped) {
+            t.sidewalk_m = (d - 0.5 * t.width_m + footway_half_m)
+                .clamp(MAPPED_SIDEWALK_RANGE_M[0], MAPPED_SIDEWALK_RANGE_M[1]);
+        }
+    }
 }
 
 /// The along and lateral coordinates (t, u) of a point in a segment's frame (u left positive).
@@ -270,6 +298,59 @@ mod tests {
             mid[1] + e[0] * (t.width_m / 2.0 + 0.01),
         ];
         assert!(!in_strip(s, t, out));
+    }
+
+    /// A 111 m residential street along x and, `north_m` north of it, a parallel footway
+    /// with `footway` tags; the street has `street` tags.
+    fn street_and_footway(street: &str, footway: &str, north_m: f64) -> OsmMap {
+        let lat = 60.0 + north_m / 111_320.0;
+        OsmMap::from_xml_str(&format!(
+            r#"<osm><node id="1" lat="60.0" lon="24.0"/><node id="2" lat="60.0" lon="24.002"/>
+            <node id="3" lat="{lat}" lon="23.9995"/><node id="4" lat="{lat}" lon="24.0025"/>
+            <way id="10"><nd ref="1"/><nd ref="2"/><tag k="highway" v="residential"/>{street}</way>
+            <way id="11"><nd ref="3"/><nd ref="4"/><tag k="highway" v="footway"/>{footway}</way>
+            </osm>"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn sidewalks_mapped_as_footways_are_the_streets_sidewalk() {
+        let sidewalk_tag = r#"<tag k="footway" v="sidewalk"/>"#;
+        let separate = r#"<tag k="sidewalk" v="separate"/>"#;
+        let sidewalk_of = |street: &str, footway: &str, north_m: f64| {
+            let map = street_and_footway(street, footway, north_m);
+            let truth = street_truth(&map, &TruthOptions::default(), 3).unwrap();
+            let road = map.streets.segments.iter().position(|s| s.way_index == 0);
+            let path = map.streets.segments.iter().position(|s| s.way_index == 1);
+            (truth[road.unwrap()], truth[path.unwrap()])
+        };
+        // A tagged sidewalk north of the road: the sidewalk reaches from the kerb to its outer
+        // edge (as mapped, with a footway's mean width).
+        for north_m in [4.5, 6.0, 8.0] {
+            for street in ["", separate] {
+                let (road, path) = sidewalk_of(street, sidewalk_tag, north_m);
+                let expected = north_m - 0.5 * road.width_m + 1.125;
+                assert!(
+                    (road.sidewalk_m - expected).abs() < 0.05,
+                    "{north_m} {street}: {road:?} {path:?}"
+                );
+            }
+        }
+        // A plain footway is the sidewalk only of a road tagged `separate`.
+        let (road, _) = sidewalk_of(separate, "", 6.0);
+        let expected = 6.0 - 0.5 * road.width_m + 1.125;
+        assert!((road.sidewalk_m - expected).abs() < 0.05, "{road:?}");
+        let (road, _) = sidewalk_of("", "", 6.0);
+        assert!((1.5..=3.0).contains(&road.sidewalk_m), "{road:?}");
+        // Too far from the kerb, it is a path of its own: the default, or none for `separate`.
+        let (road, _) = sidewalk_of("", sidewalk_tag, 20.0);
+        assert!((1.5..=3.0).contains(&road.sidewalk_m), "{road:?}");
+        let (road, _) = sidewalk_of(separate, sidewalk_tag, 20.0);
+        assert_eq!(road.sidewalk_m, 0.0);
+        // `sidewalk=no` stays without one.
+        let (road, _) = sidewalk_of(r#"<tag k="sidewalk" v="no"/>"#, sidewalk_tag, 6.0);
+        assert_eq!(road.sidewalk_m, 0.0);
     }
 
     #[test]

@@ -339,7 +339,10 @@ pub fn coupling(map: &OsmMap, s1: usize, s2: usize, geometry: &GeometryOptions) 
     if max_turn_deg < 180.0 && cos < max_turn_deg.to_radians().cos() {
         return None;
     }
-    if !geometry.couple_across_tag_changes && SegmentTags::of(map, s1) != SegmentTags::of(map, s2) {
+    if !geometry.couple_across_tag_changes
+        && SegmentTags::of(map, s1).without_geometry()
+            != SegmentTags::of(map, s2).without_geometry()
+    {
         return None;
     }
     Some(flipped)
@@ -1387,6 +1390,7 @@ mod tests {
                         width_m: None,
                         lanes: None,
                         no_sidewalk: false,
+                        mapped_sidewalk_m: None,
                     };
                     (tags, g)
                 }),

@@ -45,6 +45,9 @@ pub struct SegmentTags {
     pub lanes: Option<u32>,
     /// `sidewalk=no|none|separate`.
     pub no_sidewalk: bool,
+    /// Distance of the footways mapped as the road's sidewalks from its centre line, metres
+    /// ([`geodata::osm::sidewalks`]), when it has them.
+    pub mapped_sidewalk_m: Option<f64>,
 }
 
 impl SegmentTags {
@@ -60,6 +63,16 @@ impl SegmentTags {
             lanes: way.and_then(|w| w.lanes).filter(|l| (1..=12).contains(l)),
             no_sidewalk: way
                 .is_some_and(|w| matches!(w.sidewalk.as_deref(), Some("no" | "none" | "separate"))),
+            mapped_sidewalk_m: way.and_then(|w| w.mapped_sidewalk_m),
+        }
+    }
+
+    /// The tags, and whether sidewalks are mapped but not where (what neighbours must share
+    /// to be coupled).
+    pub fn without_geometry(self) -> SegmentTags {
+        SegmentTags {
+            mapped_sidewalk_m: self.mapped_sidewalk_m.map(|_| 0.0),
+            ..self
         }
     }
 
@@ -238,12 +251,23 @@ pub type MarginSample = (SegmentTags, (f64, f64), (f64, f64));
 
 /// The with-sidewalk prior given a segment's driving area: the sidewalk margin per
 /// `highway` class (and `sidewalk=no`), learnt from training segments with both truths.
+///
+/// A road whose sidewalks the map draws as footways of their own
+/// ([`SegmentTags::mapped_sidewalk_m`]) says where its sidewalk is: its prior is centred on
+/// those footways' distance plus a learnt margin ([`SidewalkPrior::mapped`], the outer edge
+/// beyond the footways' centre lines), whatever its driving area.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SidewalkPrior {
-    /// The margin over every training segment.
+    /// The margin over every training segment without mapped sidewalks (over all when every
+    /// one has them).
     pub global: MarginGroup,
-    /// Groups by key (`highway=CLASS`, maybe with `;sidewalk=no`).
+    /// Groups by key (`highway=CLASS`, maybe with `;sidewalk=no`), over training segments
+    /// without mapped sidewalks.
     pub groups: BTreeMap<String, MarginGroup>,
+    /// Over training segments with mapped sidewalks: half the width with sidewalk minus the
+    /// footways' distance (`mean_m`, `sigma_m`), and the centre shift as in the groups.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mapped: Option<MarginGroup>,
 }
 
 /// Mean and spread of `xs` shrunk toward (`mean0`, `sigma0`) by [`PSEUDO_SEGMENTS`], with a
@@ -262,8 +286,19 @@ impl SidewalkPrior {
         }
         let margin = |s: &MarginSample| 0.5 * (s.2 .1 - s.1 .1);
         let shift = |s: &MarginSample| s.2 .0 - s.1 .0;
-        let all_m: Vec<f64> = samples.iter().map(margin).collect();
-        let all_d: Vec<f64> = samples.iter().map(shift).collect();
+        // The global margin over the roads without mapped sidewalks (their margin is another
+        // quantity), or over every road when all have them.
+        let plain: Vec<&MarginSample> = samples
+            .iter()
+            .filter(|s| s.0.mapped_sidewalk_m.is_none())
+            .collect();
+        let plain = if plain.is_empty() {
+            samples.iter().collect()
+        } else {
+            plain
+        };
+        let all_m: Vec<f64> = plain.iter().map(|s| margin(s)).collect();
+        let all_d: Vec<f64> = plain.iter().map(|s| shift(s)).collect();
         let (gm, gsm) = pooled(&all_m, 0.0, 0.0, 0.0);
         let gsm = gsm.max(MIN_SIGMA_MARGIN_M);
         let (gd, gsd) = pooled(&all_d, 0.0, 0.0, 0.0);
@@ -276,11 +311,29 @@ impl SidewalkPrior {
             segments: samples.len(),
         };
         let mut by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+        let (mut mapped_m, mut mapped_d) = (Vec::new(), Vec::new());
         for s in samples {
+            if let Some(d) = s.0.mapped_sidewalk_m {
+                mapped_m.push(0.5 * s.2 .1 - d);
+                mapped_d.push(shift(s));
+                continue;
+            }
             let e = by.entry(s.0.groups(true).1).or_default();
             e.0.push(margin(s));
             e.1.push(shift(s));
         }
+        let mapped = (!mapped_m.is_empty()).then(|| {
+            let mean = mapped_m.iter().sum::<f64>() / mapped_m.len() as f64;
+            let (mean_m, sigma_m) = shrunk_m(&mapped_m, mean, gsm);
+            let (mean_shift_m, sigma_shift_m) = shrunk_m(&mapped_d, gd, gsd);
+            MarginGroup {
+                mean_m,
+                sigma_m,
+                mean_shift_m,
+                sigma_shift_m,
+                segments: mapped_m.len(),
+            }
+        });
         let groups = by
             .into_iter()
             .map(|(key, (ms, ds))| {
@@ -298,7 +351,11 @@ impl SidewalkPrior {
                 )
             })
             .collect();
-        Some(SidewalkPrior { global, groups })
+        Some(SidewalkPrior {
+            global,
+            groups,
+            mapped,
+        })
     }
 
     /// The with-sidewalk prior of a segment with these tags whose driving area was estimated
@@ -310,6 +367,16 @@ impl SidewalkPrior {
         driving: (f64, f64),
         spread_m: f64,
     ) -> GeometryPrior {
+        if let (Some(d), Some(g)) = (tags.mapped_sidewalk_m, &self.mapped) {
+            let width = (2.0 * (d + g.mean_m)).max(driving.1).max(0.5);
+            let sigma_d = (g.sigma_shift_m.powi(2) + 0.25 * spread_m * spread_m).sqrt();
+            return GeometryPrior {
+                mean_offset_m: driving.0 + g.mean_shift_m,
+                sigma_offset_m: sigma_d.max(0.2),
+                mean_log_width: width.ln(),
+                sigma_log_width: (2.0 * g.sigma_m / width).max(MIN_SIGMA_LOG_WIDTH),
+            };
+        }
         let g = self
             .groups
             .get(&tags.groups(true).1)
@@ -329,6 +396,7 @@ impl SidewalkPrior {
     pub fn check(&self) -> Result<(), String> {
         for (key, g) in std::iter::once(("global".to_string(), &self.global))
             .chain(self.groups.iter().map(|(k, g)| (format!("groups[{k}]"), g)))
+            .chain(self.mapped.iter().map(|g| ("mapped".to_string(), g)))
         {
             for (name, v, positive) in [
                 ("mean_m", g.mean_m, false),
@@ -396,6 +464,7 @@ mod tests {
             width_m: width,
             lanes,
             no_sidewalk: no_sw,
+            mapped_sidewalk_m: None,
         }
     }
 
@@ -527,6 +596,51 @@ mod tests {
             .check()
             .unwrap_err()
             .contains("sidewalk_prior.groups[highway=service].sigma_m"));
+        assert_eq!(p.mapped, None);
+    }
+
+    #[test]
+    fn mapped_sidewalks_centre_the_prior_on_the_footways() {
+        let mapped = |d: f64| SegmentTags {
+            mapped_sidewalk_m: Some(d),
+            ..tags("residential", None, None, false)
+        };
+        let mut samples = Vec::new();
+        for i in 0..20 {
+            let (da, j) = (6.0 + f64::from(i % 3), f64::from(i % 5) * 0.1);
+            // Plain residential roads: 2 m sidewalks; mapped ones reach 1.2 m beyond the
+            // footways' centre lines, whatever their driving area.
+            samples.push((
+                tags("residential", None, None, false),
+                (0.0, da),
+                (0.0, da + 4.0),
+            ));
+            let d = 5.0 + f64::from(i % 4);
+            samples.push((mapped(d), (0.0, da), (0.0, 2.0 * (d + 1.1 + j))));
+        }
+        let p = SidewalkPrior::fit(&samples).unwrap();
+        p.check().unwrap();
+        let m = p.mapped.unwrap();
+        assert_eq!(m.segments, 20);
+        assert!((m.mean_m - 1.3).abs() < 0.05, "{m:?}");
+        // The class group learnt from the plain roads alone.
+        assert!((p.groups["highway=residential"].mean_m - 2.0).abs() < 1e-9);
+        let g = p.given_driving_area(&mapped(7.0), (0.5, 7.0), 1.0);
+        assert!((g.mean_log_width.exp() - 2.0 * (7.0 + m.mean_m)).abs() < 1e-9);
+        assert!((g.mean_offset_m - 0.5).abs() < 0.1);
+        let plain = p.given_driving_area(&tags("residential", None, None, false), (0.5, 7.0), 1.0);
+        assert!((plain.mean_log_width.exp() - 11.0).abs() < 1e-9);
+        // A model without the group (trained before it existed) reads and falls back.
+        let old: SidewalkPrior = serde_json::from_str(
+            &serde_json::to_string(&SidewalkPrior {
+                mapped: None,
+                ..p.clone()
+            })
+            .unwrap(),
+        )
+        .unwrap();
+        let fallback = old.given_driving_area(&mapped(7.0), (0.5, 7.0), 1.0);
+        assert!((fallback.mean_log_width.exp() - 11.0).abs() < 1e-9);
     }
 
     #[test]

@@ -47,6 +47,7 @@ pub mod model;
 pub mod network;
 mod pbf;
 mod rings;
+pub mod sidewalks;
 pub mod tags;
 pub mod write;
 mod xml;
@@ -62,15 +63,19 @@ use rayon::prelude::*;
 use std::path::Path;
 
 /// Tag keys kept from ways and relations; everything else is dropped while reading.
-pub(crate) const KEPT_KEYS: [&str; 13] = [
+pub(crate) const KEPT_KEYS: [&str; 17] = [
     "building",
     "highway",
+    "footway",
     "name",
     "width",
     "lanes",
     "tunnel",
     "layer",
     "sidewalk",
+    "sidewalk:both",
+    "sidewalk:left",
+    "sidewalk:right",
     "oneway",
     "height",
     "building:levels",
@@ -115,6 +120,32 @@ pub(crate) struct RawData {
     pub nodes: Vec<RawNode>,
     pub ways: Vec<RawWay>,
     pub relations: Vec<RawRelation>,
+}
+
+/// A way's sidewalks as one `sidewalk` value (`both`, `left`, `right`, `no`, `separate`, …):
+/// the `sidewalk` tag when present, else from `sidewalk:both` or `sidewalk:left` /
+/// `sidewalk:right` (the per-side scheme many cities map with): the sides with a sidewalk
+/// (`yes`) give `both`, `left` or `right`; with none, `separate` when a side is mapped as its
+/// own way, else `no`.
+fn sidewalk_value(tags: &[(String, String)]) -> Option<String> {
+    if let Some(v) = tag(tags, "sidewalk").or_else(|| tag(tags, "sidewalk:both")) {
+        return Some(v.to_string());
+    }
+    let (left, right) = (tag(tags, "sidewalk:left"), tag(tags, "sidewalk:right"));
+    if left.is_none() && right.is_none() {
+        return None;
+    }
+    let yes = |v: Option<&str>| v == Some("yes");
+    Some(
+        match (yes(left), yes(right)) {
+            (true, true) => "both",
+            (true, false) => "left",
+            (false, true) => "right",
+            _ if left == Some("separate") || right == Some("separate") => "separate",
+            _ => "no",
+        }
+        .to_string(),
+    )
 }
 
 fn tag<'a>(tags: &'a [(String, String)], key: &str) -> Option<&'a str> {
@@ -310,7 +341,9 @@ fn build_way(way: &RawWay, nodes: &NodeTable, counts: &mut WayCounts) -> WayOutc
                         layer: tag(&way.tags, "layer")
                             .and_then(|v| v.trim().parse().ok())
                             .unwrap_or(0),
-                        sidewalk: tag(&way.tags, "sidewalk").map(str::to_string),
+                        sidewalk: sidewalk_value(&way.tags),
+                        is_sidewalk: tag(&way.tags, "footway") == Some("sidewalk"),
+                        mapped_sidewalk_m: None,
                         oneway: tag(&way.tags, "oneway")
                             .is_some_and(|v| matches!(v, "yes" | "true" | "1" | "-1")),
                         area: tag(&way.tags, "area") == Some("yes"),
@@ -505,6 +538,10 @@ impl OsmMap {
             }
         }
         let streets = network::build_network(&highways);
+        let distances = sidewalks::mapped_sidewalk_distances(&highways, &streets.segments);
+        for (way, d) in highways.iter_mut().zip(distances) {
+            way.mapped_sidewalk_m = d;
+        }
         Ok(OsmMap {
             frame,
             bbox_lonlat,
@@ -540,6 +577,58 @@ mod tests {
         assert_eq!(map.stats.skipped_building_ways_missing_nodes, 1);
         assert_eq!(map.stats.highway_ways, 1);
         assert_eq!(map.stats.skipped_highway_ways_missing_nodes, 1);
+    }
+
+    #[test]
+    fn sidewalks_are_read_from_every_tagging_scheme() {
+        let way = |id: usize, tags: &str| {
+            format!(
+                r#"<way id="{id}"><nd ref="1"/><nd ref="2"/><tag k="highway" v="residential"/>{tags}</way>"#
+            )
+        };
+        let t = |k: &str, v: &str| format!(r#"<tag k="{k}" v="{v}"/>"#);
+        let cases: [(String, Option<&str>); 9] = [
+            (String::new(), None),
+            (t("sidewalk", "both"), Some("both")),
+            // The plain key wins over the per-side scheme.
+            (t("sidewalk", "no") + &t("sidewalk:left", "yes"), Some("no")),
+            (t("sidewalk:both", "separate"), Some("separate")),
+            (
+                t("sidewalk:left", "yes") + &t("sidewalk:right", "yes"),
+                Some("both"),
+            ),
+            (
+                t("sidewalk:left", "yes") + &t("sidewalk:right", "no"),
+                Some("left"),
+            ),
+            (t("sidewalk:right", "yes"), Some("right")),
+            (
+                t("sidewalk:left", "no") + &t("sidewalk:right", "separate"),
+                Some("separate"),
+            ),
+            (
+                t("sidewalk:left", "no") + &t("sidewalk:right", "no"),
+                Some("no"),
+            ),
+        ];
+        let ways: String = cases
+            .iter()
+            .enumerate()
+            .map(|(i, (tags, _))| way(10 + i, tags))
+            .collect();
+        let xml = format!(
+            r#"<osm><node id="1" lat="48.0" lon="11.0"/><node id="2" lat="48.0" lon="11.001"/>{ways}</osm>"#
+        );
+        let map = OsmMap::from_xml_str(&xml).unwrap();
+        assert_eq!(map.highways.len(), cases.len());
+        for (h, (tags, expected)) in map.highways.iter().zip(&cases) {
+            assert_eq!(h.sidewalk.as_deref(), *expected, "{tags}");
+            assert!(!h.is_sidewalk);
+        }
+        let footway = r#"<way id="9"><nd ref="1"/><nd ref="2"/><tag k="highway" v="footway"/><tag k="footway" v="sidewalk"/></way>"#;
+        let map =
+            OsmMap::from_xml_str(&xml.replace("</osm>", &format!("{footway}</osm>"))).unwrap();
+        assert!(map.highways.iter().any(|h| h.is_sidewalk && h.osm_id == 9));
     }
 
     #[test]

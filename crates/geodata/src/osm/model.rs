@@ -59,8 +59,14 @@ pub struct HighwayWay {
     pub tunnel: bool,
     /// `layer` (0 when untagged or not an integer).
     pub layer: i32,
-    /// `sidewalk` value (`both`, `left`, `no`, …), when tagged.
+    /// `sidewalk` value (`both`, `left`, `no`, `separate`, …), when tagged, by the `sidewalk`
+    /// key or by `sidewalk:both` / `sidewalk:left` / `sidewalk:right`.
     pub sidewalk: Option<String>,
+    /// `footway=sidewalk`: this way is a street's sidewalk, mapped as a way of its own.
+    pub is_sidewalk: bool,
+    /// Distance of the footways mapped as this road's sidewalks from its centre line, metres,
+    /// derived while reading the map ([`super::sidewalks`]); `None` without.
+    pub mapped_sidewalk_m: Option<f64>,
     /// `oneway=yes|true|1|-1`.
     pub oneway: bool,
     /// `area=yes`: a pedestrian square or similar, not a centre line (kept out of the network).

@@ -202,6 +202,8 @@ mod tests {
             tunnel: false,
             layer: 0,
             sidewalk: None,
+            is_sidewalk: false,
+            mapped_sidewalk_m: None,
             oneway: false,
             area,
             node_ids: ids.to_vec(),

@@ -172,6 +172,9 @@ pub fn to_xml(map: &OsmMap, generator: &str) -> String {
         if let Some(s) = &h.sidewalk {
             tags.push(("sidewalk", s.clone()));
         }
+        if h.is_sidewalk {
+            tags.push(("footway", "sidewalk".to_string()));
+        }
         if h.oneway {
             tags.push(("oneway", "yes".to_string()));
         }
@@ -230,6 +233,7 @@ mod tests {
             <tag k="lanes" v="2"/><tag k="width" v="6.5"/><tag k="oneway" v="yes"/><tag k="sidewalk" v="both"/>
             <tag k="layer" v="-1"/><tag k="tunnel" v="yes"/><tag k="name" v="Straße"/></way>
           <way id="41"><nd ref="10"/><nd ref="3"/><tag k="highway" v="service"/></way>
+          <way id="42"><nd ref="9"/><nd ref="10"/><tag k="highway" v="footway"/><tag k="footway" v="sidewalk"/></way>
         </osm>"#;
         let map = OsmMap::from_xml_str(xml).unwrap();
         let back = OsmMap::from_xml_reader(
@@ -256,10 +260,16 @@ mod tests {
             let strip = |h: &super::super::HighwayWay| {
                 let mut h = h.clone();
                 h.points.clear();
+                h.mapped_sidewalk_m = None;
                 h
             };
             assert_eq!(strip(a), strip(b));
+            match (a.mapped_sidewalk_m, b.mapped_sidewalk_m) {
+                (Some(x), Some(y)) => assert!((x - y).abs() < 1e-6),
+                (x, y) => assert_eq!(x, y),
+            }
         }
+        assert!(back.highways.iter().any(|h| h.is_sidewalk));
         assert_eq!(back.streets.segments.len(), map.streets.segments.len());
         assert_eq!(back.streets.neighbour_pairs, map.streets.neighbour_pairs);
         assert_eq!(

@@ -17,9 +17,11 @@
 //!
 //!   Labels: **Sidewalk** is only the sidewalk strip of a drivable segment, the ground its
 //!   truth describes (so a streets dataset's bin labels agree with the true geometry of both
-//!   targets); other paved ground is labelled [`Class::Other`] with object id 0, as
-//!   KITTI-360's `ground` class (footways mapped on their own, squares, facade strips), and is
-//!   neither driving area nor a street's sidewalk.
+//!   targets); where the map draws a road's sidewalks as footways of their own, the strip
+//!   reaches over them ([`super::truth`]), so they are sidewalk too. Other paved ground is
+//!   labelled [`Class::Other`] with object id 0, as KITTI-360's `ground` class (footways and
+//!   paths that are no road's sidewalk, squares, facade strips), and is neither driving area
+//!   nor a street's sidewalk.
 //! - **Clutter** a map does not have: parked cars along the kerbs, street trees and trees
 //!   on grass, poles, bicycles, pedestrians, and fenced construction sites.
 //!
