@@ -308,7 +308,7 @@ impl SidewalkPrior {
             sigma_m: gsm,
             mean_shift_m: gd,
             sigma_shift_m: gsd,
-            segments: samples.len(),
+            segments: plain.len(),
         };
         let mut by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
         let (mut mapped_m, mut mapped_d) = (Vec::new(), Vec::new());
@@ -621,7 +621,7 @@ mod tests {
         let p = SidewalkPrior::fit(&samples).unwrap();
         p.check().unwrap();
         let m = p.mapped.unwrap();
-        assert_eq!(m.segments, 20);
+        assert_eq!((m.segments, p.global.segments), (20, 20));
         assert!((m.mean_m - 1.3).abs() < 0.05, "{m:?}");
         // The class group learnt from the plain roads alone.
         assert!((p.groups["highway=residential"].mean_m - 2.0).abs() < 1e-9);
