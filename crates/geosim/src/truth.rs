@@ -186,8 +186,9 @@ const MAPPED_SIDEWALK_RANGE_M: [f64; 2] = [1.0, 7.0];
 
 /// Widens every drivable way's sidewalk to the footways mapped beside it (module docs).
 fn mapped_sidewalks(map: &OsmMap, truth: &mut [StreetTruth]) {
-    // Half the mean width of a simulated footway (`type_ranges`: 1.5–3 m).
-    let footway_half_m = 0.25 * (1.5 + 3.0);
+    // Half the mean width of a simulated footway.
+    let [lo, hi] = type_ranges("footway").0;
+    let footway_half_m = 0.25 * (lo + hi);
     for (seg, t) in map.streets.segments.iter().zip(truth.iter_mut()) {
         let mapped = map
             .highways
