@@ -24,7 +24,7 @@
 //! With `varied: false` every class has one material (the simulator before this model).
 //! Cost: O(1) per point (hashes and a few comparisons), O(segments) to build.
 
-use super::truth::{segment_coordinates, StreetTruth};
+use super::truth::StreetTruth;
 use super::{mix64, stream_rng, SimError};
 use geodata::classes::Class;
 use geodata::osm::model::StreetSegment;
@@ -305,7 +305,7 @@ impl GroundModel {
         if g.lowered.is_empty() {
             return false;
         }
-        let (t, u) = segment_coordinates(segment, p);
+        let (t, u) = segment.coordinates(p);
         let side = if u >= 0.0 { 1.0 } else { -1.0 };
         g.lowered
             .iter()
@@ -377,7 +377,7 @@ impl GroundModel {
         let Some(g) = self.segments.get(s) else {
             return class_look(Class::Street);
         };
-        let (along, u) = segment_coordinates(seg, p);
+        let (along, u) = seg.coordinates(p);
         let lateral = u - t.offset_m;
         let white = Look {
             reflectance: 0.75,

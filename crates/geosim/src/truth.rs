@@ -201,18 +201,6 @@ fn mapped_sidewalks(map: &OsmMap, truth: &mut [StreetTruth]) {
     }
 }
 
-/// The along and lateral coordinates (t, u) of a point in a segment's frame (u left positive).
-pub fn segment_coordinates(segment: &StreetSegment, p: [f64; 2]) -> (f64, f64) {
-    let d = [segment.b[0] - segment.a[0], segment.b[1] - segment.a[1]];
-    let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
-    if len <= 0.0 {
-        return (0.0, 0.0);
-    }
-    let e = [d[0] / len, d[1] / len];
-    let q = [p[0] - segment.a[0], p[1] - segment.a[1]];
-    (q[0] * e[0] + q[1] * e[1], -q[0] * e[1] + q[1] * e[0])
-}
-
 /// The segment's true centre line: its end points moved by the offset along the left normal.
 pub fn offset_centre_line(segment: &StreetSegment, truth: &StreetTruth) -> [[f64; 2]; 2] {
     let d = [segment.b[0] - segment.a[0], segment.b[1] - segment.a[1]];
@@ -227,7 +215,7 @@ pub fn offset_centre_line(segment: &StreetSegment, truth: &StreetTruth) -> [[f64
 
 /// Whether a point lies in the segment's driving-area strip (0 ≤ t ≤ L, |u − d| ≤ w/2).
 pub fn in_strip(segment: &StreetSegment, truth: &StreetTruth, p: [f64; 2]) -> bool {
-    let (t, u) = segment_coordinates(segment, p);
+    let (t, u) = segment.coordinates(p);
     (0.0..=segment.length_m).contains(&t) && (u - truth.offset_m).abs() <= 0.5 * truth.width_m
 }
 
@@ -286,7 +274,7 @@ mod tests {
         let [c0, c1] = offset_centre_line(s, t);
         let mid = [(c0[0] + c1[0]) / 2.0, (c0[1] + c1[1]) / 2.0];
         assert!(in_strip(s, t, mid));
-        let (tt, u) = segment_coordinates(s, mid);
+        let (tt, u) = s.coordinates(mid);
         assert!((tt - s.length_m / 2.0).abs() < 1e-9);
         assert!((u - t.offset_m).abs() < 1e-9);
         // Just outside the left edge.

@@ -98,6 +98,21 @@ pub struct StreetSegment {
     pub highway: String,
 }
 
+impl StreetSegment {
+    /// The along and lateral coordinates (t, u) of a point in the segment's frame: t from `a`
+    /// towards `b`, u to the left of that direction, metres ((0, 0) for a zero-length segment).
+    pub fn coordinates(&self, p: [f64; 2]) -> (f64, f64) {
+        let d = [self.b[0] - self.a[0], self.b[1] - self.a[1]];
+        let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        if len <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let e = [d[0] / len, d[1] / len];
+        let q = [p[0] - self.a[0], p[1] - self.a[1]];
+        (q[0] * e[0] + q[1] * e[1], -q[0] * e[1] + q[1] * e[0])
+    }
+}
+
 /// A street intersection: a node shared by ≥ 3 segment ends or by two different ways.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Intersection {
@@ -183,5 +198,37 @@ impl OsmMap {
     /// Number of building elements in the file: closed `building=*` ways plus building multipolygons.
     pub fn building_count(&self) -> usize {
         self.stats.building_ways + self.stats.building_relations
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StreetSegment;
+
+    #[test]
+    fn segment_coordinates_run_along_and_left() {
+        let seg = StreetSegment {
+            way_index: 0,
+            index_in_way: 0,
+            from_node: 1,
+            to_node: 2,
+            a: [1.0, 1.0],
+            b: [4.0, 5.0],
+            length_m: 5.0,
+            highway: "residential".into(),
+        };
+        let close = |(t, u): (f64, f64), want: (f64, f64)| {
+            assert!(
+                (t - want.0).abs() < 1e-12 && (u - want.1).abs() < 1e-12,
+                "{t} {u}"
+            );
+        };
+        close(seg.coordinates(seg.a), (0.0, 0.0));
+        close(seg.coordinates(seg.b), (5.0, 0.0));
+        // 2 m to the left of the middle: along (0.6, 0.8), left normal (-0.8, 0.6).
+        close(seg.coordinates([2.5 - 1.6, 3.0 + 1.2]), (2.5, 2.0));
+        close(seg.coordinates([2.5 + 1.6, 3.0 - 1.2]), (2.5, -2.0));
+        let point = StreetSegment { b: seg.a, ..seg };
+        close(point.coordinates([9.0, 9.0]), (0.0, 0.0));
     }
 }

@@ -89,11 +89,7 @@ pub fn mapped_sidewalk_distances(
                 if (e[0] * fe[0] + e[1] * fe[1]).abs() < cos_max {
                     continue;
                 }
-                let coords = |p: [f64; 2]| {
-                    let q = [p[0] - seg.a[0], p[1] - seg.a[1]];
-                    (q[0] * e[0] + q[1] * e[1], -q[0] * e[1] + q[1] * e[0])
-                };
-                let ((t0, u0), (t1, u1)) = (coords(fs.a), coords(fs.b));
+                let ((t0, u0), (t1, u1)) = (seg.coordinates(fs.a), seg.coordinates(fs.b));
                 let (lo, hi) = (t0.min(t1).max(0.0), t0.max(t1).min(seg.length_m));
                 if hi <= lo || (t1 - t0).abs() < 1e-9 {
                     continue;

@@ -173,7 +173,7 @@ mod tests {
             let s = (o - scene.street_object(0)) as usize;
             let t = &segments[s];
             let seg = &map.streets.segments[s];
-            let (along, u) = crate::truth::segment_coordinates(seg, [p[0], p[1]]);
+            let (along, u) = seg.coordinates([p[0], p[1]]);
             let w = t["width_m"].as_f64().unwrap();
             let d = t["offset_m"].as_f64().unwrap();
             if (0.0..=seg.length_m).contains(&along) {
