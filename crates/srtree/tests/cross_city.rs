@@ -67,14 +67,15 @@ fn a_model_trained_in_helsinki_holds_at_kth() {
     let mut infer = InferOptions::default();
     infer.walksat.seed = 1;
     let ev = evaluate(&model, &kth, &infer).unwrap();
-    // Measured 2026-11-30 (README): On 0.971, LeftOf 0.969, Behind 0.949 (SVM + MLN);
-    // pinned 0.03 below (about three of the 107 true Behind pairs).
+    // Measured 2026-12-02 on the scenes redrawn with the sidewalks as the maps draw them
+    // (README, *Redrawn 2026-12-02*): On 0.953, LeftOf 0.986, Behind 0.962 (SVM + MLN);
+    // pinned 0.03 below (about three of the true Behind pairs).
     let f1: Vec<f64> = ev.mln.confusion.iter().map(|c| c.true_value().f1).collect();
     eprintln!("Helsinki → KTH True-F1 On, LeftOf, Behind (SVM + MLN): {f1:.3?}");
     for (name, got, want) in [
-        ("On", f1[0], 0.971),
-        ("LeftOf", f1[1], 0.969),
-        ("Behind", f1[2], 0.949),
+        ("On", f1[0], 0.953),
+        ("LeftOf", f1[1], 0.986),
+        ("Behind", f1[2], 0.962),
     ] {
         assert!(got >= want - 0.03, "{name} True-F1 {got:.3}, README {want}");
     }
