@@ -30,11 +30,9 @@
 //! | 35, 36, 39–42, 44 | gate, stop, trash bin, vending machine, box, unknown construction, unknown object | other |
 //! | other values | – | unlabelled |
 
-use super::{attach_labels, check_rotation, floats, frames_in, iso_from_rows, read_text};
+use super::{check_rotation, floats, frames_in, iso_from_rows, load_bin_scan, read_text};
 use super::{DatasetError, Georeference, LidarSequence, Result, Scan, SequenceKind};
 use crate::classes::Class;
-use crate::cloud::kitti::{read_kitti_bin, read_label_file};
-use crate::cloud::ReadOptions;
 use crate::mercator::ScaledMercator;
 use nalgebra::{Isometry3, Matrix4};
 use std::collections::BTreeMap;
@@ -104,24 +102,7 @@ impl Kitti360Sequence {
 
     /// Loads a scan with its labels (when `gt_labels/` has them) and pose.
     pub fn load_scan(&self, frame: u64) -> Result<Scan> {
-        let path = self
-            .dir
-            .join("velodyne_points")
-            .join(format!("{frame:010}.bin"));
-        let (mut cloud, _) = read_kitti_bin(&path, &ReadOptions::default())?;
-        let label_path = self.dir.join("gt_labels").join(format!("{frame:010}.bin"));
-        if label_path.exists() {
-            let raw = read_label_file(&label_path, Some(cloud.len()))?;
-            attach_labels(&mut cloud, raw, kitti360_class);
-        }
-        let world_from_sensor = LidarSequence::world_from_sensor(self, frame)?;
-        Ok(Scan {
-            frame,
-            path,
-            cloud,
-            world_from_sensor,
-            georef: Georeference::ScaledMercator(self.georef),
-        })
+        load_bin_scan(self, "velodyne_points", frame, kitti360_class, self.georef)
     }
 }
 

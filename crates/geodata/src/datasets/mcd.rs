@@ -39,11 +39,9 @@
 //! | 26, 27, 28 | vehicle-dynamic, vehicle-other, vehicle-static | car |
 //! | other values | – | unlabelled |
 
-use super::{attach_labels, check_rotation, floats, frames_in, iso_from_rows, read_text};
+use super::{check_rotation, floats, frames_in, iso_from_rows, load_bin_scan, read_text};
 use super::{DatasetError, Georeference, LidarSequence, Result, Scan, SequenceKind};
 use crate::classes::Class;
-use crate::cloud::kitti::{read_kitti_bin, read_label_file};
-use crate::cloud::ReadOptions;
 use crate::mercator::ScaledMercator;
 use nalgebra::{Isometry3, Matrix4, Quaternion, Translation3, UnitQuaternion};
 use std::collections::BTreeMap;
@@ -157,21 +155,7 @@ impl McdSequence {
 
     /// Loads a scan with its labels (when `gt_labels/` has them) and lidar pose.
     pub fn load_scan(&self, frame: u64) -> Result<Scan> {
-        let path = self.dir.join("lidar_bin").join(format!("{frame:010}.bin"));
-        let (mut cloud, _) = read_kitti_bin(&path, &ReadOptions::default())?;
-        let label_path = self.dir.join("gt_labels").join(format!("{frame:010}.bin"));
-        if label_path.exists() {
-            let raw = read_label_file(&label_path, Some(cloud.len()))?;
-            attach_labels(&mut cloud, raw, mcd_class);
-        }
-        let world_from_sensor = LidarSequence::world_from_sensor(self, frame)?;
-        Ok(Scan {
-            frame,
-            path,
-            cloud,
-            world_from_sensor,
-            georef: Georeference::ScaledMercator(self.georef),
-        })
+        load_bin_scan(self, "lidar_bin", frame, mcd_class, self.georef)
     }
 }
 

@@ -407,6 +407,34 @@ pub(crate) fn floats(path: &Path, line: usize, text: &str, sep: char) -> Result<
         .collect()
 }
 
+/// A KITTI-layout `.bin` scan `scans/{frame:010}.bin` of `seq` with the labels of
+/// `gt_labels/{frame:010}.bin` when there are any (dataset ids mapped by `map`) and its pose.
+pub(crate) fn load_bin_scan<S: LidarSequence + ?Sized>(
+    seq: &S,
+    scans: &str,
+    frame: u64,
+    map: fn(u32) -> crate::classes::Class,
+    georef: crate::mercator::ScaledMercator,
+) -> Result<Scan> {
+    let dir = seq.dir();
+    let path = dir.join(scans).join(format!("{frame:010}.bin"));
+    let (mut cloud, _) =
+        crate::cloud::kitti::read_kitti_bin(&path, &crate::cloud::ReadOptions::default())?;
+    let label_path = dir.join("gt_labels").join(format!("{frame:010}.bin"));
+    if label_path.exists() {
+        let raw = crate::cloud::kitti::read_label_file(&label_path, Some(cloud.len()))?;
+        attach_labels(&mut cloud, raw, map);
+    }
+    let world_from_sensor = seq.world_from_sensor(frame)?;
+    Ok(Scan {
+        frame,
+        path,
+        cloud,
+        world_from_sensor,
+        georef: Georeference::ScaledMercator(georef),
+    })
+}
+
 /// Sets `label` (urbansem ids via `map`) and `raw_label` of a scan cloud from dataset ids.
 pub(crate) fn attach_labels(
     cloud: &mut PointCloud,
