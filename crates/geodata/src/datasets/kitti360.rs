@@ -102,7 +102,7 @@ impl Kitti360Sequence {
 
     /// Loads a scan with its labels (when `gt_labels/` has them) and pose.
     pub fn load_scan(&self, frame: u64) -> Result<Scan> {
-        load_bin_scan(self, "velodyne_points", frame, kitti360_class, self.georef)
+        load_bin_scan(self, "velodyne_points", frame, kitti360_class)
     }
 }
 

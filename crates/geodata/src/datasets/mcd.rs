@@ -155,7 +155,7 @@ impl McdSequence {
 
     /// Loads a scan with its labels (when `gt_labels/` has them) and lidar pose.
     pub fn load_scan(&self, frame: u64) -> Result<Scan> {
-        load_bin_scan(self, "lidar_bin", frame, mcd_class, self.georef)
+        load_bin_scan(self, "lidar_bin", frame, mcd_class)
     }
 }
 

@@ -408,13 +408,13 @@ pub(crate) fn floats(path: &Path, line: usize, text: &str, sep: char) -> Result<
 }
 
 /// A KITTI-layout `.bin` scan `scans/{frame:010}.bin` of `seq` with the labels of
-/// `gt_labels/{frame:010}.bin` when there are any (dataset ids mapped by `map`) and its pose.
+/// `gt_labels/{frame:010}.bin` when there are any (dataset ids mapped by `map`), its pose and
+/// the sequence's georeference.
 pub(crate) fn load_bin_scan<S: LidarSequence + ?Sized>(
     seq: &S,
     scans: &str,
     frame: u64,
     map: fn(u32) -> crate::classes::Class,
-    georef: crate::mercator::ScaledMercator,
 ) -> Result<Scan> {
     let dir = seq.dir();
     let path = dir.join(scans).join(format!("{frame:010}.bin"));
@@ -431,7 +431,7 @@ pub(crate) fn load_bin_scan<S: LidarSequence + ?Sized>(
         path,
         cloud,
         world_from_sensor,
-        georef: Georeference::ScaledMercator(georef),
+        georef: seq.georeference(),
     })
 }
 
