@@ -347,22 +347,12 @@ pub fn embed_among_distractors(
                 continue;
             }
             let (from, to) = (fresh(), fresh());
-            map.highways.push(HighwayWay {
-                osm_id: fresh(),
-                highway: s.highway.clone(),
-                name: None,
-                width_m: None,
-                lanes: None,
-                tunnel: false,
-                layer: 0,
-                sidewalk: None,
-                is_sidewalk: false,
-                mapped_sidewalk_m: None,
-                oneway: false,
-                area: false,
-                node_ids: vec![from, to],
-                points: vec![a, b],
-            });
+            map.highways.push(HighwayWay::plain(
+                fresh(),
+                &s.highway,
+                vec![from, to],
+                vec![a, b],
+            ));
             summary.distractor_street_segments += 1;
         }
     }
@@ -386,7 +376,7 @@ fn vertex_mean(ring: &[[f64; 2]]) -> Option<[f64; 2]> {
 mod tests {
     use super::*;
     use geodata::osm::geometry::signed_area;
-    use geodata::osm::model::{ElementKind, OsmStats};
+    use geodata::osm::model::OsmStats;
     use geodata::projection::LocalFrame;
 
     fn square(c: [f64; 2], half: f64) -> Vec<[f64; 2]> {
@@ -402,21 +392,13 @@ mod tests {
         let highways: Vec<HighwayWay> = streets
             .iter()
             .enumerate()
-            .map(|(i, s)| HighwayWay {
-                osm_id: 1000 + i as i64,
-                highway: "residential".into(),
-                name: None,
-                width_m: None,
-                lanes: None,
-                tunnel: false,
-                layer: 0,
-                sidewalk: None,
-                is_sidewalk: false,
-                mapped_sidewalk_m: None,
-                oneway: false,
-                area: false,
-                node_ids: vec![2 * i as i64 + 1, 2 * i as i64 + 2],
-                points: s.to_vec(),
+            .map(|(i, s)| {
+                HighwayWay::plain(
+                    1000 + i as i64,
+                    "residential",
+                    vec![2 * i as i64 + 1, 2 * i as i64 + 2],
+                    s.to_vec(),
+                )
             })
             .collect();
         OsmMap {
@@ -425,16 +407,7 @@ mod tests {
             buildings: rings
                 .into_iter()
                 .enumerate()
-                .map(|(i, outer)| Building {
-                    osm_id: i as i64,
-                    kind: ElementKind::Way,
-                    building: "yes".into(),
-                    outer,
-                    inners: Vec::new(),
-                    height_m: None,
-                    levels: None,
-                    name: None,
-                })
+                .map(|(i, outer)| Building::outline(i as i64, outer, Vec::new()))
                 .collect(),
             streets: build_network(&highways),
             highways,

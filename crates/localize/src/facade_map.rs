@@ -27,7 +27,7 @@ use crate::{LocalizeError, Result, WithContext};
 use geodata::classes::Class;
 use geodata::datasets::LidarSequence;
 use geodata::osm::geometry::segments_intersect;
-use geodata::osm::model::{Building, ElementKind, OsmMap, OsmStats, StreetNetwork};
+use geodata::osm::model::{Building, OsmMap, OsmStats, StreetNetwork};
 use geodata::projection::LocalFrame;
 use rustc_hash::{FxHashMap, FxHashSet};
 use serde::Serialize;
@@ -259,16 +259,11 @@ pub fn facade_map(
                 .collect();
             let ring = simplify_ring(&ring, options.simplify_m);
             summary.vertices += ring.len();
-            buildings.push(Building {
-                osm_id: buildings.len() as i64 + 1,
-                kind: ElementKind::Way,
-                building: "yes".into(),
-                outer: ring,
-                inners: Vec::new(),
-                height_m: None,
-                levels: None,
-                name: None,
-            });
+            buildings.push(Building::outline(
+                buildings.len() as i64 + 1,
+                ring,
+                Vec::new(),
+            ));
         }
     }
     summary.buildings = buildings.len();

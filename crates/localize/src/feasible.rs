@@ -293,7 +293,7 @@ mod tests {
     use super::*;
     use crate::chamfer::{map_edges, ChamferOptions};
     use geodata::osm::index::MapIndex;
-    use geodata::osm::model::{Building, ElementKind, OsmStats, StreetNetwork};
+    use geodata::osm::model::{Building, OsmStats, StreetNetwork};
     use geodata::projection::LocalFrame;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -321,16 +321,7 @@ mod tests {
             } else {
                 Vec::new()
             };
-            buildings.push(Building {
-                osm_id: k,
-                kind: ElementKind::Way,
-                building: "yes".into(),
-                outer: ring,
-                inners,
-                height_m: None,
-                levels: None,
-                name: None,
-            });
+            buildings.push(Building::outline(k, ring, inners));
         }
         let mut net = StreetNetwork::default();
         if streets {

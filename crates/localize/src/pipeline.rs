@@ -807,7 +807,7 @@ pub(crate) fn finish<'p>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use geodata::osm::model::{Building, ElementKind, OsmStats, StreetNetwork, StreetSegment};
+    use geodata::osm::model::{Building, OsmStats, StreetNetwork, StreetSegment};
     use geodata::projection::LocalFrame;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -827,16 +827,7 @@ mod tests {
             buildings: rings
                 .into_iter()
                 .enumerate()
-                .map(|(i, outer)| Building {
-                    osm_id: i as i64,
-                    kind: ElementKind::Way,
-                    building: "yes".into(),
-                    outer,
-                    inners: Vec::new(),
-                    height_m: None,
-                    levels: None,
-                    name: None,
-                })
+                .map(|(i, outer)| Building::outline(i as i64, outer, Vec::new()))
                 .collect(),
             highways: Vec::new(),
             streets: StreetNetwork::default(),

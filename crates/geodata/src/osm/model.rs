@@ -77,6 +77,50 @@ pub struct HighwayWay {
     pub points: Vec<[f64; 2]>,
 }
 
+impl Building {
+    /// A way tagged `building=yes` and nothing else, with this outline and these holes (maps
+    /// drawn by code: façade maps, test cities).
+    pub fn outline(osm_id: i64, outer: Vec<[f64; 2]>, inners: Vec<Vec<[f64; 2]>>) -> Building {
+        Building {
+            osm_id,
+            kind: ElementKind::Way,
+            building: "yes".into(),
+            outer,
+            inners,
+            height_m: None,
+            levels: None,
+            name: None,
+        }
+    }
+}
+
+impl HighwayWay {
+    /// A way tagged `highway=<highway>` and nothing else, through these nodes.
+    pub fn plain(
+        osm_id: i64,
+        highway: &str,
+        node_ids: Vec<i64>,
+        points: Vec<[f64; 2]>,
+    ) -> HighwayWay {
+        HighwayWay {
+            osm_id,
+            highway: highway.into(),
+            name: None,
+            width_m: None,
+            lanes: None,
+            tunnel: false,
+            layer: 0,
+            sidewalk: None,
+            is_sidewalk: false,
+            mapped_sidewalk_m: None,
+            oneway: false,
+            area: false,
+            node_ids,
+            points,
+        }
+    }
+}
+
 /// A street segment: the straight piece between two consecutive nodes of a highway way.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StreetSegment {

@@ -194,20 +194,8 @@ mod tests {
 
     fn way(ids: &[i64], pts: &[[f64; 2]], area: bool) -> HighwayWay {
         HighwayWay {
-            osm_id: 1,
-            highway: "residential".into(),
-            name: None,
-            width_m: None,
-            lanes: None,
-            tunnel: false,
-            layer: 0,
-            sidewalk: None,
-            is_sidewalk: false,
-            mapped_sidewalk_m: None,
-            oneway: false,
             area,
-            node_ids: ids.to_vec(),
-            points: pts.to_vec(),
+            ..HighwayWay::plain(1, "residential", ids.to_vec(), pts.to_vec())
         }
     }
 
