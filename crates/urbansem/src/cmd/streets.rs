@@ -139,18 +139,9 @@ pub enum StreetsCommand {
         /// Evaluation options.
         #[command(flatten)]
         eval: EvalArgs,
-        /// Score this trained model (`streets train`) instead of the 5-fold evaluation: its
-        /// estimate of every observed drivable segment against the simulator's truth.
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// With --model: re-estimate the classifier's confusion matrix on the dataset's own
-        /// cloud, at most this many rounds (0: the model's calibration matrix as it is).
-        #[arg(long, default_value_t = 0)]
-        self_calibrate: usize,
-        /// With a with-sidewalk --model: the driving-area model whose estimates centre the
-        /// with-sidewalk priors, as in `streets estimate` (default: the shipped model).
-        #[arg(long)]
-        driving_model: Option<PathBuf>,
+        /// A trained model to score instead.
+        #[command(flatten)]
+        score: ScoreModelArgs,
     },
     /// Table 4.1 analogue on a real labelled sequence (KITTI-360 or MCD layout) and an OSM
     /// map of its streets: scans registered by their poses, each segment's true offset and
@@ -172,18 +163,9 @@ pub enum StreetsCommand {
         /// Evaluation options.
         #[command(flatten)]
         eval: EvalArgs,
-        /// Score this trained model (`streets train`) instead of training on the sequence:
-        /// its estimate from the registered cloud against the derived truth.
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// With --model: re-estimate the classifier's confusion matrix on the sequence's own
-        /// cloud, at most this many rounds (0: the model's calibration matrix as it is).
-        #[arg(long, default_value_t = 0)]
-        self_calibrate: usize,
-        /// With a with-sidewalk --model: the driving-area model whose estimates centre the
-        /// with-sidewalk priors, as in `streets estimate` (default: the shipped model).
-        #[arg(long)]
-        driving_model: Option<PathBuf>,
+        /// A trained model to score instead.
+        #[command(flatten)]
+        score: ScoreModelArgs,
     },
     /// Train a model (classifier, confusion matrix, prior) on whole `streets` datasets and
     /// labelled real sequences together.
@@ -332,43 +314,19 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
         StreetsCommand::Eval {
             dataset,
             json,
-            thesis_mask: _,
-            segments_out,
-            eval: _,
-            model: Some(model),
-            self_calibrate,
-            driving_model,
-        } => {
-            let model_value = model_for_eval(&model, segments_out.as_deref())?;
-            let driving = driving_model_for(
-                &model_value,
-                &model.display().to_string(),
-                driving_model.as_deref(),
-                "streets eval",
-            )?;
-            let r = streets::jobs::eval_dataset_model(
-                &dataset,
-                &model_value,
-                driving.as_ref(),
-                self_calibrate,
-            )?;
-            print_model_report(&r, json, &model, &dataset.display().to_string())
-        }
-        StreetsCommand::Eval {
-            dataset,
-            json,
             thesis_mask,
             segments_out,
             eval,
-            model: None,
-            self_calibrate,
-            driving_model,
+            score,
         } => {
-            if self_calibrate > 0 {
-                super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
-            }
-            if driving_model.is_some() {
-                super::usage!("--driving-model needs --model (the 5-fold evaluation estimates the driving area itself)");
+            if let Some(scored) = score.load(segments_out.as_deref(), "streets eval")? {
+                let r = streets::jobs::eval_dataset_model(
+                    &dataset,
+                    &scored.model,
+                    scored.driving.as_ref(),
+                    score.self_calibrate,
+                )?;
+                return print_model_report(&r, json, &scored.path, &dataset.display().to_string());
             }
             let mut options = eval.options();
             options.geometry.corridor.mask_nearer_segments = !thesis_mask;
@@ -387,60 +345,32 @@ pub fn run(args: StreetsArgs) -> anyhow::Result<()> {
             map,
             json,
             segments_out,
-            eval: _,
-            model: Some(model),
-            self_calibrate,
-            driving_model,
+            eval,
+            score,
         } => {
-            let model_value = model_for_eval(&model, segments_out.as_deref())?;
-            let driving = driving_model_for(
-                &model_value,
-                &model.display().to_string(),
-                driving_model.as_deref(),
-                "streets eval-real",
-            )?;
             let progress = |done: usize, total: usize| {
                 if done == total || done % 10 == 0 {
                     eprintln!("streets eval-real: {done}/{total} scans registered");
                 }
             };
-            let r = streets::jobs::eval_real_model(
-                &dataset,
-                &map,
-                &model_value,
-                driving.as_ref(),
-                self_calibrate,
-                &progress,
-            )?;
-            let what = format!("{} with {}", dataset.display(), map.display());
-            print_model_report(&r, json, &model, &what)
-        }
-        StreetsCommand::EvalReal {
-            dataset,
-            map,
-            json,
-            segments_out,
-            eval,
-            model: None,
-            self_calibrate,
-            driving_model,
-        } => {
-            if self_calibrate > 0 {
-                super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
-            }
-            if driving_model.is_some() {
-                super::usage!("--driving-model needs --model (the 5-fold evaluation estimates the driving area itself)");
+            if let Some(scored) = score.load(segments_out.as_deref(), "streets eval-real")? {
+                let r = streets::jobs::eval_real_model(
+                    &dataset,
+                    &map,
+                    &scored.model,
+                    scored.driving.as_ref(),
+                    score.self_calibrate,
+                    &progress,
+                )?;
+                let what = format!("{} with {}", dataset.display(), map.display());
+                return print_model_report(&r, json, &scored.path, &what);
             }
             let r = streets::jobs::eval_real(
                 &dataset,
                 &map,
                 &eval.options(),
                 segments_out.as_deref(),
-                &|done, total| {
-                    if done == total || done % 10 == 0 {
-                        eprintln!("streets eval-real: {done}/{total} scans registered");
-                    }
-                },
+                &progress,
             )?;
             if json {
                 super::print_json(&r)?;
@@ -696,16 +626,66 @@ fn driving_model_for(
     Ok(Some(driving))
 }
 
-fn model_for_eval(
-    path: &std::path::Path,
-    segments_out: Option<&std::path::Path>,
-) -> anyhow::Result<StreetModel> {
-    if segments_out.is_some() {
-        super::usage!(
-            "--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON"
-        );
+/// `streets eval` and `eval-real`: score a trained model instead of the 5-fold evaluation.
+#[derive(Args)]
+pub struct ScoreModelArgs {
+    /// Score this trained model (`streets train`) instead of the 5-fold evaluation: its
+    /// estimate of every observed drivable segment against the truth (the simulator's, or
+    /// the one derived from a real sequence's labels).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// With --model: re-estimate the classifier's confusion matrix on the data's own cloud,
+    /// at most this many rounds (0: the model's calibration matrix as it is).
+    #[arg(long, default_value_t = 0)]
+    self_calibrate: usize,
+    /// With a with-sidewalk --model: the driving-area model whose estimates centre the
+    /// with-sidewalk priors, as in `streets estimate` (default: the shipped model).
+    #[arg(long)]
+    driving_model: Option<PathBuf>,
+}
+
+/// A model to score, read and checked, with the driving-area model its priors need.
+struct ScoredModel {
+    path: PathBuf,
+    model: StreetModel,
+    driving: Option<StreetModel>,
+}
+
+impl ScoreModelArgs {
+    /// The model to score (`None`: run the 5-fold evaluation, which refuses the options
+    /// that only a model takes).
+    fn load(
+        &self,
+        segments_out: Option<&std::path::Path>,
+        command: &str,
+    ) -> anyhow::Result<Option<ScoredModel>> {
+        let Some(path) = &self.model else {
+            if self.self_calibrate > 0 {
+                super::usage!("--self-calibrate needs --model (the 5-fold evaluation calibrates on the other folds)");
+            }
+            if self.driving_model.is_some() {
+                super::usage!("--driving-model needs --model (the 5-fold evaluation estimates the driving area itself)");
+            }
+            return Ok(None);
+        };
+        if segments_out.is_some() {
+            super::usage!(
+                "--segments-out is for the 5-fold evaluation; --model lists every segment in its JSON"
+            );
+        }
+        let model = read_model(path)?;
+        let driving = driving_model_for(
+            &model,
+            &path.display().to_string(),
+            self.driving_model.as_deref(),
+            command,
+        )?;
+        Ok(Some(ScoredModel {
+            path: path.clone(),
+            model,
+            driving,
+        }))
     }
-    read_model(path)
 }
 
 /// A model file from `urbansem streets train`, checked as it is read: dimensions, finite
