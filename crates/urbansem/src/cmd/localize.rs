@@ -200,18 +200,9 @@ pub struct TrackArgs {
     /// `[R|t]` per line, localized scans in order; map frame east, north, up; z = 0).
     #[arg(long)]
     pub poses_kitti: Option<PathBuf>,
-    /// Grid of the distance-transform tensor, metres.
-    #[arg(long, default_value_t = 0.5)]
-    pub grid_m: f64,
-    /// Yaw step of the search, degrees.
-    #[arg(long, default_value_t = 0.5)]
-    pub yaw_step_deg: f64,
-    /// Sensor profile and extraction knobs.
+    /// Search grid, yaw step, extraction and acceptance.
     #[command(flatten)]
-    pub extract: ExtractArgs,
-    /// When no pose explains the scan well.
-    #[command(flatten)]
-    pub gate: GateArgs,
+    pub search: SearchArgs,
 }
 
 /// Sensor names accepted by `--sensor`.
@@ -538,6 +529,15 @@ pub struct RunArgs {
     /// (RFC 7946, WGS84, with the OSM attribution).
     #[arg(long)]
     pub geojson: Option<PathBuf>,
+    /// Search grid, yaw step, extraction and acceptance.
+    #[command(flatten)]
+    pub search: SearchArgs,
+}
+
+/// What every localizing command (`localize`, `localize track`, `localize eval`) searches
+/// with: the grid and yaw step of the search, the extraction and the acceptance gate.
+#[derive(Args, Clone)]
+pub struct SearchArgs {
     /// Grid of the distance-transform tensor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub grid_m: f64,
@@ -601,13 +601,6 @@ pub struct EvalArgs {
     /// With --scan-every: the position of the first scan evaluated (0-based).
     #[arg(long, default_value_t = 0)]
     pub scan_offset: usize,
-    /// Grid of the distance-transform tensor, metres.
-    #[arg(long, default_value_t = 0.5)]
-    pub grid_m: f64,
-    /// Yaw step of the search, degrees (1 is about twice as fast, with fewer accurate
-    /// candidates on maps with errors).
-    #[arg(long, default_value_t = 0.5)]
-    pub yaw_step_deg: f64,
     /// Embed the map among distractor buildings and streets cut from this other real OSM map
     /// (rotated tiles in a ring around the map's buildings; see `localize::distractors`).
     #[arg(long)]
@@ -648,12 +641,9 @@ pub struct EvalArgs {
     /// Track mode: the seed of a random odometry drift.
     #[arg(long, default_value_t = 1)]
     pub odometry_seed: u64,
-    /// Sensor profile and extraction knobs.
+    /// Search grid, yaw step, extraction and acceptance.
     #[command(flatten)]
-    pub extract: ExtractArgs,
-    /// When no pose explains the scan well.
-    #[command(flatten)]
-    pub gate: GateArgs,
+    pub search: SearchArgs,
 }
 
 /// How `localize eval --track` drifts the odometry it makes from the true poses.
@@ -677,13 +667,14 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
     }
 }
 
-fn options(
-    cost: CostKind,
-    grid_m: f64,
-    yaw_step_deg: f64,
-    extract: &ExtractArgs,
-    gate: &GateArgs,
-) -> anyhow::Result<LocalizeOptions> {
+fn options(cost: CostKind, search: &SearchArgs) -> anyhow::Result<LocalizeOptions> {
+    let SearchArgs {
+        grid_m,
+        yaw_step_deg,
+        extract,
+        gate,
+    } = search;
+    let (grid_m, yaw_step_deg) = (*grid_m, *yaw_step_deg);
     if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
         super::usage!("--yaw-step-deg {yaw_step_deg}: expected a step in (0, 90] degrees");
     }
@@ -765,13 +756,7 @@ fn run_one(args: RunArgs) -> anyhow::Result<()> {
             "urbansem localize needs --map MAP and --scan SCAN (or the `eval` subcommand)"
         );
     };
-    let options = options(
-        args.cost.kind(),
-        args.grid_m,
-        args.yaw_step_deg,
-        &args.extract,
-        &args.gate,
-    )?;
+    let options = options(args.cost.kind(), &args.search)?;
     let tiled = localize::tiles::is_manifest(map_path);
     if tiled && args.svg.is_some() {
         super::usage!("--svg draws on one map, not on a tiled map's manifest: use --geojson");
@@ -857,13 +842,7 @@ fn track(args: TrackArgs) -> anyhow::Result<()> {
             args.map.display()
         );
     }
-    let options = options(
-        args.cost.kind(),
-        args.grid_m,
-        args.yaw_step_deg,
-        &args.extract,
-        &args.gate,
-    )?;
+    let options = options(args.cost.kind(), &args.search)?;
     let report = match (&args.bag, &args.scans, &args.odometry) {
         (Some(bag), _, _) => {
             let job = BagTrackJob {
@@ -1091,13 +1070,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         map: args.map.clone(),
         methods,
         // The default ranking, as `localize` and `localize track` rank (track mode follows it).
-        options: options(
-            LocalizeOptions::default().rank_by,
-            args.grid_m,
-            args.yaw_step_deg,
-            &args.extract,
-            &args.gate,
-        )?,
+        options: options(LocalizeOptions::default().rank_by, &args.search)?,
         distractors: args.distractors.clone().map(|path| {
             let options = DistractorOptions {
                 ring_m: args.distractor_ring_m,
@@ -1170,10 +1143,12 @@ mod tests {
             json: false,
             svg: None,
             geojson: None,
-            grid_m: 0.5,
-            yaw_step_deg: 0.5,
-            extract: ExtractArgs::default(),
-            gate: GateArgs::default(),
+            search: SearchArgs {
+                grid_m: 0.5,
+                yaw_step_deg: 0.5,
+                extract: ExtractArgs::default(),
+                gate: GateArgs::default(),
+            },
         })
         .unwrap_err();
         assert!(err.to_string().contains("--map"), "{err}");
