@@ -668,13 +668,12 @@ pub fn run(args: LocalizeArgs) -> anyhow::Result<()> {
 }
 
 fn options(cost: CostKind, search: &SearchArgs) -> anyhow::Result<LocalizeOptions> {
-    let SearchArgs {
+    let &SearchArgs {
         grid_m,
         yaw_step_deg,
-        extract,
-        gate,
+        ref extract,
+        ref gate,
     } = search;
-    let (grid_m, yaw_step_deg) = (*grid_m, *yaw_step_deg);
     if !(yaw_step_deg > 0.0 && yaw_step_deg <= 90.0) {
         super::usage!("--yaw-step-deg {yaw_step_deg}: expected a step in (0, 90] degrees");
     }
