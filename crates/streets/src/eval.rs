@@ -420,31 +420,38 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
     let mut geometries = BTreeMap::new();
     let (mut train_s, mut predict_s, mut potentials_s, mut inference_s, mut mcmc_s) =
         (0.0, 0.0, 0.0, 0.0, 0.0);
-    // The driving area's full-model states and width spreads, for the with-sidewalk prior.
-    type Driving = (Vec<(usize, usize)>, Vec<f64>);
+    // The driving area's full-model and single-segment states and its width spreads, for the
+    // with-sidewalk prior (the single-segment model's on the single-segment driving area, so
+    // that it takes nothing from the network).
+    type Driving = (Vec<(usize, usize)>, Vec<(usize, usize)>, Vec<f64>);
     let mut driving: Option<Driving> = None;
     for target in [Target::DrivingArea, Target::WithSidewalk] {
         let mut predicted: Vec<Vec<bool>> = vec![Vec::new(); eval_ids.len()];
         let mut priors = vec![GeometryPrior::flat(); eval_ids.len()];
         let mut fold_priors = Vec::with_capacity(folds);
         let mut fold_sidewalk: Vec<Option<SidewalkPrior>> = Vec::with_capacity(folds);
-        // Segment k's prior: with sidewalk, centred on its estimated driving area when a
-        // margin prior was fitted; else its tag group's.
-        let segment_prior =
-            |prior: &TagPrior, sidewalk: Option<&SidewalkPrior>, k: usize| -> GeometryPrior {
-                match (sidewalk, &driving) {
-                    (Some(sp), Some((states, spread)))
-                        if target == Target::WithSidewalk && spread[k].is_finite() =>
-                    {
-                        sp.given_driving_area(
-                            &tags[k],
-                            grid.geometry(states[k].0, states[k].1),
-                            spread[k],
-                        )
-                    }
-                    _ => prior.for_tags(&tags[k]),
+        // Segment k's prior: with sidewalk, centred on its estimated driving area (the full
+        // model's, or with `single` the single-segment model's) when a margin prior was
+        // fitted; else its tag group's.
+        let segment_prior = |prior: &TagPrior,
+                             sidewalk: Option<&SidewalkPrior>,
+                             k: usize,
+                             single: bool|
+         -> GeometryPrior {
+            match (sidewalk, &driving) {
+                (Some(sp), Some((full, alone, spread)))
+                    if target == Target::WithSidewalk && spread[k].is_finite() =>
+                {
+                    let states = if single { alone } else { full };
+                    sp.given_driving_area(
+                        &tags[k],
+                        grid.geometry(states[k].0, states[k].1),
+                        spread[k],
+                    )
                 }
-            };
+                _ => prior.for_tags(&tags[k]),
+            }
+        };
         let mut conf_sum = [[0u64; 2]; 2];
         let mut sv_sum = 0usize;
         for fold in 0..folds {
@@ -515,7 +522,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 .then(|| SidewalkPrior::fit(&train_margin))
                 .flatten();
             for &k in &test {
-                priors[k] = segment_prior(&prior, sidewalk.as_ref(), k);
+                priors[k] = segment_prior(&prior, sidewalk.as_ref(), k, false);
             }
             fold_priors.push(prior);
             fold_sidewalk.push(sidewalk);
@@ -528,6 +535,8 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             .map(|k| eval_bins[k].counts(&predicted[k]))
             .collect();
         let mut potentials: Vec<Option<SegmentPotential>> = vec![None; eval_ids.len()];
+        // Single-segment states where its prior differs from the full model's.
+        let mut single_states: Vec<Option<(usize, usize)>> = vec![None; eval_ids.len()];
         let mut conf_test = [[0u64; 2]; 2];
         let mut chosen = Vec::with_capacity(folds);
         let truth_cols: Vec<(usize, usize)> = eval_ids
@@ -550,12 +559,19 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             }
             let clog = Confusion::from_pairs(&truth, &pred).log_likelihood();
             let flat = GeometryPrior::flat();
-            let prior_log = PriorTables::new(
-                &(0..eval_ids.len())
-                    .map(|k| segment_prior(fold_prior, sidewalk.as_ref(), k))
-                    .collect::<Vec<_>>(),
-                &grid,
-            );
+            let tables = |single: bool| {
+                PriorTables::new(
+                    &(0..eval_ids.len())
+                        .map(|k| segment_prior(fold_prior, sidewalk.as_ref(), k, single))
+                        .collect::<Vec<_>>(),
+                    &grid,
+                )
+            };
+            let prior_log = tables(false);
+            // The single-segment model's priors differ only where they rest on the driving
+            // area's estimate.
+            let single_log =
+                (target == Target::WithSidewalk && driving.is_some()).then(|| tables(true));
             let ll: Vec<SegmentPotential> = counts
                 .par_iter()
                 .map(|c| segment_potential(c, &clog, &flat, &grid))
@@ -587,6 +603,9 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             chosen.push(selected);
             for k in (0..eval_ids.len()).filter(|&k| fold_of(k) == fold) {
                 potentials[k] = Some(tempered_with_prior(&ll[k], &selected, prior_log.table(k)));
+                single_states[k] = single_log
+                    .as_ref()
+                    .map(|t| tempered_with_prior(&ll[k], &selected, t.table(k)).argmax());
                 for (c, &p) in classes[k].iter().zip(&predicted[k]) {
                     if let Some(c) = c {
                         conf_test[usize::from(target.positive(*c))][usize::from(p)] += 1;
@@ -616,7 +635,12 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
             lambda,
             truncation: chosen[0].coupling_cap_nats,
         };
-        let single = net.single_segment();
+        let mut single = net.single_segment();
+        for (state, own) in single.states.iter_mut().zip(&single_states) {
+            if let Some(own) = own {
+                *state = *own;
+            }
+        }
         // The full model: a test fold's segments take their states from the whole network
         // with the coupling cap that fold selected (one run per distinct cap).
         let t = Instant::now();
@@ -775,7 +799,7 @@ pub fn evaluate(ds: &StreetsDataset, options: &EvalOptions) -> Result<EvalReport
                 .collect(),
         );
         if target == Target::DrivingArea {
-            driving = Some((full_states, spread));
+            driving = Some((full_states, single.states, spread));
         }
         per_target.insert(target, scores);
     }

@@ -323,3 +323,37 @@ fn a_with_sidewalk_model_centres_its_prior_on_the_estimated_driving_area() {
     );
     assert!(err.to_string().contains("m.json"), "{err}");
 }
+
+#[test]
+fn the_single_segment_model_takes_nothing_from_the_network() {
+    // With sidewalk, every segment's prior is centred on its estimated driving area; the
+    // single-segment model must centre it on the single-segment driving area, so that its
+    // scores do not move when the coupling between segments does (one tempering: no
+    // selection through the network).
+    let ds = StreetsDataset::load(fixture("eval")).unwrap();
+    let mut options = small_options();
+    options.mcmc.chains = 1;
+    options.mcmc.iterations = 100;
+    options.temperings = vec![streets::potentials::Tempering {
+        tau: 512.0,
+        floor_nats: 8.0,
+        prior_weight: 1.0,
+        coupling_cap_nats: f64::INFINITY,
+    }];
+    let coupled = evaluate(&ds, &options).unwrap();
+    options.geometry.sigma_m = 1e9;
+    let loose = evaluate(&ds, &options).unwrap();
+    // The coupling matters here: the driving area's full model moves with it …
+    assert_ne!(
+        coupled.driving_area.full_model.rmse_w,
+        loose.driving_area.full_model.rmse_w
+    );
+    // … and neither single-segment row does.
+    for (a, b) in [
+        (&coupled.driving_area, &loose.driving_area),
+        (&coupled.with_sidewalk, &loose.with_sidewalk),
+    ] {
+        assert_eq!(a.single_segment.rmse_w, b.single_segment.rmse_w);
+        assert_eq!(a.single_segment.f1, b.single_segment.f1);
+    }
+}
